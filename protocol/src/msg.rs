@@ -1,0 +1,291 @@
+//! Message types. Field order is wire order: never reorder, only append new enum variants.
+
+use crate::gyro::GyroConfig;
+use serde::{Deserialize, Serialize};
+
+/// Firmware version, semantic.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Version {
+    /// Major.
+    pub major: u8,
+    /// Minor.
+    pub minor: u8,
+    /// Patch.
+    pub patch: u8,
+}
+
+/// Turns of the sensor table (θ2) per turn of the base table (θ1), as a fraction.
+/// The prototype's magnetic gears are 1:1 (EXCITER.md, "Mechanism").
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GearRatio {
+    /// Numerator.
+    pub num: u16,
+    /// Denominator.
+    pub den: u16,
+}
+
+/// Rotation direction of the base table, seen from above (+z1 up).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Direction {
+    /// Counter-clockwise: positive θ1' and, through the gears, positive θ2'.
+    Ccw,
+    /// Clockwise: negative rates.
+    Cw,
+}
+
+impl Direction {
+    /// +1 for counter-clockwise, −1 for clockwise.
+    pub const fn sign(self) -> i32 {
+        match self {
+            Direction::Ccw => 1,
+            Direction::Cw => -1,
+        }
+    }
+}
+
+/// Sent on power-up, on [`Command::Identify`] and after every configuration change: everything
+/// needed to interpret the rest of the stream.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hello {
+    /// [`crate::PROTOCOL_VERSION`] of the sender.
+    pub protocol_version: u16,
+    /// Firmware version.
+    pub firmware: Version,
+    /// Gyro settings in force.
+    pub gyro: GyroConfig,
+    /// Base-table encoder counts per revolution after quadrature decoding.
+    pub encoder_counts_per_rev: u32,
+    /// Sensor-table turns per base-table turn.
+    pub gear_ratio: GearRatio,
+    /// Tick rate of every `t_us` field, in Hz.
+    pub timestamp_hz: u32,
+}
+
+/// Bits of [`Sample::status`].
+pub mod sample_status {
+    /// The gyro reported a data overrun (STATUS_REG ZYXOR): at least one sample was overwritten
+    /// inside the gyro before it was read.
+    pub const OVERRUN: u8 = 0x01;
+    /// Data-ready was seen but STATUS_REG ZYXDA was clear: the data read may be stale.
+    pub const STALE: u8 = 0x02;
+}
+
+/// One gyro sample, read on its data-ready edge.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sample {
+    /// Data-ready timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// Base-table encoder count latched at that same instant, wrapping modulo 2^32.
+    pub encoder: u32,
+    /// Raw OUT_X, OUT_Y, OUT_Z, two's complement counts.
+    pub rate_counts: [i16; 3],
+    /// [`sample_status`] bits.
+    pub status: u8,
+}
+
+/// Edge of the photo-interrupter signal (1 while the shield plate blocks it).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Edge {
+    /// 0 → 1: the plate starts to block.
+    Rising,
+    /// 1 → 0: the plate clears.
+    Falling,
+}
+
+/// One edge of the sensor-table index, captured by timer hardware.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct IndexEdge {
+    /// Timestamp of the edge, µs, wrapping.
+    pub t_us: u32,
+    /// Base-table encoder count at the edge, wrapping.
+    pub encoder: u32,
+    /// Which edge.
+    pub edge: Edge,
+}
+
+/// Gyro die temperature, at least once a second.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Temperature {
+    /// Timestamp of the read, µs, wrapping.
+    pub t_us: u32,
+    /// OUT_TEMP register: −1 LSB/°C with an unspecified offset (datasheet Table 5).
+    pub raw: i8,
+}
+
+/// Bits of [`MotorStatus::faults`].
+pub mod motor_faults {
+    /// Driven, but the encoder did not move.
+    pub const STALL: u8 = 0x01;
+    /// Measured speed beyond the over-speed limit.
+    pub const OVER_SPEED: u8 = 0x02;
+    /// No frame from the host for too long.
+    pub const HOST_LINK_LOST: u8 = 0x04;
+    /// Driver enable dropped by a fault elsewhere (gyro, watchdog).
+    pub const INTERLOCK: u8 = 0x08;
+}
+
+/// Speed loop state, at 10 Hz while running.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MotorStatus {
+    /// Timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// Measured base-table speed, encoder counts per second (signed).
+    pub speed_cps: i32,
+    /// Setpoint after the ramp, counts per second (signed).
+    pub setpoint_cps: i32,
+    /// PWM duty, per mille, signed by direction.
+    pub duty_permille: i16,
+    /// [`motor_faults`] bits.
+    pub faults: u8,
+    /// Tag of the run in progress, 0 when idle: lets a reader that lost the [`RunStarted`] frame
+    /// still attribute the samples that follow.
+    pub run_tag: u8,
+}
+
+/// Health counters since power-up, at 1 Hz.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    /// Timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// Frames handed to the link.
+    pub frames_sent: u32,
+    /// Frames dropped because the transmit queue was full (each lost sample is counted here).
+    pub queue_drops: u32,
+    /// Samples read from the gyro.
+    pub samples_read: u32,
+    /// Samples the gyro flagged as overrun.
+    pub gyro_overruns: u32,
+    /// SPI transactions that failed.
+    pub spi_errors: u32,
+    /// Frames from the host that failed to decode.
+    pub rx_errors: u32,
+}
+
+/// Result of a host command.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum CmdResult {
+    /// Done.
+    Ok,
+    /// A parameter is out of range.
+    InvalidArgument,
+    /// Not allowed while a run is in progress (stop first).
+    Busy,
+    /// The rig is in a fault state; the fault was reported separately.
+    Faulted,
+}
+
+/// Acknowledges one host command.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ack {
+    /// Sequence number of the host frame being answered.
+    pub cmd_seq: u16,
+    /// Outcome.
+    pub result: CmdResult,
+}
+
+/// Marks the start of a run in the stream, so that every capture says which run (and pose) its
+/// samples belong to.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunStarted {
+    /// Timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// Host-chosen tag, echoed verbatim; the host puts the sensor pose in it.
+    pub run_tag: u8,
+    /// Commanded base-table speed, milli-degrees per second (unsigned).
+    pub rate_mdps: u32,
+    /// Commanded direction.
+    pub direction: Direction,
+    /// Gyro settings in force for the run.
+    pub gyro: GyroConfig,
+}
+
+/// Why the rig stopped a run or refused to start.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// WHO_AM_I did not read 0xD3.
+    GyroAbsent {
+        /// What it read instead.
+        who_am_i: u8,
+    },
+    /// SPI transfers to the gyro keep failing.
+    GyroSpi,
+    /// Data-ready stopped arriving while running.
+    GyroSilent,
+    /// The encoder did not move while the motor was driven.
+    Stall,
+    /// Speed beyond the limit.
+    OverSpeed,
+    /// No frame from the host for too long.
+    HostLinkLost,
+    /// The previous reset came from the independent watchdog.
+    WatchdogReset,
+}
+
+/// A fault, reported once when it happens; the motor is off.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FaultReport {
+    /// Timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// What went wrong.
+    pub fault: Fault,
+}
+
+/// Marks the end of a run (by command or by fault).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunStopped {
+    /// Timestamp, µs, wrapping.
+    pub t_us: u32,
+    /// Tag of the run that ended.
+    pub run_tag: u8,
+}
+
+/// Everything the rig sends. Variant order is wire order (postcard varint discriminant).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RigMsg {
+    /// 0: identity and configuration.
+    Hello(Hello),
+    /// 1: one gyro sample.
+    Sample(Sample),
+    /// 2: an index edge.
+    Index(IndexEdge),
+    /// 3: gyro temperature.
+    Temperature(Temperature),
+    /// 4: speed loop state.
+    Motor(MotorStatus),
+    /// 5: health counters.
+    Counters(Counters),
+    /// 6: command acknowledgement.
+    Ack(Ack),
+    /// 7: a run began.
+    RunStarted(RunStarted),
+    /// 8: a run ended.
+    RunStopped(RunStopped),
+    /// 9: a fault.
+    Fault(FaultReport),
+}
+
+/// Start a run: ramp the base table to a speed in a direction.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StartRun {
+    /// Base-table speed, milli-degrees per second (180 000 = 0.5 Hz).
+    pub rate_mdps: u32,
+    /// Direction.
+    pub direction: Direction,
+    /// Echoed in [`RunStarted::run_tag`].
+    pub run_tag: u8,
+}
+
+/// Everything the host sends. Variant order is wire order.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Command {
+    /// 0: answer with [`Hello`] (then the ack).
+    Identify,
+    /// 1: start a run.
+    Start(StartRun),
+    /// 2: ramp down and stop; ends the run.
+    Stop,
+    /// 3: set the gyro; refused with [`CmdResult::Busy`] during a run.
+    ConfigureGyro(GyroConfig),
+    /// 4: keeps the link alive; the rig stops the motor after 2 s without any host frame.
+    Heartbeat,
+}
