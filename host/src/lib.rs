@@ -1,3 +1,8 @@
 //! Host side of the gyro calibration rig.
+pub mod calib;
 pub mod capture;
 pub mod geometry;
+pub mod inspect;
+pub mod link;
+pub mod session;
+pub mod sim;

@@ -1,1 +1,334 @@
-fn main() {}
+//! `host`: record, simulate, inspect and calibrate the gyro exciter; apply a calibration.
+//!
+//! Exit status: 0 success (for `calibrate`: calibrated, residual at the noise floor); 1 failed,
+//! with a one-line `error:` on stderr; 2 wrong usage; 3 calibrated, but with structure in the
+//! residual that no model explains, so the calibration is not to be trusted.
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use host::calib;
+use host::capture::{self, Capture};
+use host::geometry::Pose;
+use host::link::{self, Link};
+use host::session;
+use host::sim;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+#[derive(Parser)]
+#[command(name = "host", version, about = "Gyro calibration rig: record, simulate, inspect, calibrate, apply")]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Record the raw bytes of the wire to a file, optionally running one pose.
+    Record {
+        /// Serial port of the rig, e.g. /dev/ttyACM0.
+        #[arg(long)]
+        port: String,
+        /// Capture file to write (never overwritten).
+        #[arg(long)]
+        out: PathBuf,
+        /// Run this pose (1 or 2) and stop; without it, only listen.
+        #[arg(long, value_parser = parse_pose)]
+        pose: Option<Pose>,
+        /// Base-table rate, °/s, negative for clockwise.
+        #[arg(long, default_value_t = 180.0, allow_negative_numbers = true)]
+        rate_dps: f64,
+        /// Seconds to record (at speed when running a pose).
+        #[arg(long, default_value_t = 120.0)]
+        duration: f64,
+        /// Baud rate (ignored by USB CDC-ACM).
+        #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+        baud: u32,
+    },
+    /// Calibrate: live against the rig (--port) or from recorded captures (--replay).
+    Calibrate {
+        /// Serial port of the rig: runs the guided live session.
+        #[arg(long, conflicts_with = "replay", required_unless_present = "replay")]
+        port: Option<String>,
+        /// Capture files to compute from instead (each says which pose it holds).
+        #[arg(long, num_args = 1..)]
+        replay: Vec<PathBuf>,
+        /// Where the captures (live), the JSON result and the report go.
+        #[arg(long, default_value = "calibration")]
+        out_dir: PathBuf,
+        /// Live: seconds of data per run once at speed.
+        #[arg(long, default_value_t = 120.0)]
+        duration: f64,
+        /// Live: base-table rates to run in each pose, °/s, negative for clockwise
+        /// (e.g. 180,90,-180: two speeds and both directions).
+        #[arg(long, value_delimiter = ',', default_value = "180", allow_negative_numbers = true)]
+        rates_dps: Vec<f64>,
+        /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
+        #[arg(long)]
+        yes: bool,
+        /// Baud rate (ignored by USB CDC-ACM).
+        #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+        baud: u32,
+    },
+    /// Convert raw counts to rate vectors in the package frame with a calibration.
+    Apply {
+        /// The calibration.json written by `calibrate`.
+        #[arg(long)]
+        cal: PathBuf,
+        /// One raw reading, x,y,z counts.
+        #[arg(long, value_delimiter = ',', num_args = 3, allow_negative_numbers = true, conflicts_with = "capture", required_unless_present = "capture")]
+        counts: Option<Vec<i16>>,
+        /// A capture: prints t_s,pose,x_dps,y_dps,z_dps for every sample as CSV.
+        #[arg(long)]
+        capture: Option<PathBuf>,
+    },
+    /// Simulate a session on the virtual exciter: a capture and, beside it, the truth.
+    Simulate {
+        /// Capture file to write; the truth goes to the same name with `.truth.json`.
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed: one seed is one simulated sensor.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Seconds per run, spin-up included.
+        #[arg(long, default_value_t = 120.0)]
+        duration: f64,
+        /// Poses to run, in order.
+        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = parse_pose)]
+        poses: Vec<Pose>,
+        /// Base-table rates to run in each pose, °/s, negative for clockwise.
+        #[arg(long, value_delimiter = ',', default_value = "180", allow_negative_numbers = true)]
+        rates_dps: Vec<f64>,
+        /// Gyro full scale, °/s: 250, 500 or 2000.
+        #[arg(long, default_value_t = 500, value_parser = parse_full_scale)]
+        full_scale: u16,
+        /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
+        /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
+        /// gear_ratio_error, mystery_harmonic.
+        #[arg(long = "effect")]
+        effects: Vec<String>,
+        /// Full configuration as JSON (a `SimConfig`); overrides the options above.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// Describe a capture: rig, settings, runs, rates, losses with their byte offsets.
+    Inspect {
+        /// Capture files.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn parse_pose(s: &str) -> Result<Pose, String> {
+    match s {
+        "1" => Ok(Pose::One),
+        "2" => Ok(Pose::Two),
+        _ => Err(format!("pose must be 1 or 2, not {s:?}")),
+    }
+}
+
+fn parse_full_scale(s: &str) -> Result<u16, String> {
+    match s {
+        "250" | "500" | "2000" => Ok(s.parse().expect("matched digits")),
+        _ => Err(format!("full scale must be 250, 500 or 2000 °/s, not {s:?}")),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Cmd::Record { port, out, pose, rate_dps, duration, baud } => record(&port, &out, pose, rate_dps, duration, baud),
+        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, yes, baud } => {
+            let files = match port {
+                Some(port) => {
+                    let interrupted = interrupt_flag()?;
+                    let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+                    let plan = session::plan(&Pose::ALL, &rates_dps, duration);
+                    session::record_session(&mut link, &plan, &out_dir, yes, &interrupted)?
+                }
+                None => replay,
+            };
+            calibrate(&files, &out_dir)
+        }
+        Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
+            let cfg = match config {
+                Some(path) => {
+                    let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+                    serde_json::from_str(&text).with_context(|| format!("{} is not a simulation config", path.display()))?
+                }
+                None => {
+                    let mut cfg = sim::SimConfig::with_runs(seed, session::plan(&poses, &rates_dps, duration).iter().map(|r| sim::RunSpec { pose: r.pose, rate_dps: r.rate_dps, duration_s: r.duration_s }).collect());
+                    cfg.gyro.full_scale = match full_scale {
+                        250 => protocol::FullScale::Dps250,
+                        2000 => protocol::FullScale::Dps2000,
+                        _ => protocol::FullScale::Dps500,
+                    };
+                    for e in &effects {
+                        cfg.effects.enable(e)?;
+                    }
+                    cfg
+                }
+            };
+            simulate(&cfg, &out)
+        }
+        Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
+        Cmd::Inspect { files, json } => {
+            for f in &files {
+                let cap = read_capture(f)?;
+                let report = host::inspect::inspect(&f.display().to_string(), &cap);
+                if json {
+                    println!("{}", serde_json::to_string_pretty(&report)?);
+                } else {
+                    print!("{report}");
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// Reads and decodes a capture file.
+fn read_capture(path: &Path) -> Result<Capture> {
+    let bytes = fs::read(path).with_context(|| format!("cannot read capture {}", path.display()))?;
+    Ok(capture::decode(&bytes))
+}
+
+/// Ctrl-C sets a flag that the session loops check, so the motor is stopped and the file closed.
+fn interrupt_flag() -> Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    ctrlc::set_handler(move || f.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    Ok(flag)
+}
+
+fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s: f64, baud: u32) -> Result<ExitCode> {
+    let interrupted = interrupt_flag()?;
+    let mut link = Link::new(link::open_port(port, baud)?, port);
+    match pose {
+        Some(pose) => {
+            let run = session::RunPlan { pose, rate_dps, duration_s };
+            let progress = indicatif::ProgressBar::new(0);
+            session::record_run(&mut link, &run, out, &progress, &interrupted)?;
+        }
+        None => {
+            let file = fs::File::options()
+                .write(true)
+                .create_new(true)
+                .open(out)
+                .with_context(|| format!("cannot create capture {}", out.display()))?;
+            link.record_to(Some(Box::new(file)))?;
+            session::identify(&mut link)?;
+            let start = std::time::Instant::now();
+            while start.elapsed().as_secs_f64() < duration_s && !interrupted.load(Ordering::SeqCst) {
+                link.poll(|_| {})?;
+            }
+            link.record_to(None)?;
+        }
+    }
+    eprintln!("saved {}", out.display());
+    if interrupted.load(Ordering::SeqCst) {
+        bail!("interrupted; capture so far kept in {}", out.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Decodes the captures, reports their losses, calibrates, writes `calibration.json`.
+fn calibrate(files: &[PathBuf], out_dir: &Path) -> Result<ExitCode> {
+    let mut runs = Vec::new();
+    for f in files {
+        let cap = read_capture(f)?;
+        let l = &cap.loss;
+        eprintln!(
+            "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
+            f.display(),
+            cap.runs.len(),
+            l.bytes,
+            l.frames_missing(),
+            l.bytes_skipped()
+        );
+        if cap.hello.is_some_and(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
+            bail!("{} was recorded with protocol v{}, this host reads v{}", f.display(), cap.hello.unwrap().protocol_version, protocol::PROTOCOL_VERSION);
+        }
+        if cap.runs.is_empty() {
+            bail!("{} holds no run (no RunStarted frame and no motor status naming one)", f.display());
+        }
+        runs.extend(cap.runs);
+    }
+    let report = calib::calibrate(&runs, &calib::CalOptions::default()).context("calibration failed")?;
+    print!("{}", report.summary());
+    fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let json = out_dir.join("calibration.json");
+    fs::write(&json, serde_json::to_string_pretty(&report)?).with_context(|| format!("cannot write {}", json.display()))?;
+    eprintln!("wrote {}", json.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Loads a calibration from `calibrate`'s JSON (the full report) or a bare calibration.
+fn load_calibration(path: &Path) -> Result<calib::Calibration> {
+    let text = fs::read_to_string(path).with_context(|| format!("cannot read calibration {}", path.display()))?;
+    if let Ok(report) = serde_json::from_str::<calib::CalReport>(&text) {
+        return Ok(report.calibration());
+    }
+    calib::Calibration::from_json(&text).with_context(|| format!("{} is not a calibration", path.display()))
+}
+
+fn apply(cal_path: &Path, counts: Option<Vec<i16>>, capture_path: Option<&Path>) -> Result<ExitCode> {
+    let cal = load_calibration(cal_path)?;
+    if let Some(c) = counts {
+        let w = cal.apply([c[0], c[1], c[2]]);
+        println!("{:.4},{:.4},{:.4}", w[0], w[1], w[2]);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let path = capture_path.expect("clap requires --counts or --capture");
+    let cap = read_capture(path)?;
+    if let Some(run) = cap.runs.iter().find(|r| r.gyro.full_scale != cal.full_scale) {
+        bail!(
+            "{} was recorded at ±{} °/s but the calibration is for ±{} °/s",
+            path.display(),
+            run.gyro.full_scale.range_dps(),
+            cal.full_scale.range_dps()
+        );
+    }
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    use std::io::Write as _;
+    writeln!(out, "t_s,pose,x_dps,y_dps,z_dps")?;
+    for run in &cap.runs {
+        for s in &run.samples {
+            let w = cal.apply(s.rate_counts);
+            writeln!(out, "{:.6},{},{:.4},{:.4},{:.4}", s.t_us as f64 * 1e-6, run.pose.number(), w[0], w[1], w[2])?;
+        }
+    }
+    out.flush()?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Path of the truth written beside a simulated capture: `x.cap` → `x.truth.json`.
+fn truth_path(capture: &Path) -> PathBuf {
+    capture.with_extension("truth.json")
+}
+
+fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {
+    cfg.validate().map_err(|e| anyhow::anyhow!("invalid simulation: {e}"))?;
+    let file = fs::File::create(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file)).with_context(|| format!("writing {}", out.display()))?;
+    let tp = truth_path(out);
+    fs::write(&tp, serde_json::to_string_pretty(&truth)?).with_context(|| format!("cannot write {}", tp.display()))?;
+    eprintln!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display());
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,64 @@
+//! Every pin of the rig on the STM32F4DISCOVERY (STM32F407VGT6), and the H-bridge.
+//! The wiring table in `firmware/README.md` mirrors this module.
+//!
+//! | Signal                    | Pin  | Function                  |
+//! |---------------------------|------|---------------------------|
+//! | Motor PWM                 | PE9  | TIM1_CH1 (AF1), 20 kHz    |
+//! | Motor DIR                 | PE10 | GPIO out                  |
+//! | Motor EN                  | PE11 | GPIO out, 10 kΩ pull-down |
+//! | Encoder A / B             | PA15 / PB3 | TIM2_CH1 / CH2 (AF1), encoder mode |
+//! | Index → encoder count     | PB10 | TIM2_CH3 (AF1), both edges |
+//! | Index → timestamp         | PA2  | TIM5_CH3 (AF2), both edges |
+//! | DRDY → encoder count      | PB11 | TIM2_CH4 (AF1), rising    |
+//! | DRDY → timestamp + IRQ    | PA3  | TIM5_CH4 (AF2), rising    |
+//! | Gyro SCK / MISO / MOSI    | PA5 / PA6 / PA7 | SPI1 (AF5), mode 3 |
+//! | Gyro CS                   | PE7  | GPIO out                  |
+//! | On-board LIS3DSH CS       | PE3  | held high (shares SPI1)   |
+//! | USB D− / D+               | PA11 / PA12 | OTG_FS (AF10)      |
+
+use crate::pac;
+use firmware::pwm::{MotorCommand, PWM_PERIOD_TICKS};
+use stm32f4xx_hal::gpio::{Output, PE10, PE11};
+use stm32f4xx_hal::pac::TIM1;
+use stm32f4xx_hal::timer::PwmChannel;
+
+/// SPI1 clock for the gyro: 84 MHz APB2 / 16. The L3G4200D allows 10 MHz (datasheet Table 7);
+/// the next divider up, /8 = 10.5 MHz, would exceed it.
+pub const GYRO_SPI_HZ: u32 = 5_250_000;
+
+/// Input-capture digital filter for every capture channel, CCMRx ICxF = 0b0011: 8 samples at
+/// f_CK_INT (84 MHz), 95 ns. Identical on TIM2 and TIM5, so both latch the same edge after the
+/// same delay; the fastest encoder edges (324 kHz at 1 Hz) are 3 µs apart.
+pub const CAPTURE_FILTER: u8 = 0b0011;
+
+/// The H-bridge (e.g. TI DRV8874 in PH/EN mode: PWM on EN, DIR on PH, EN on nSLEEP). Its
+/// nSLEEP has a pull-down, so the bridge is off from reset until firmware drives it.
+pub struct Motor {
+    /// PWM output.
+    pub pwm: PwmChannel<TIM1, 0>,
+    /// Direction.
+    pub dir: PE10<Output>,
+    /// Enable.
+    pub en: PE11<Output>,
+}
+
+impl Motor {
+    /// Applies one loop period's command.
+    pub fn apply(&mut self, cmd: MotorCommand) {
+        if cmd.enable {
+            self.dir.set_state(cmd.reverse.into());
+            self.pwm.set_duty(cmd.compare.min(PWM_PERIOD_TICKS));
+            self.en.set_high();
+        } else {
+            self.en.set_low();
+            self.pwm.set_duty(0);
+        }
+    }
+}
+
+/// Level of the index input (PA2) after an edge: beam blocked = high. Read through IDR, which
+/// samples the pin in alternate-function mode too.
+pub fn index_level() -> bool {
+    // SAFETY: a read of GPIOA.IDR, which has no side effects and is not written by anyone.
+    unsafe { (*pac::GPIOA::ptr()).idr().read().idr(2).bit_is_set() }
+}

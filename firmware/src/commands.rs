@@ -1,0 +1,131 @@
+//! Host commands: validation, execution, acknowledgement. Every command frame gets exactly one
+//! [`Ack`], sent after whatever the command itself emits (Hello, RunStarted), so a host that has
+//! the ack has everything it caused.
+
+use crate::link::Received;
+use crate::rig::{GyroControl, Rig, Run};
+use crate::supervisor::MAX_RATE_MDPS;
+use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, StartRun, ENCODER_COUNTS_PER_REV};
+
+/// Milli-degrees per second to base-table encoder counts per second, rounded to nearest:
+/// 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
+pub fn rate_cps(rate_mdps: u32) -> u32 {
+    const MDEG_PER_REV: u64 = 360_000;
+    ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV)
+        as u32
+}
+
+/// Signed setpoint for a start request, or why it is refused.
+pub fn setpoint_cps(start: &StartRun) -> Result<i32, CmdResult> {
+    if start.rate_mdps == 0 || start.rate_mdps > MAX_RATE_MDPS {
+        return Err(CmdResult::InvalidArgument);
+    }
+    Ok(start.direction.sign() * rate_cps(start.rate_mdps) as i32)
+}
+
+impl Rig {
+    /// Executes one command and acknowledges it.
+    pub(crate) fn execute(&mut self, t_us: u32, rx: Received, gyro: &mut impl GyroControl) {
+        let result = match rx.command {
+            Command::Identify => {
+                self.send_hello();
+                CmdResult::Ok
+            }
+            Command::Start(start) => self.start(t_us, &start),
+            Command::Stop => {
+                if let Run::Running { tag } = self.run {
+                    self.speed_loop.set_target(0);
+                    self.run = Run::Stopping { tag };
+                }
+                CmdResult::Ok
+            }
+            Command::ConfigureGyro(config) => {
+                if self.run != Run::Idle {
+                    CmdResult::Busy
+                } else {
+                    match gyro.apply(config) {
+                        Ok(()) => {
+                            self.gyro_config = config;
+                            self.gyro_fault = None;
+                            // Restart the silence watch: the new ODR begins now.
+                            self.last_sample_us = t_us;
+                            self.send_hello();
+                            CmdResult::Ok
+                        }
+                        Err(fault) => {
+                            self.gyro_fault = Some(fault);
+                            self.report(t_us, fault);
+                            CmdResult::Faulted
+                        }
+                    }
+                }
+            }
+            Command::Heartbeat => CmdResult::Ok,
+        };
+        self.link.send(&RigMsg::Ack(Ack {
+            cmd_seq: rx.seq,
+            result,
+        }));
+    }
+
+    fn start(&mut self, t_us: u32, start: &StartRun) -> CmdResult {
+        if self.gyro_fault.is_some() {
+            return CmdResult::Faulted;
+        }
+        if self.run != Run::Idle {
+            return CmdResult::Busy;
+        }
+        let target_cps = match setpoint_cps(start) {
+            Ok(cps) => cps,
+            Err(refusal) => return refusal,
+        };
+        self.motor_off();
+        self.motor_faults = 0;
+        self.speed_loop.set_target(target_cps);
+        self.run = Run::Running { tag: start.run_tag };
+        self.link.send(&RigMsg::RunStarted(RunStarted {
+            t_us,
+            run_tag: start.run_tag,
+            rate_mdps: start.rate_mdps,
+            direction: start.direction,
+            gyro: self.gyro_config,
+        }));
+        CmdResult::Ok
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::Direction;
+
+    #[test]
+    fn rate_conversion_is_exact_at_the_paper_speed() {
+        assert_eq!(rate_cps(180_000), 162_000);
+        assert_eq!(rate_cps(360_000), ENCODER_COUNTS_PER_REV);
+        assert_eq!(rate_cps(1), 1); // 0.9 rounds up
+        assert_eq!(rate_cps(u32::MAX), 3_865_470_566); // 3 865 470 565.5, no overflow
+    }
+
+    #[test]
+    fn start_validation() {
+        let run = |rate_mdps, direction| StartRun {
+            rate_mdps,
+            direction,
+            run_tag: 1,
+        };
+        assert_eq!(setpoint_cps(&run(180_000, Direction::Cw)), Ok(-162_000));
+        assert_eq!(
+            setpoint_cps(&run(MAX_RATE_MDPS, Direction::Ccw)),
+            Ok(324_000)
+        );
+        assert_eq!(
+            setpoint_cps(&run(0, Direction::Ccw)),
+            Err(CmdResult::InvalidArgument)
+        );
+        assert_eq!(
+            setpoint_cps(&run(MAX_RATE_MDPS + 1, Direction::Ccw)),
+            Err(CmdResult::InvalidArgument)
+        );
+    }
+}

@@ -1,0 +1,211 @@
+//! What engineers read off M = K S: sensitivities, axis directions, their tilts from the package
+//! axes and the angles between them, each with a 1-σ from the covariance of M by the delta
+//! method (first-order propagation through a numerical Jacobian).
+
+use super::lsq::AXES;
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Central-difference step, in units of each input's σ: small enough that the curvature of the
+/// functions here (angles, norms, of relative scale ≫ σ) adds < 1e-8 relative error, large
+/// enough to stay clear of rounding.
+const STEP_SIGMAS: f64 = 1e-3;
+
+/// First-order propagation of `cov` through `f` at `x`: returns f(x) and J·cov·Jᵀ.
+pub fn delta_method(
+    f: impl Fn(&[f64]) -> Vec<f64>,
+    x: &[f64],
+    cov: &DMatrix<f64>,
+) -> (Vec<f64>, DMatrix<f64>) {
+    let y = f(x);
+    let mut jac = DMatrix::zeros(y.len(), x.len());
+    let mut xp = x.to_vec();
+    for j in 0..x.len() {
+        let sd = cov[(j, j)].max(0.0).sqrt();
+        if sd == 0.0 {
+            continue;
+        }
+        let h = STEP_SIGMAS * sd;
+        xp[j] = x[j] + h;
+        let up = f(&xp);
+        xp[j] = x[j] - h;
+        let down = f(&xp);
+        xp[j] = x[j];
+        for i in 0..y.len() {
+            jac[(i, j)] = (up[i] - down[i]) / (2.0 * h);
+        }
+    }
+    let out = &jac * cov * jac.transpose();
+    (y, out)
+}
+
+/// One axis's calibration, from row i of M and offset i.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AxisEstimate {
+    /// Axis name.
+    pub axis: char,
+    /// Sensitivity k_i = |m_i|, counts per °/s.
+    pub k_counts_per_dps: f64,
+    /// 1-σ of k.
+    pub k_sigma: f64,
+    /// k relative to the datasheet sensitivity of the full scale in use, percent.
+    pub k_vs_nominal_percent: f64,
+    /// Direction s_i (unit vector, package frame).
+    pub s: [f64; 3],
+    /// 1-σ of each component of s.
+    pub s_sigma: [f64; 3],
+    /// Offset, counts.
+    pub offset_counts: f64,
+    /// 1-σ of the offset.
+    pub offset_sigma_counts: f64,
+    /// Angle between s_i and the package axis e_i, degrees. Its σ is first-order, valid for tilts
+    /// well above it; `tilt_components_deg` are well-behaved at any size.
+    pub tilt_deg: f64,
+    /// 1-σ of the tilt.
+    pub tilt_sigma_deg: f64,
+    /// The package axes toward which the two tilt components lean.
+    pub tilt_component_axes: [char; 2],
+    /// Tilt of s_i toward each of those axes, atan2(s_j, s_i), degrees.
+    pub tilt_components_deg: [f64; 2],
+    /// 2×2 covariance of the tilt components, degrees².
+    pub tilt_components_cov_deg2: [[f64; 2]; 2],
+}
+
+/// The angle between two real axes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct InterAxisAngle {
+    /// The two axes, e.g. ['x', 'y'].
+    pub axes: [char; 2],
+    /// Angle between s_a and s_b, degrees.
+    pub angle_deg: f64,
+    /// 1-σ.
+    pub sigma_deg: f64,
+    /// angle − 90°, degrees.
+    pub non_orthogonality_deg: f64,
+}
+
+/// Axis pairs in report order.
+const PAIRS: [(usize, usize); 3] = [(0, 1), (1, 2), (0, 2)];
+
+/// Derived values from the 12 parameters [m_x, b_x, m_y, b_y, m_z, b_z] (axis-major, each m a
+/// row of M): per axis k, s (3), offset, tilt, two tilt components (8); then 3 inter-axis angles.
+fn derived_vector(p: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(27);
+    let rows: Vec<Vector3<f64>> = (0..3)
+        .map(|i| Vector3::new(p[4 * i], p[4 * i + 1], p[4 * i + 2]))
+        .collect();
+    for (i, m) in rows.iter().enumerate() {
+        let k = m.norm();
+        let s = m / k;
+        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
+        let perp = (s[j] * s[j] + s[l] * s[l]).sqrt();
+        out.extend_from_slice(&[k, s.x, s.y, s.z, p[4 * i + 3]]);
+        out.push(perp.atan2(s[i]).to_degrees());
+        out.push(s[j].atan2(s[i]).to_degrees());
+        out.push(s[l].atan2(s[i]).to_degrees());
+    }
+    for (a, b) in PAIRS {
+        let c = rows[a].dot(&rows[b]) / (rows[a].norm() * rows[b].norm());
+        out.push(c.clamp(-1.0, 1.0).acos().to_degrees());
+    }
+    out
+}
+
+/// Per-axis estimates and inter-axis angles from the parameters and their covariance.
+/// `nominal_counts_per_dps` is the datasheet sensitivity.
+pub fn derive(
+    params: &[f64; 12],
+    cov: &DMatrix<f64>,
+    nominal_counts_per_dps: f64,
+) -> ([AxisEstimate; 3], [InterAxisAngle; 3]) {
+    let (y, c) = delta_method(derived_vector, params, cov);
+    let sd = |i: usize| c[(i, i)].max(0.0).sqrt();
+    let axes = std::array::from_fn(|i| {
+        let o = 8 * i;
+        AxisEstimate {
+            axis: AXES[i],
+            k_counts_per_dps: y[o],
+            k_sigma: sd(o),
+            k_vs_nominal_percent: (y[o] / nominal_counts_per_dps - 1.0) * 100.0,
+            s: [y[o + 1], y[o + 2], y[o + 3]],
+            s_sigma: [sd(o + 1), sd(o + 2), sd(o + 3)],
+            offset_counts: y[o + 4],
+            offset_sigma_counts: sd(o + 4),
+            tilt_deg: y[o + 5],
+            tilt_sigma_deg: sd(o + 5),
+            tilt_component_axes: [AXES[(i + 1) % 3], AXES[(i + 2) % 3]],
+            tilt_components_deg: [y[o + 6], y[o + 7]],
+            tilt_components_cov_deg2: [
+                [c[(o + 6, o + 6)], c[(o + 6, o + 7)]],
+                [c[(o + 7, o + 6)], c[(o + 7, o + 7)]],
+            ],
+        }
+    });
+    let angles = std::array::from_fn(|n| {
+        let (a, b) = PAIRS[n];
+        InterAxisAngle {
+            axes: [AXES[a], AXES[b]],
+            angle_deg: y[24 + n],
+            sigma_deg: sd(24 + n),
+            non_orthogonality_deg: y[24 + n] - 90.0,
+        }
+    });
+    (axes, angles)
+}
+
+/// Mahalanobis distance of a 2-vector difference under a 2×2 covariance.
+pub fn mahalanobis2(d: [f64; 2], cov: [[f64; 2]; 2]) -> f64 {
+    let c = nalgebra::Matrix2::new(cov[0][0], cov[0][1], cov[1][0], cov[1][1]);
+    match c.try_inverse() {
+        Some(ci) => {
+            let v = nalgebra::Vector2::new(d[0], d[1]);
+            (v.transpose() * ci * v)[(0, 0)].max(0.0).sqrt()
+        }
+        None => f64::INFINITY,
+    }
+}
+
+/// Converts a fixed array to a column vector (helper for callers building covariances).
+pub fn dvec(v: &[f64]) -> DVector<f64> {
+    DVector::from_column_slice(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Linear maps propagate exactly: y = A x gives A C Aᵀ.
+    #[test]
+    fn delta_method_is_exact_for_linear_maps() {
+        let a = DMatrix::from_row_slice(2, 3, &[1.0, 2.0, 0.0, -1.0, 0.5, 3.0]);
+        let c = DMatrix::from_row_slice(3, 3, &[2.0, 0.3, 0.0, 0.3, 1.0, -0.2, 0.0, -0.2, 0.5]);
+        let x = [0.4, -1.0, 2.0];
+        let (_, out) = delta_method(|v| (&a * dvec(v)).iter().copied().collect(), &x, &c);
+        let expect = &a * &c * a.transpose();
+        assert!((out - expect).abs().max() < 1e-9);
+    }
+
+    /// A row of M along e_x tilted by 1° toward y: k is the norm and the tilt is 1°.
+    #[test]
+    fn derived_values_of_a_tilted_row() {
+        let t = 1f64.to_radians();
+        let mut p = [0.0; 12];
+        p[..4].copy_from_slice(&[57.0 * t.cos(), 57.0 * t.sin(), 0.0, 5.0]);
+        p[4..8].copy_from_slice(&[0.0, 57.0, 0.0, 0.0]);
+        p[8..].copy_from_slice(&[0.0, 0.0, 57.0, 0.0]);
+        let cov = DMatrix::identity(12, 12) * 1e-6;
+        let (axes, angles) = derive(&p, &cov, 57.142_857);
+        assert!((axes[0].k_counts_per_dps - 57.0).abs() < 1e-12);
+        assert!((axes[0].tilt_deg - 1.0).abs() < 1e-9);
+        assert!((axes[0].tilt_components_deg[0] - 1.0).abs() < 1e-9);
+        assert!((angles[0].angle_deg - 89.0).abs() < 1e-9);
+        // σ of k for isotropic σ² = 1e-6 on the row: exactly 1e-3.
+        assert!((axes[0].k_sigma - 1e-3).abs() < 1e-9);
+        // σ of a tilt component: σ/k rad.
+        assert!((axes[1].tilt_components_deg[0] - 0.0).abs() < 1e-12);
+        assert!(
+            (axes[1].tilt_components_cov_deg2[0][0].sqrt() - (1e-3 / 57.0f64).to_degrees()).abs()
+                < 1e-9
+        );
+    }
+}

@@ -1,0 +1,66 @@
+//! Why a calibration could not be computed, each as one line that says what and where.
+
+use crate::geometry::Pose;
+use protocol::GyroConfig;
+
+/// A calibration failure. Runs are numbered from 1 in the order given to [`super::calibrate`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalError {
+    /// Nothing to calibrate.
+    #[error("no runs to calibrate: the capture holds no run")]
+    NoRuns,
+    /// The axis directions need both poses (EXCITER.md, eq. 4-5; the linear fit is singular too).
+    #[error(
+        "only {present} was captured: {missing} is needed too (axis directions need both poses)"
+    )]
+    MissingPose {
+        /// The pose that is there.
+        present: Pose,
+        /// The pose that is not.
+        missing: Pose,
+    },
+    /// A run has too few samples at steady speed.
+    #[error("run {run} ({label}): too few usable samples ({usable} of {total} at steady speed), need at least {needed} (one sensor-table revolution)")]
+    TooFewSamples {
+        /// Run number, from 1.
+        run: usize,
+        /// Run label (pose, rate).
+        label: String,
+        /// Samples kept.
+        usable: usize,
+        /// Samples in the run.
+        total: usize,
+        /// Samples needed.
+        needed: usize,
+    },
+    /// Without a complete index pulse θ2 has no zero.
+    #[error("run {run} ({label}): no complete index pulse (rising then falling edge) among {edges} edges, cannot reference θ2")]
+    NoIndex {
+        /// Run number, from 1.
+        run: usize,
+        /// Run label (pose, rate).
+        label: String,
+        /// Index edges seen.
+        edges: usize,
+    },
+    /// Counts mean different things under different gyro settings.
+    #[error("run {run} ({label}): gyro config {found:?} differs from run 1's {expected:?}")]
+    InconsistentGyro {
+        /// Run number, from 1.
+        run: usize,
+        /// Run label (pose, rate).
+        label: String,
+        /// Config of this run.
+        found: GyroConfig,
+        /// Config of run 1.
+        expected: GyroConfig,
+    },
+    /// The runs do not excite every regressor independently.
+    #[error("normal matrix of axis {axis} is singular (reciprocal condition {rcond:.1e}): the runs do not excite all rate directions")]
+    Singular {
+        /// Axis name, x, y or z.
+        axis: char,
+        /// Reciprocal condition number of the scaled normal matrix.
+        rcond: f64,
+    },
+}

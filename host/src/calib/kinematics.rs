@@ -1,0 +1,581 @@
+//! Table angles and rates at every gyro sample, from the encoder and the index, computed once per
+//! calibration and shared by every model fitted to them.
+//!
+//! θ2 comes from the unwrapped encoder count referenced to the index: each index pulse (the
+//! shield plate blocking the photo-interrupter) is centred on θ2 = 0, so its centre is the
+//! midpoint of its rising and falling edge, whichever way the table turns. The pulse centres of a
+//! run lie on a line `centre_k = ref + k·period`; fitting it gives the reference and, pooled over
+//! runs, the period, i.e. the actual gear ratio. θ1' is the slope of a local straight-line fit of
+//! encoder count against sample time, θ2' = ratio·θ1'.
+
+use super::error::CalError;
+use crate::capture::{Run, RunSample};
+use crate::geometry::{omega2, Pose};
+use nalgebra::Matrix3;
+use protocol::{sample_status, Edge};
+use serde::{Deserialize, Serialize};
+
+/// Standard deviation of uniform quantisation, in quanta: 1/√12.
+const UNIFORM_QUANTISATION_SIGMA: f64 = 0.288_675_134_594_812_9;
+
+/// MAD to σ for a normal distribution: 1/Φ⁻¹(3/4).
+const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// Index pulse centres further than this many robust σ from the line are rejected (a missed or
+/// spurious edge shifts a centre by half a plate width, far more).
+const INDEX_OUTLIER_SIGMAS: f64 = 5.0;
+
+/// Floor of the outlier threshold, encoder counts: with exact data the MAD is 0, and a centre is
+/// only known to the quantum of its two edge counts.
+const INDEX_OUTLIER_FLOOR_COUNTS: f64 = 2.0;
+
+/// Values a median of sample spacings or speeds looks at: its standard error is then ~1 % of the
+/// spread, far inside the 2 % steady-speed tolerance.
+const MEDIAN_SUBSAMPLE: usize = 8192;
+
+/// Settings of the kinematics reconstruction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct KinOptions {
+    /// Span of the local straight-line fit that gives θ1', s. 20 ms is 17 samples at 800 Hz: the
+    /// encoder's quantisation then puts 0.013 °/s rms on θ1' (324 000 counts/rev), 30× below the
+    /// L3G4200D's ≈0.4 °/s rms noise (0.03 °/s/√Hz, datasheet Table 4, over its 110 Hz
+    /// bandwidth), while speed changes slower than ≈20 Hz pass unattenuated.
+    pub rate_window_s: f64,
+    /// Samples whose θ1' is further than this fraction from the run's median speed are spin-up,
+    /// stop or a stall, and excluded. The linear model holds at any speed; the cut removes the
+    /// ramps, where angular acceleration magnifies unmodelled timing errors.
+    pub steady_tolerance: f64,
+}
+
+impl Default for KinOptions {
+    fn default() -> Self {
+        Self {
+            rate_window_s: 0.020,
+            steady_tolerance: 0.02,
+        }
+    }
+}
+
+/// Kinematics at one gyro sample (64 bytes: the passes over millions of them are
+/// memory-bound, so θ2' = ratio·θ1' is not stored; see [`RunKinematics::theta2_rate_dps`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KinSample {
+    /// Sample time, s since the start of the capture.
+    pub t_s: f64,
+    /// Sensor-table angle θ2, rad (0 at the centre of the index plate).
+    pub theta2_rad: f64,
+    /// Base-table rate θ1', °/s.
+    pub theta1_rate_dps: f64,
+    /// Rate the package feels, ω_s = R_qᵀ ω2 (geometry, eq. 1-2), °/s in package axes.
+    pub omega_package_dps: [f64; 3],
+    /// Gyro die temperature, OUT_TEMP counts (−1 count/°C, offset unknown), interpolated in time.
+    pub temp_counts: f32,
+    /// Raw gyro output, counts.
+    pub rate_counts: [i16; 3],
+}
+
+/// Where θ2 = 0 lies in a run, from its index pulses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct IndexStats {
+    /// Complete pulses found (rising edge followed by a falling edge).
+    pub pulses: usize,
+    /// Pulses rejected as outliers from the line.
+    pub rejected: usize,
+    /// Encoder count of θ2 = 0 nearest the first pulse.
+    pub ref_counts: f64,
+    /// 1-σ of `ref_counts`, counts.
+    pub ref_sigma_counts: f64,
+    /// 1-σ of the reference as a θ2 angle, degrees.
+    pub ref_sigma_deg: f64,
+    /// RMS distance of pulse centres from the fitted line, counts.
+    pub centre_rms_counts: f64,
+    /// Median plate width, counts.
+    pub plate_width_counts: f64,
+    /// This run's own estimate of the encoder counts per θ2 revolution (NaN with one pulse).
+    pub period_counts: f64,
+    /// 1-σ of `period_counts`.
+    pub period_sigma_counts: f64,
+}
+
+/// The actual gear ratio θ2'/θ1', from the encoder counts between index pulses of all runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GearEstimate {
+    /// Nominal ratio from `Hello::gear_ratio`.
+    pub nominal: f64,
+    /// Estimated ratio, used for θ2 and θ2'.
+    pub estimated: f64,
+    /// 1-σ of `estimated`.
+    pub sigma: f64,
+    /// (estimated − nominal)/nominal, parts per million.
+    pub deviation_ppm: f64,
+}
+
+/// One run's kinematics and bookkeeping.
+#[derive(Debug, Clone)]
+pub struct RunKinematics {
+    /// Run number, from 1, in the order given.
+    pub run: usize,
+    /// Pose.
+    pub pose: Pose,
+    /// `Run::label()`.
+    pub label: String,
+    /// Commanded base-table rate, °/s (signed).
+    pub commanded_rate_dps: f64,
+    /// R_qᵀ, package ← table (geometry, eq. 2).
+    pub rot_t: Matrix3<f64>,
+    /// Gear ratio θ2'/θ1' used (the pooled estimate).
+    pub gear_ratio: f64,
+    /// Samples kept (steady speed, full rate window, not stale), in time order.
+    pub samples: Vec<KinSample>,
+    /// Samples in the run.
+    pub total: usize,
+    /// Dropped as spin-up, stop or off-speed.
+    pub excluded_unsteady: usize,
+    /// Dropped because the rate window did not fit inside the run.
+    pub excluded_window_edge: usize,
+    /// Dropped because the rig flagged them stale.
+    pub excluded_stale: usize,
+    /// Median base-table rate θ1', °/s.
+    pub steady_rate_dps: f64,
+    /// Samples per second, from the median sample spacing.
+    pub sample_rate_hz: f64,
+    /// Samples in the θ1' window.
+    pub rate_window_samples: usize,
+    /// RMS of the encoder quantisation on θ1', °/s.
+    pub rate_quantisation_dps: f64,
+    /// θ2 reference.
+    pub index: IndexStats,
+}
+
+impl RunKinematics {
+    /// Sensor-table rate θ2' at a sample, °/s.
+    pub fn theta2_rate_dps(&self, s: &KinSample) -> f64 {
+        self.gear_ratio * s.theta1_rate_dps
+    }
+}
+
+/// Kinematics of all runs.
+#[derive(Debug, Clone)]
+pub struct Kinematics {
+    /// Per run, in the order given.
+    pub runs: Vec<RunKinematics>,
+    /// Gear ratio estimate.
+    pub gear: GearEstimate,
+}
+
+/// One index pulse: its centre and width in encoder counts.
+#[derive(Debug, Clone, Copy)]
+struct Pulse {
+    centre_counts: f64,
+    width_counts: f64,
+}
+
+/// Rising edge followed by the next falling edge, in arrival order. Both directions work: the
+/// plate always starts to block first, only the encoder runs the other way.
+fn pulses(run: &Run) -> Vec<Pulse> {
+    let mut out = Vec::new();
+    let mut rising: Option<i64> = None;
+    for e in &run.index {
+        match e.edge {
+            Edge::Rising => rising = Some(e.encoder),
+            Edge::Falling => {
+                if let Some(r) = rising.take() {
+                    out.push(Pulse {
+                        centre_counts: 0.5 * (r + e.encoder) as f64,
+                        width_counts: (e.encoder - r).unsigned_abs() as f64,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// Pulse centres of one run against their revolution number.
+struct IndexLine {
+    /// (revolution number, centre counts) of the inliers.
+    points: Vec<(f64, f64)>,
+    pulses: usize,
+    rejected: usize,
+    width_counts: f64,
+}
+
+impl IndexLine {
+    /// Numbers the pulses with the nominal period, fits a line, drops outliers, refits.
+    fn new(pulses: &[Pulse], nominal_period_counts: f64) -> Self {
+        let first = pulses[0].centre_counts;
+        let all: Vec<(f64, f64)> = pulses
+            .iter()
+            .map(|p| {
+                (
+                    ((p.centre_counts - first) / nominal_period_counts).round(),
+                    p.centre_counts,
+                )
+            })
+            .collect();
+        let mut widths: Vec<f64> = pulses.iter().map(|p| p.width_counts).collect();
+        let width_counts = median(&mut widths);
+        let (a, p) = line_fit(&all, nominal_period_counts);
+        let mut dev: Vec<f64> = all.iter().map(|&(k, c)| (c - a - p * k).abs()).collect();
+        let threshold = (INDEX_OUTLIER_SIGMAS * MAD_TO_SIGMA * median(&mut dev.clone()))
+            .max(INDEX_OUTLIER_FLOOR_COUNTS);
+        let mut points = Vec::with_capacity(all.len());
+        for (pt, d) in all.iter().zip(dev.iter_mut()) {
+            if *d <= threshold {
+                points.push(*pt);
+            }
+        }
+        Self {
+            rejected: all.len() - points.len(),
+            pulses: all.len(),
+            points,
+            width_counts,
+        }
+    }
+
+    /// Least-squares (intercept, slope, σ of centres, σ intercept, σ slope); σ floored at the
+    /// quantisation of a midpoint of two counts.
+    fn fit(&self, nominal_period_counts: f64) -> (f64, f64, f64, f64, f64) {
+        let (a, p) = line_fit(&self.points, nominal_period_counts);
+        let n = self.points.len() as f64;
+        let rss: f64 = self
+            .points
+            .iter()
+            .map(|&(k, c)| (c - a - p * k).powi(2))
+            .sum();
+        let quant = UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt();
+        let sigma = if n > 2.0 {
+            (rss / (n - 2.0)).sqrt().max(quant)
+        } else {
+            quant
+        };
+        let kbar = self.points.iter().map(|pt| pt.0).sum::<f64>() / n;
+        let skk: f64 = self.points.iter().map(|pt| (pt.0 - kbar).powi(2)).sum();
+        let sp = if skk > 0.0 {
+            sigma / skk.sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let sa = sigma * (1.0 / n + kbar * kbar / skk.max(f64::MIN_POSITIVE)).sqrt();
+        (a, p, (rss / n).sqrt(), sa, sp)
+    }
+
+    /// Intercept with the slope held at `period`, and its σ.
+    fn intercept(&self, period_counts: f64, sigma_centre: f64) -> (f64, f64) {
+        let n = self.points.len() as f64;
+        let a = self
+            .points
+            .iter()
+            .map(|&(k, c)| c - period_counts * k)
+            .sum::<f64>()
+            / n;
+        (a, sigma_centre / n.sqrt())
+    }
+}
+
+/// Straight line c = a + p·k; with one point the slope is `fallback_slope`.
+fn line_fit(points: &[(f64, f64)], fallback_slope: f64) -> (f64, f64) {
+    let n = points.len() as f64;
+    let kbar = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let cbar = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let skk: f64 = points.iter().map(|p| (p.0 - kbar).powi(2)).sum();
+    let skc: f64 = points.iter().map(|p| (p.0 - kbar) * (p.1 - cbar)).sum();
+    let p = if skk > 0.0 { skc / skk } else { fallback_slope };
+    (cbar - p * kbar, p)
+}
+
+/// Local straight-line slopes of encoder count against time, counts/s, over windows of 2h+1
+/// consecutive samples: `f(centre, slope)` for every sample with a full window. Sliding sums of
+/// offsets from the run's first sample, in i128 so that they stay exact for any run length: O(1)
+/// per sample. The centred combinations n·Σte − Σt·Σe and n·Σtt − (Σt)² are those of the window
+/// alone (≲ 1e13 for any sane window), so they pass through i64 on their way to f64.
+fn for_each_slope_cps(samples: &[RunSample], h: usize, mut f: impl FnMut(usize, f64)) {
+    let w = 2 * h + 1;
+    if samples.len() < w {
+        return;
+    }
+    let (t0, e0) = (samples[0].t_us, samples[0].encoder);
+    let te = |s: &RunSample| (i128::from(s.t_us - t0), i128::from(s.encoder - e0));
+    let (mut st, mut stt, mut se, mut ste) = (0i128, 0i128, 0i128, 0i128);
+    for s in &samples[..w] {
+        let (t, e) = te(s);
+        st += t;
+        stt += t * t;
+        se += e;
+        ste += t * e;
+    }
+    let n = w as i128;
+    for j in 0..=samples.len() - w {
+        if j > 0 {
+            let (to, eo) = te(&samples[j - 1]);
+            let (ti, ei) = te(&samples[j + w - 1]);
+            st += ti - to;
+            stt += ti * ti - to * to;
+            se += ei - eo;
+            ste += ti * ei - to * eo;
+        }
+        let num = (n * ste - st * se) as i64 as f64;
+        let den = (n * stt - st * st) as i64 as f64;
+        f(j + h, num / den * 1e6);
+    }
+}
+
+/// The same slope at one centre `i` (h ≤ i < len − h), directly: offsets from sample `i` are
+/// small enough for i64.
+fn slope_at_cps(samples: &[RunSample], i: usize, h: usize) -> f64 {
+    let c = &samples[i];
+    let (mut st, mut stt, mut se, mut ste) = (0i64, 0i64, 0i64, 0i64);
+    for s in &samples[i - h..=i + h] {
+        let (t, e) = (s.t_us - c.t_us, s.encoder - c.encoder);
+        st += t;
+        stt += t * t;
+        se += e;
+        ste += t * e;
+    }
+    let n = (2 * h + 1) as i64;
+    (n * ste - st * se) as f64 / (n * stt - st * st) as f64 * 1e6
+}
+
+/// Median of at most ~`MEDIAN_SUBSAMPLE` evenly strided values of `f(0..len)`: a robust level
+/// needs no more.
+fn strided_median(len: usize, f: impl Fn(usize) -> f64) -> f64 {
+    let stride = len.div_ceil(MEDIAN_SUBSAMPLE).max(1);
+    let mut sub: Vec<f64> = (0..len).step_by(stride).map(f).collect();
+    median(&mut sub)
+}
+
+/// Temperature at `t_us` by linear interpolation, held at the ends; `cursor` walks forward.
+fn temperature_at(run: &Run, t_us: i64, cursor: &mut usize) -> f32 {
+    let temps = &run.temperatures;
+    match temps.len() {
+        0 => return f32::NAN,
+        1 => return f32::from(temps[0].raw),
+        _ => {}
+    }
+    while *cursor + 2 < temps.len() && temps[*cursor + 1].t_us <= t_us {
+        *cursor += 1;
+    }
+    let (a, b) = (&temps[*cursor], &temps[*cursor + 1]);
+    let span = (b.t_us - a.t_us) as f64;
+    let w = if span > 0.0 {
+        ((t_us - a.t_us) as f64 / span).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (f64::from(a.raw) + w * f64::from(b.raw - a.raw)) as f32
+}
+
+/// Everything about a run that does not depend on the pooled gear ratio.
+struct RunPrep<'a> {
+    run: &'a Run,
+    number: usize,
+    line: IndexLine,
+    fit: (f64, f64, f64, f64, f64),
+}
+
+/// Reconstructs θ2, θ1', θ2' and temperature at every usable sample of every run.
+pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let first = runs.first().ok_or(CalError::NoRuns)?;
+    let cpr = f64::from(first.hello.encoder_counts_per_rev);
+    let nominal = f64::from(first.hello.gear_ratio.num) / f64::from(first.hello.gear_ratio.den);
+    let nominal_period = cpr / nominal;
+
+    let mut preps = Vec::with_capacity(runs.len());
+    for (i, run) in runs.iter().enumerate() {
+        let p = pulses(run);
+        if p.is_empty() {
+            return Err(CalError::NoIndex {
+                run: i + 1,
+                label: run.label(),
+                edges: run.index.len(),
+            });
+        }
+        let line = IndexLine::new(&p, nominal_period);
+        let fit = line.fit(nominal_period);
+        preps.push(RunPrep {
+            run,
+            number: i + 1,
+            line,
+            fit,
+        });
+    }
+
+    // Pool the per-run periods, weighted by 1/σ²; runs with a single pulse carry no period.
+    let (mut wsum, mut psum) = (0.0, 0.0);
+    for p in &preps {
+        let sp = p.fit.4;
+        if sp.is_finite() && sp > 0.0 {
+            wsum += 1.0 / (sp * sp);
+            psum += p.fit.1 / (sp * sp);
+        }
+    }
+    let (period, period_sigma) = if wsum > 0.0 {
+        (psum / wsum, (1.0 / wsum).sqrt())
+    } else {
+        (nominal_period, f64::NAN)
+    };
+    let ratio = cpr / period;
+    let gear = GearEstimate {
+        nominal,
+        estimated: ratio,
+        sigma: ratio * period_sigma / period,
+        deviation_ppm: (ratio - nominal) / nominal * 1e6,
+    };
+
+    let out = preps
+        .into_iter()
+        .map(|p| run_kinematics(p, cpr, period, ratio, opts))
+        .collect::<Result<_, _>>()?;
+    Ok(Kinematics { runs: out, gear })
+}
+
+fn run_kinematics(
+    p: RunPrep<'_>,
+    cpr: f64,
+    period: f64,
+    ratio: f64,
+    opts: &KinOptions,
+) -> Result<RunKinematics, CalError> {
+    let run = p.run;
+    let centre_sigma = if p.line.points.len() > 2 {
+        p.fit.2 * (p.line.points.len() as f64 / (p.line.points.len() as f64 - 2.0)).sqrt()
+    } else {
+        UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt()
+    };
+    let (ref_counts, ref_sigma) = p.line.intercept(
+        period,
+        centre_sigma.max(UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt()),
+    );
+    let index = IndexStats {
+        pulses: p.line.pulses,
+        rejected: p.line.rejected,
+        ref_counts,
+        ref_sigma_counts: ref_sigma,
+        ref_sigma_deg: ref_sigma / period * 360.0,
+        centre_rms_counts: p.fit.2,
+        plate_width_counts: p.line.width_counts,
+        period_counts: if p.fit.4.is_finite() {
+            p.fit.1
+        } else {
+            f64::NAN
+        },
+        period_sigma_counts: p.fit.4,
+    };
+
+    let s = &run.samples;
+    let total = s.len();
+    let dt_s = strided_median(total.saturating_sub(1), |i| {
+        (s[i + 1].t_us - s[i].t_us) as f64
+    }) * 1e-6;
+    let sample_rate_hz = 1.0 / dt_s;
+    let h = ((opts.rate_window_s * sample_rate_hz / 2.0).round() as usize).max(1);
+    let deg_per_count = 360.0 / cpr;
+    // Slope σ of a straight line through 2h+1 evenly spaced points: σ_q/√(Σ(t−t̄)²).
+    let stt = dt_s * dt_s * (h * (h + 1) * (2 * h + 1)) as f64 / 3.0;
+    let rate_quantisation_dps = UNIFORM_QUANTISATION_SIGMA * deg_per_count / stt.sqrt();
+    let label = run.label();
+    let windows = total.saturating_sub(2 * h);
+
+    // The steady speed is the median of the rates near the commanded one, so that a short run
+    // dominated by its ramps still finds its plateau; with none near, the median of all.
+    let commanded = run.commanded_rate_dps();
+    let near_band = opts.steady_tolerance * commanded.abs();
+    let rate_at = |j: usize| slope_at_cps(s, j + h, h) * deg_per_count;
+    let mut near: Vec<f64> = (0..windows)
+        .step_by(windows.div_ceil(MEDIAN_SUBSAMPLE).max(1))
+        .map(rate_at)
+        .filter(|r| (r - commanded).abs() <= near_band)
+        .collect();
+    let steady_rate_dps = if near.is_empty() {
+        strided_median(windows, rate_at)
+    } else {
+        median(&mut near)
+    };
+    let tol = opts.steady_tolerance * steady_rate_dps.abs();
+
+    let mut samples = Vec::with_capacity(windows);
+    let (mut unsteady, mut stale) = (0, 0);
+    let mut cursor = 0;
+    let two_pi_over_period = std::f64::consts::TAU / period;
+    let rot_t = run.pose.rotation().transpose();
+    for_each_slope_cps(s, h, |i, slope_cps| {
+        let smp = &s[i];
+        let rate = slope_cps * deg_per_count;
+        if smp.status & sample_status::STALE != 0 {
+            stale += 1;
+            return;
+        }
+        let steady = (rate - steady_rate_dps).abs() <= tol;
+        if !steady {
+            unsteady += 1;
+            return;
+        }
+        let theta2_rad = (smp.encoder as f64 - ref_counts) * two_pi_over_period;
+        let theta2_rate_dps = ratio * rate;
+        samples.push(KinSample {
+            t_s: smp.t_us as f64 * 1e-6,
+            theta2_rad,
+            theta1_rate_dps: rate,
+            omega_package_dps: (rot_t * omega2(rate, theta2_rad, theta2_rate_dps)).into(),
+            temp_counts: temperature_at(run, smp.t_us, &mut cursor),
+            rate_counts: smp.rate_counts,
+        });
+    });
+
+    // One sensor-table revolution at the commanded speed: the paper's per-pose sinusoid fit needs
+    // a whole period.
+    let commanded_dps = commanded.abs();
+    let needed = if commanded_dps > 0.0 {
+        (sample_rate_hz * 360.0 / (ratio * commanded_dps)).ceil() as usize
+    } else {
+        total + 1
+    };
+    if samples.len() < needed.max(1) {
+        return Err(CalError::TooFewSamples {
+            run: p.number,
+            label,
+            usable: samples.len(),
+            total,
+            needed: needed.max(1),
+        });
+    }
+
+    Ok(RunKinematics {
+        run: p.number,
+        pose: run.pose,
+        label,
+        commanded_rate_dps: run.commanded_rate_dps(),
+        rot_t,
+        gear_ratio: ratio,
+        samples,
+        total,
+        excluded_unsteady: unsteady,
+        excluded_window_edge: total - windows,
+        excluded_stale: stale,
+        steady_rate_dps,
+        sample_rate_hz,
+        rate_window_samples: 2 * h + 1,
+        rate_quantisation_dps,
+        index,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sample record stays one cache line: every pass streams millions of them.
+    #[test]
+    fn kin_sample_is_one_cache_line() {
+        assert_eq!(std::mem::size_of::<KinSample>(), 64);
+    }
+}

@@ -1,0 +1,212 @@
+//! The paper's identification (EXCITER.md eq. 4-5) as an independent cross-check of the joint
+//! fit: per pose and axis a sinusoid in θ2, whose phase gives a plane containing R_q s_i and
+//! e_z2; two poses' planes intersect in s_i; the amplitude gives k_i, the baseline the offset.
+//!
+//! Per pose q the regression `v = a·θ1' sinθ2 + b·θ1' cosθ2 + d·(θ2' − θ̄2') + c` handles a
+//! non-constant speed. Its columns are an invertible linear map of the joint fit's columns
+//! restricted to that pose ([θ1' sinθ2, θ1' cosθ2, θ2'] = R_q ω_s), so its normal equations are
+//! the joint fit's per-run sums transformed, with no further pass over the samples.
+
+use super::derived::{delta_method, dvec};
+use super::kinematics::Kinematics;
+use super::lsq::{Fit, NormalEq, AXES};
+use crate::geometry::Pose;
+use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The sinusoid fitted to one axis in one pose.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseSinusoid {
+    /// Pose.
+    pub pose: Pose,
+    /// Coefficients [a, b, d, c]: of θ1' sinθ2 and θ1' cosθ2 (counts per °/s), of θ2' − θ̄2'
+    /// (counts per °/s), and the baseline at θ̄2' (counts).
+    pub coef: [f64; 4],
+    /// 1-σ of each coefficient.
+    pub coef_sigma: [f64; 4],
+    /// Amplitude √(a² + b²), counts per °/s of θ1'.
+    pub amplitude_counts_per_dps: f64,
+    /// Phase φ of a sinθ2 + b cosθ2 = A sin(θ2 + φ), degrees.
+    pub phase_deg: f64,
+    /// Mean θ2' of the pose's samples, °/s.
+    pub mean_theta2_rate_dps: f64,
+    /// Samples.
+    pub n: u64,
+}
+
+/// One axis by the paper's method, compared with the joint fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PaperAxis {
+    /// Axis name.
+    pub axis: char,
+    /// Direction s_i (sign chosen nearest e_i).
+    pub s: [f64; 3],
+    /// 1-σ of each component of s.
+    pub s_sigma: [f64; 3],
+    /// Sensitivity, counts per °/s.
+    pub k_counts_per_dps: f64,
+    /// 1-σ of k.
+    pub k_sigma: f64,
+    /// Offset, counts.
+    pub offset_counts: f64,
+    /// 1-σ of the offset.
+    pub offset_sigma_counts: f64,
+    /// (joint fit − paper)/σ_paper for s (3 components; the on-axis one is not pooled into
+    /// `max_abs_z` / `rms_z`), k, offset.
+    pub z_s: [f64; 3],
+    /// See `z_s`.
+    pub z_k: f64,
+    /// See `z_s`.
+    pub z_offset: f64,
+    /// The two sinusoids, pose 1 then pose 2.
+    pub sinusoids: [PoseSinusoid; 2],
+}
+
+/// The cross-check. The z-scores use the paper method's own σ as the scale: both methods use
+/// the same samples, so their difference has variance σ²_paper − σ²_joint (the joint fit being
+/// the efficient one), not the sum; σ_paper bounds it from above and is what the paper's method
+/// would report alone.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PaperCheck {
+    /// Per axis.
+    pub axes: [PaperAxis; 3],
+    /// Largest |z| over all compared parameters.
+    pub max_abs_z: f64,
+    /// RMS z over all compared parameters.
+    pub rms_z: f64,
+}
+
+/// A fitted pose sinusoid with its covariance, for the construction.
+struct SinFit {
+    sinusoid: PoseSinusoid,
+    cov: Matrix4<f64>,
+    r: Matrix3<f64>,
+}
+
+/// Fits one axis in one pose from the joint fit's sums over that pose's runs.
+fn fit_pose(
+    eq: &NormalEq<4>,
+    r: Matrix3<f64>,
+    axis: usize,
+    inflation: f64,
+    pose: Pose,
+) -> Option<SinFit> {
+    let a = eq.xtx_axis(axis);
+    let b = eq.xty_axis(axis);
+    let n = eq.n_axis(axis);
+    let mean_x = Vector3::new(a[(0, 3)], a[(1, 3)], a[(2, 3)]) / a[(3, 3)];
+    let theta2_mean = (r * mean_x).z;
+    let mut t = Matrix4::zeros();
+    t.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    t[(2, 3)] = -theta2_mean;
+    t[(3, 3)] = 1.0;
+    let ztz = t * a * t.transpose();
+    let zty = t * b;
+    let inv = ztz.try_inverse()?;
+    let g = inv * zty;
+    let rss = (eq.yty[axis] - 2.0 * g.dot(&zty) + (g.transpose() * ztz * g)[(0, 0)]).max(0.0);
+    let cov = inv * (rss / (n as f64 - 4.0) * inflation);
+    let coef: [f64; 4] = g.into();
+    Some(SinFit {
+        sinusoid: PoseSinusoid {
+            pose,
+            coef,
+            coef_sigma: std::array::from_fn(|i| cov[(i, i)].max(0.0).sqrt()),
+            amplitude_counts_per_dps: coef[0].hypot(coef[1]),
+            phase_deg: coef[1].atan2(coef[0]).to_degrees(),
+            mean_theta2_rate_dps: theta2_mean,
+            n,
+        },
+        cov,
+        r,
+    })
+}
+
+/// The paper's construction for axis `axis` from the two poses' coefficients
+/// p = [a1, b1, d1, c1, a2, b2, d2, c2]: returns [s (3), k, offset].
+fn construct(p: &[f64], r: [&Matrix3<f64>; 2], theta2_mean: [f64; 2], axis: usize) -> Vec<f64> {
+    // n_iq = R_q s_i × e_z2 ∝ (b, −a, 0), to package frame by R_qᵀ (eq. 4).
+    let normal = |q: usize| r[q].transpose() * Vector3::new(p[4 * q + 1], -p[4 * q], 0.0);
+    let mut s = normal(0).cross(&normal(1)).normalize();
+    if s[axis] < 0.0 {
+        s = -s;
+    }
+    // Amplitude A_q = k·|(R_q s)_xy| = k·√(1 − (R_q s)_z²); least squares over the two poses.
+    let (mut num, mut den) = (0.0, 0.0);
+    for q in 0..2 {
+        let w = (1.0 - (r[q] * s).z.powi(2)).max(0.0).sqrt();
+        num += p[4 * q].hypot(p[4 * q + 1]) * w;
+        den += w * w;
+    }
+    let k = num / den;
+    // Baseline at θ̄2' = offset + k (R_q s)_z θ̄2': remove the constant θ2' term, average poses.
+    let offset = (0..2)
+        .map(|q| p[4 * q + 3] - k * (r[q] * s).z * theta2_mean[q])
+        .sum::<f64>()
+        / 2.0;
+    vec![s.x, s.y, s.z, k, offset]
+}
+
+/// Runs the paper's method on the joint fit's sums and compares it with the joint estimates
+/// (`joint[i]` = [s (3), k, offset] of axis i). `inflation[i]` scales each sinusoid's
+/// covariance for residual autocorrelation, as measured on the joint fit's residuals (the
+/// same noise). None if a pose has no samples or a 4×4 system is singular.
+pub fn paper_check(
+    fit: &Fit<4>,
+    kin: &Kinematics,
+    inflation: [f64; 3],
+    joint: [[f64; 5]; 3],
+) -> Option<PaperCheck> {
+    let mut eqs = [NormalEq::<4>::default(), NormalEq::<4>::default()];
+    for (run, eq) in kin.runs.iter().zip(&fit.per_run) {
+        let q = usize::from(run.pose.number()) - 1;
+        eqs[q].merge(eq);
+    }
+    let rot = [Pose::One.rotation(), Pose::Two.rotation()];
+    let mut axes = Vec::with_capacity(3);
+    let mut zs = Vec::with_capacity(12);
+    for axis in 0..3 {
+        let f1 = fit_pose(&eqs[0], rot[0], axis, inflation[axis], Pose::One)?;
+        let f2 = fit_pose(&eqs[1], rot[1], axis, inflation[axis], Pose::Two)?;
+        let mut p = [0.0; 8];
+        p[..4].copy_from_slice(&f1.sinusoid.coef);
+        p[4..].copy_from_slice(&f2.sinusoid.coef);
+        let mut cov = DMatrix::zeros(8, 8);
+        cov.view_mut((0, 0), (4, 4)).copy_from(&f1.cov);
+        cov.view_mut((4, 4), (4, 4)).copy_from(&f2.cov);
+        let means = [
+            f1.sinusoid.mean_theta2_rate_dps,
+            f2.sinusoid.mean_theta2_rate_dps,
+        ];
+        let (y, c) = delta_method(|v| construct(v, [&f1.r, &f2.r], means, axis), &p, &cov);
+        let sd: Vec<f64> = (0..5).map(|i| c[(i, i)].max(0.0).sqrt()).collect();
+        let z: Vec<f64> = (0..5).map(|i| (joint[axis][i] - y[i]) / sd[i]).collect();
+        // The on-axis component of s is cos(tilt): its first-order σ vanishes with the tilt,
+        // so it is reported but not pooled.
+        zs.extend(
+            z.iter()
+                .enumerate()
+                .filter(|&(i, _)| i != axis)
+                .map(|(_, v)| *v),
+        );
+        axes.push(PaperAxis {
+            axis: AXES[axis],
+            s: [y[0], y[1], y[2]],
+            s_sigma: [sd[0], sd[1], sd[2]],
+            k_counts_per_dps: y[3],
+            k_sigma: sd[3],
+            offset_counts: y[4],
+            offset_sigma_counts: sd[4],
+            z_s: [z[0], z[1], z[2]],
+            z_k: z[3],
+            z_offset: z[4],
+            sinusoids: [f1.sinusoid, f2.sinusoid],
+        });
+    }
+    let zv = dvec(&zs);
+    Some(PaperCheck {
+        axes: axes.try_into().ok()?,
+        max_abs_z: zv.amax(),
+        rms_z: (zv.norm_squared() / zs.len() as f64).sqrt(),
+    })
+}

@@ -1,0 +1,392 @@
+//! Named, switchable departures from the ideal rig and sensor.
+//!
+//! Every effect is off by default, so that the plain simulation matches the calibration model
+//! exactly (`v = M ω_s + v_off`, white noise, quantisation). Residual diagnostics are tested by
+//! switching on effects the calibration model is not told about. Each effect's `Default` holds
+//! its physical default; `Effects::enable` switches one on by name (for the command line).
+
+use serde::{Deserialize, Serialize};
+
+/// The effects in force. `None` = off.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct Effects {
+    /// The gyro's internal low-pass filter and/or a pure output delay.
+    pub filter_delay: Option<FilterDelay>,
+    /// The index plate mounted off θ2 = 0.
+    pub index_offset: Option<IndexOffset>,
+    /// Offsets drifting with the die temperature during warm-up.
+    pub offset_drift: Option<OffsetDrift>,
+    /// Motor speed ripple at harmonics of the base-table revolution.
+    pub speed_ripple: Option<SpeedRipple>,
+    /// Rate-dependent scale factor.
+    pub nonlinearity: Option<Nonlinearity>,
+    /// Actual gear ratio differing from the 1/1 announced in `Hello`.
+    pub gear_ratio_error: Option<GearRatioError>,
+    /// Structure outside every model: a θ2 harmonic on one axis.
+    pub mystery_harmonic: Option<MysteryHarmonic>,
+}
+
+/// Output delay. Physical source: the L3G4200D's digital low-pass filter (CTRL_REG1 BW bits;
+/// cut-off from datasheet Table 21) delays the output by ~√2/(2π·fc) at low frequency, i.e.
+/// 2.0 ms at 110 Hz and 7.5 ms at 30 Hz; at 0.5 Hz 5 ms is a 0.9° phase shift (EXCITER.md), the
+/// size of the tilts being measured.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FilterDelay {
+    /// Apply a 2nd-order Butterworth low-pass at the Table-21 cut-off of the configured
+    /// ODR/bandwidth (default: on). Its actual group delay at each run's drive frequency is
+    /// reported in the truth.
+    pub lowpass: bool,
+    /// Additional pure delay of the output, ms (default 0): an exactly known delay for tests.
+    pub pure_delay_ms: f64,
+}
+
+impl Default for FilterDelay {
+    fn default() -> Self {
+        Self {
+            lowpass: true,
+            pure_delay_ms: 0.0,
+        }
+    }
+}
+
+impl FilterDelay {
+    /// A pure delay of `delay_ms` without the low-pass.
+    pub fn pure_ms(delay_ms: f64) -> Self {
+        Self {
+            lowpass: false,
+            pure_delay_ms: delay_ms,
+        }
+    }
+}
+
+/// Physical source: the shield plate is glued to the base by hand, so its centre is not exactly
+/// at the θ2 the sensor pose was defined for.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct IndexOffset {
+    /// True θ2 at the centre of the index pulse, degrees (default 3°, assumed: hand mounting).
+    pub offset_deg: f64,
+}
+
+impl Default for IndexOffset {
+    fn default() -> Self {
+        Self { offset_deg: 3.0 }
+    }
+}
+
+/// Physical source: self-heating after power-up warms the die; the zero-rate level follows the
+/// temperature (datasheet Table 4, "zero-rate level change vs temperature", ±0.03 °/s/°C typ.,
+/// i.e. 1.7 counts/°C at ±500 °/s). The Temperature messages follow the same temperature.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OffsetDrift {
+    /// Temperature rise from power-up to steady state, °C (default 10, assumed: typical
+    /// self-heating of a board in a closed rig).
+    pub rise_c: f64,
+    /// Time constant of the exponential warm-up, s (default 90, assumed: board thermal mass).
+    pub tau_s: f64,
+    /// Offset change per °C for each axis, °/s/°C (default [0.03, −0.02, 0.04], around the
+    /// datasheet's typical ±0.03).
+    pub dps_per_c: [f64; 3],
+}
+
+impl Default for OffsetDrift {
+    fn default() -> Self {
+        Self {
+            rise_c: 10.0,
+            tau_s: 90.0,
+            dps_per_c: [0.03, -0.02, 0.04],
+        }
+    }
+}
+
+/// One harmonic of the base-table revolution.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RippleHarmonic {
+    /// Harmonic number (cycles per base-table revolution), ≥ 1.
+    pub order: u32,
+    /// Relative speed amplitude: θ1' = θ1'_nominal·(1 + Σ amplitude·cos(order·θ1 + phase)).
+    pub amplitude: f64,
+    /// Phase, rad.
+    pub phase_rad: f64,
+}
+
+/// Physical source: bearing and shaft eccentricity load the base once and twice per revolution
+/// (1×, 2×); the 12-pole magnetic gears (EXCITER.md, "Mechanism") add a detent torque at 12× per
+/// revolution. (The maxon RE 30 itself is coreless, hence free of cogging.) The encoder and index
+/// follow the rippled motion, so encoder-derived rates carry the ripple.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpeedRipple {
+    /// Default: 1× 0.5 %, 2× 0.25 %, 12× 0.1 % (assumed, typical of a small direct-drive table
+    /// under a speed loop).
+    pub harmonics: [RippleHarmonic; 3],
+}
+
+impl Default for SpeedRipple {
+    fn default() -> Self {
+        Self {
+            harmonics: [
+                RippleHarmonic {
+                    order: 1,
+                    amplitude: 0.005,
+                    phase_rad: 0.7,
+                },
+                RippleHarmonic {
+                    order: 2,
+                    amplitude: 0.0025,
+                    phase_rad: 2.1,
+                },
+                RippleHarmonic {
+                    order: 12,
+                    amplitude: 0.001,
+                    phase_rad: 0.0,
+                },
+            ],
+        }
+    }
+}
+
+/// Physical source: the sense element and ADC are not perfectly linear (datasheet Table 4,
+/// "non-linearity", 0.2 % of full scale typ.) and the drive/sense loop gains differ slightly with
+/// the sign of the Coriolis force. Applied per axis to the rate along the axis, `x` in °/s:
+/// `y = x·(1 ± asymmetry/2) + quadratic_fs·x·|x|/FS`, `+` for x > 0.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Nonlinearity {
+    /// Added output at full scale, as a fraction of full scale (default 0.002: datasheet
+    /// Table 4).
+    pub quadratic_fs: f64,
+    /// Difference between the positive and negative scale factors, fraction (default 0.004,
+    /// assumed).
+    pub asymmetry: f64,
+}
+
+impl Default for Nonlinearity {
+    fn default() -> Self {
+        Self {
+            quadratic_fs: 0.002,
+            asymmetry: 0.004,
+        }
+    }
+}
+
+/// Physical source: a magnetic gear slips by whole poles under overload, and a rig built with a
+/// different gear pair than documented changes the ratio; the `Hello` still says 1/1.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GearRatioError {
+    /// Actual ratio = nominal·(1 + ppm·10⁻⁶) (default +200 ppm, assumed).
+    pub ppm: f64,
+}
+
+impl Default for GearRatioError {
+    fn default() -> Self {
+        Self { ppm: 200.0 }
+    }
+}
+
+/// Out-of-catalogue structure for "unexplained residual" tests: a rate of
+/// `amplitude·sin(order·θ2 + phase)` added to one axis, as a sensor-table wobble or a magnetic
+/// disturbance from the gears might produce. No calibration model explains it.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MysteryHarmonic {
+    /// Axis it appears on, 0..3 (default 0 = x).
+    pub axis: usize,
+    /// Harmonic of θ2 (default 3).
+    pub order: u32,
+    /// Amplitude, °/s (default 0.3).
+    pub amplitude_dps: f64,
+    /// Phase, rad (default 0.4).
+    pub phase_rad: f64,
+}
+
+impl Default for MysteryHarmonic {
+    fn default() -> Self {
+        Self {
+            axis: 0,
+            order: 3,
+            amplitude_dps: 0.3,
+            phase_rad: 0.4,
+        }
+    }
+}
+
+/// An effect name or value that `Effects::enable` does not understand.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EffectSpecError(pub String);
+
+impl std::fmt::Display for EffectSpecError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for EffectSpecError {}
+
+impl Effects {
+    /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
+    pub const NAMES: [(&'static str, &'static str); 8] = [
+        ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
+        ("delay_ms", "pure output delay, ms (default 5)"),
+        ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
+        ("offset_drift", "warm-up temperature rise, °C (default 10)"),
+        ("speed_ripple", "1× speed ripple, fraction (default 0.005)"),
+        ("nonlinearity", "quadratic term at full scale, fraction (default 0.002)"),
+        ("gear_ratio_error", "gear ratio error, ppm (default 200)"),
+        ("mystery_harmonic", "3×θ2 harmonic on x, °/s (default 0.3)"),
+    ];
+
+    /// True when no effect is on.
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Switches on one effect from `name` or `name=value` (see [`Effects::NAMES`]); the value
+    /// sets the effect's headline parameter, the others keep their defaults.
+    pub fn enable(&mut self, spec: &str) -> Result<(), EffectSpecError> {
+        let (name, value) = match spec.split_once('=') {
+            Some((n, v)) => {
+                let v: f64 = v
+                    .trim()
+                    .parse()
+                    .map_err(|_| EffectSpecError(format!("effect {spec:?}: value is not a number")))?;
+                if !v.is_finite() {
+                    return Err(EffectSpecError(format!("effect {spec:?}: value is not finite")));
+                }
+                (n.trim(), Some(v))
+            }
+            None => (spec.trim(), None),
+        };
+        match name {
+            "filter_delay" => {
+                if value.is_some() {
+                    return Err(EffectSpecError("filter_delay takes no value (use delay_ms=…)".into()));
+                }
+                self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0)).lowpass = true;
+            }
+            "delay_ms" => {
+                let ms = value.unwrap_or(5.0);
+                if ms < 0.0 {
+                    return Err(EffectSpecError("delay_ms must be ≥ 0".into()));
+                }
+                self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0)).pure_delay_ms = ms;
+            }
+            "index_offset_deg" => {
+                self.index_offset = Some(IndexOffset {
+                    offset_deg: value.unwrap_or(IndexOffset::default().offset_deg),
+                })
+            }
+            "offset_drift" => {
+                let mut d = OffsetDrift::default();
+                if let Some(v) = value {
+                    d.rise_c = v;
+                }
+                self.offset_drift = Some(d);
+            }
+            "speed_ripple" => {
+                let mut r = SpeedRipple::default();
+                if let Some(v) = value {
+                    r.harmonics[0].amplitude = v;
+                }
+                self.speed_ripple = Some(r);
+            }
+            "nonlinearity" => {
+                let mut n = Nonlinearity::default();
+                if let Some(v) = value {
+                    n.quadratic_fs = v;
+                }
+                self.nonlinearity = Some(n);
+            }
+            "gear_ratio_error" => {
+                self.gear_ratio_error = Some(GearRatioError {
+                    ppm: value.unwrap_or(GearRatioError::default().ppm),
+                })
+            }
+            "mystery_harmonic" => {
+                let mut m = MysteryHarmonic::default();
+                if let Some(v) = value {
+                    m.amplitude_dps = v;
+                }
+                self.mystery_harmonic = Some(m);
+            }
+            _ => {
+                let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();
+                return Err(EffectSpecError(format!(
+                    "unknown effect {name:?}; known: {}",
+                    known.join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Actual gear ratio for a nominal one.
+    pub fn true_gear_ratio(&self, nominal: f64) -> f64 {
+        nominal * (1.0 + self.gear_ratio_error.map_or(0.0, |g| g.ppm * 1e-6))
+    }
+
+    /// θ2 at the index centre, rad.
+    pub fn index_offset_rad(&self) -> f64 {
+        self.index_offset.map_or(0.0, |o| o.offset_deg.to_radians())
+    }
+
+    /// Pure output delay, s.
+    pub fn pure_delay_s(&self) -> f64 {
+        self.filter_delay.map_or(0.0, |f| f.pure_delay_ms * 1e-3)
+    }
+
+    /// Whether the low-pass filter is on.
+    pub fn lowpass(&self) -> bool {
+        self.filter_delay.is_some_and(|f| f.lowpass)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enable_parses_names_and_values() {
+        let mut e = Effects::default();
+        assert!(e.is_none());
+        e.enable("delay_ms=5").unwrap();
+        assert_eq!(e.filter_delay, Some(FilterDelay::pure_ms(5.0)));
+        e.enable("filter_delay").unwrap();
+        assert_eq!(
+            e.filter_delay,
+            Some(FilterDelay {
+                lowpass: true,
+                pure_delay_ms: 5.0
+            })
+        );
+        e.enable("gear_ratio_error=-50").unwrap();
+        assert_eq!(e.true_gear_ratio(1.0), 1.0 - 50e-6);
+        e.enable("index_offset_deg").unwrap();
+        assert!((e.index_offset_rad() - 3f64.to_radians()).abs() < 1e-15);
+        for (name, _) in Effects::NAMES {
+            e.enable(name).unwrap();
+        }
+        assert!(e.enable("warp_drive").is_err());
+        assert!(e.enable("delay_ms=abc").is_err());
+        assert!(e.enable("delay_ms=-1").is_err());
+        assert!(e.enable("filter_delay=3").is_err());
+    }
+
+    #[test]
+    fn effects_round_trip_through_json() {
+        let mut e = Effects::default();
+        for (name, _) in Effects::NAMES {
+            e.enable(name).unwrap();
+        }
+        let json = serde_json::to_string(&e).unwrap();
+        let back: Effects = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, e);
+        let none: Effects = serde_json::from_str("{}").unwrap();
+        assert!(none.is_none());
+    }
+}

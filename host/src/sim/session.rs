@@ -1,0 +1,501 @@
+//! The simulation engine shared by the batch generator and the live emulator: one powered-up
+//! rig with one sensor, running runs and emitting every frame in time order.
+
+use super::effects::Effects;
+use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
+use super::motion::{EdgeCrossing, Encoder, IndexPlate, Motor};
+use super::sensor::{quantise, SenseChain, SensorTruth, Thermal};
+use super::stream::FrameWriter;
+use super::truth::{RunTruth, Truth};
+use super::SimConfig;
+use crate::geometry::{omega2, Pose};
+use protocol::{
+    Counters, Direction, Fault, FaultReport, GearRatio, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg, RunStarted,
+    RunStopped, Sample, Temperature, Version, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION, TIMESTAMP_HZ,
+};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal, StandardNormal};
+use std::io::{self, Write};
+
+/// Firmware version the simulator announces: the version of the firmware it emulates.
+pub const FIRMWARE_VERSION: Version = Version {
+    major: 0,
+    minor: 1,
+    patch: 0,
+};
+
+/// Gear ratio announced in `Hello`: the prototype's 1:1 magnetic gears (EXCITER.md, "Mechanism").
+pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
+
+/// Spread of the gyro's internal clock against the rig timer, ppm, 1 σ (assumed: the L3G4200D
+/// runs its ODR from an internal RC-trimmed oscillator; the datasheet gives no tolerance).
+pub const ODR_ERROR_SIGMA_PPM: f64 = 300.0;
+
+/// Sample timestamp jitter, µs rms (assumed: interrupt latency of the data-ready handler on a
+/// Cortex-M at tens of MHz).
+pub const TIMESTAMP_JITTER_US: f64 = 1.0;
+
+/// Die temperature at power-up, °C (assumed: lab ambient).
+pub const AMBIENT_C: f64 = 25.0;
+
+/// Message periods, s (protocol doc comments: `MotorStatus` at 10 Hz, `Temperature` and
+/// `Counters` at 1 Hz).
+const MOTOR_PERIOD_S: f64 = 0.1;
+const TEMPERATURE_PERIOD_S: f64 = 1.0;
+const COUNTERS_PERIOD_S: f64 = 1.0;
+
+/// Base-table speed at 100 % PWM duty, °/s (assumed: RE 30 at 24 V through the drive train;
+/// only used to fill `MotorStatus::duty_permille` plausibly).
+const FULL_DUTY_DPS: f64 = 1080.0;
+/// Duty needed to overcome bearing and gear friction, per mille (assumed).
+const FRICTION_DUTY_PERMILLE: f64 = 20.0;
+
+/// Independent random streams of one seed: the sensor is the same whatever is simulated.
+#[derive(Clone, Copy)]
+enum Stream {
+    Sensor = 0,
+    Rig = 1,
+    Noise = 2,
+    Jitter = 3,
+}
+
+fn rng(seed: u64, stream: Stream) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    r.set_stream(stream as u64);
+    r
+}
+
+/// The run in progress.
+struct ActiveRun {
+    pose: Pose,
+    run_tag: u8,
+    rate_dps: f64,
+    start_s: f64,
+    chain: SenseChain,
+    lowpass: Option<Filter3>,
+    /// Index of the next gyro data-ready on the session-wide lattice.
+    next_k: u64,
+    /// Everything up to this time has been emitted.
+    done_s: f64,
+    theta2_done_rad: f64,
+    n_motor: u64,
+    n_temperature: u64,
+    n_counters: u64,
+    samples: u64,
+    edges: u64,
+}
+
+/// One powered-up simulated rig.
+pub struct Session {
+    seed: u64,
+    gyro: GyroConfig,
+    effects: Effects,
+    noise_density: f64,
+    spin_up_s: f64,
+    plate_width_deg: f64,
+    start_t_us: u32,
+    sensor: SensorTruth,
+    thermal: Thermal,
+    motor: Motor,
+    encoder: Encoder,
+    plate: IndexPlate,
+    gear_ratio: f64,
+    theta2_start_rad: f64,
+    odr_error_ppm: f64,
+    /// Time of data-ready 0, s.
+    clock_phase_s: f64,
+    period_s: f64,
+    noise_counts: [f64; 3],
+    lowpass_coef: Option<Butterworth2>,
+    noise_rng: ChaCha8Rng,
+    jitter_rng: ChaCha8Rng,
+    jitter: Normal<f64>,
+    samples_read: u32,
+    rx_errors: u32,
+    run: Option<ActiveRun>,
+    runs: Vec<RunTruth>,
+    scratch: Vec<EdgeCrossing>,
+}
+
+impl Session {
+    /// A rig at power-up (t = 0). `cfg.runs` is not used here.
+    pub fn new(cfg: &SimConfig) -> Self {
+        let sensor = SensorTruth::draw(&mut rng(cfg.seed, Stream::Sensor));
+        let mut rig = rng(cfg.seed, Stream::Rig);
+        let z: f64 = StandardNormal.sample(&mut rig);
+        let odr_error_ppm = ODR_ERROR_SIGMA_PPM * z;
+        let clock_phase_unit: f64 = rig.random();
+        let theta2_start_rad = rig.random_range(0.0..std::f64::consts::TAU);
+        // OUT_TEMP offset: arbitrary per part (datasheet Table 5 specifies only the slope).
+        let out_temp_at_0c = f64::from(rig.random_range(20i32..60));
+        let mut s = Self {
+            seed: cfg.seed,
+            gyro: cfg.gyro,
+            effects: cfg.effects,
+            noise_density: cfg.noise_dps_per_sqrt_hz,
+            spin_up_s: cfg.spin_up_s,
+            plate_width_deg: cfg.index_plate_width_deg,
+            start_t_us: cfg.start_t_us,
+            sensor,
+            thermal: Thermal {
+                ambient_c: AMBIENT_C,
+                out_temp_at_0c,
+                drift: cfg.effects.offset_drift,
+            },
+            motor: Motor::new(cfg.effects.speed_ripple),
+            encoder: Encoder {
+                counts_per_rev: ENCODER_COUNTS_PER_REV,
+                start_counts: cfg.start_encoder,
+            },
+            plate: IndexPlate {
+                centre_rad: cfg.effects.index_offset_rad(),
+                width_rad: cfg.index_plate_width_deg.to_radians(),
+            },
+            gear_ratio: cfg.effects.true_gear_ratio(f64::from(GEAR_RATIO.num) / f64::from(GEAR_RATIO.den)),
+            theta2_start_rad,
+            odr_error_ppm,
+            clock_phase_s: 0.0,
+            period_s: 0.0,
+            noise_counts: [0.0; 3],
+            lowpass_coef: None,
+            noise_rng: rng(cfg.seed, Stream::Noise),
+            jitter_rng: rng(cfg.seed, Stream::Jitter),
+            jitter: Normal::new(0.0, TIMESTAMP_JITTER_US).expect("finite σ"),
+            samples_read: 0,
+            rx_errors: 0,
+            run: None,
+            runs: Vec::new(),
+            scratch: Vec::with_capacity(8),
+        };
+        s.configure(cfg.gyro);
+        s.clock_phase_s = clock_phase_unit * s.period_s;
+        s
+    }
+
+    /// Applies gyro settings (only between runs).
+    pub fn configure(&mut self, gyro: GyroConfig) {
+        debug_assert!(self.run.is_none());
+        self.gyro = gyro;
+        let odr_hz = f64::from(gyro.odr.hz()) * (1.0 + self.odr_error_ppm * 1e-6);
+        self.period_s = 1.0 / odr_hz;
+        let k = self.sensor.k_counts_per_dps(gyro.full_scale);
+        // White noise of density ρ sampled at the ODR: σ = ρ·√(ODR/2) (Nyquist bandwidth).
+        let sigma_dps = self.noise_density * (f64::from(gyro.odr.hz()) / 2.0).sqrt();
+        self.noise_counts = k.map(|k| k * sigma_dps);
+        self.lowpass_coef = self.effects.lowpass().then(|| {
+            let fc_hz = f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0;
+            Butterworth2::lowpass(fc_hz, odr_hz * f64::from(OVERSAMPLING))
+        });
+    }
+
+    /// Whether a run is in progress.
+    pub fn running(&self) -> bool {
+        self.run.is_some()
+    }
+
+    /// Counts a host frame that failed to decode (reported in `Counters::rx_errors`).
+    pub fn count_rx_error(&mut self) {
+        self.rx_errors = self.rx_errors.wrapping_add(1);
+    }
+
+    /// The `Hello` message.
+    pub fn hello(&self) -> Hello {
+        Hello {
+            protocol_version: PROTOCOL_VERSION,
+            firmware: FIRMWARE_VERSION,
+            gyro: self.gyro,
+            encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
+            gear_ratio: GEAR_RATIO,
+            timestamp_hz: TIMESTAMP_HZ,
+        }
+    }
+
+    /// Timer value at `t_s` (the timer counts whole µs).
+    fn timer_us(&self, t_s: f64) -> u32 {
+        (i64::from(self.start_t_us) + (t_s * 1e6).floor() as i64) as u32
+    }
+
+    fn data_ready_s(&self, k: u64) -> f64 {
+        self.clock_phase_s + k as f64 * self.period_s
+    }
+
+    fn theta2_rad(&self, theta1_deg: f64) -> f64 {
+        self.gear_ratio * theta1_deg.to_radians() + self.theta2_start_rad
+    }
+
+    /// Starts a run at `t_s`: `RunStarted`, then the motor ramps to `rate_dps` (signed).
+    pub fn start_run<W: Write>(
+        &mut self,
+        t_s: f64,
+        pose: Pose,
+        run_tag: u8,
+        rate_dps: f64,
+        w: &mut FrameWriter<W>,
+    ) -> io::Result<()> {
+        assert!(self.run.is_none(), "a run is already in progress");
+        w.send(&RigMsg::RunStarted(RunStarted {
+            t_us: self.timer_us(t_s),
+            run_tag,
+            rate_mdps: (rate_dps.abs() * 1000.0).round() as u32,
+            direction: if rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
+            gyro: self.gyro,
+        }))?;
+        self.motor.set_target(t_s, rate_dps, self.spin_up_s);
+        let next_k = ((t_s - self.clock_phase_s) / self.period_s).floor().max(0.0) as u64 + 1;
+        let chain = SenseChain::new(&self.sensor, &pose.rotation(), self.gyro.full_scale, &self.effects);
+        let mut run = ActiveRun {
+            pose,
+            run_tag,
+            rate_dps,
+            start_s: t_s,
+            chain,
+            lowpass: self.lowpass_coef.map(Filter3::new),
+            next_k,
+            done_s: t_s,
+            theta2_done_rad: self.theta2_rad(self.motor.theta1_deg(t_s)),
+            n_motor: 0,
+            n_temperature: 0,
+            n_counters: 0,
+            samples: 0,
+            edges: 0,
+        };
+        if let Some(f) = run.lowpass.as_mut() {
+            // The gyro has been filtering since power-up: start from the steady state of the
+            // input at the first internal tick.
+            let t0 = self.data_ready_s(next_k - 1) - self.effects.pure_delay_s();
+            f.settle(self.sensed_counts(&run.chain, t0));
+        }
+        self.run = Some(run);
+        Ok(())
+    }
+
+    /// Emits everything up to `t_s` (a run's frames up to its last data-ready ≤ `t_s`).
+    pub fn advance_to<W: Write>(&mut self, t_s: f64, w: &mut FrameWriter<W>) -> io::Result<()> {
+        while let Some(run) = &self.run {
+            let t_k = self.data_ready_s(run.next_k);
+            if t_k > t_s {
+                break;
+            }
+            self.emit_interval(t_k, w)?;
+            self.emit_sample(w)?;
+        }
+        Ok(())
+    }
+
+    /// Ends the run at `t_s` (`RunStopped`, after an optional fault); the motor ramps down.
+    pub fn stop_run<W: Write>(&mut self, t_s: f64, fault: Option<Fault>, w: &mut FrameWriter<W>) -> io::Result<()> {
+        self.advance_to(t_s, w)?;
+        if self.run.is_none() {
+            return Ok(());
+        }
+        self.emit_interval(t_s, w)?;
+        if let Some(fault) = fault {
+            w.send(&RigMsg::Fault(FaultReport {
+                t_us: self.timer_us(t_s),
+                fault,
+            }))?;
+        }
+        let run = self.run.take().expect("checked above");
+        w.send(&RigMsg::RunStopped(RunStopped {
+            t_us: self.timer_us(t_s),
+            run_tag: run.run_tag,
+        }))?;
+        self.motor.set_target(t_s, 0.0, self.spin_up_s);
+        let drive_hz = (run.rate_dps * self.gear_ratio).abs() / 360.0;
+        let filter_ms = self
+            .lowpass_coef
+            .map_or(0.0, |c| 1e3 * c.group_delay_s(drive_hz, f64::from(OVERSAMPLING) / self.period_s));
+        self.runs.push(RunTruth {
+            pose: run.pose,
+            rate_dps: run.rate_dps,
+            duration_s: t_s - run.start_s,
+            start_s: run.start_s,
+            samples: run.samples,
+            index_edges: run.edges,
+            gyro: self.gyro,
+            drive_hz,
+            filter_group_delay_ms: filter_ms,
+            total_delay_ms: filter_ms + self.effects.pure_delay_s() * 1e3,
+            faulted: fault.is_some(),
+        });
+        Ok(())
+    }
+
+    /// Index edges and periodic messages in `(done_s, t_end_s]`, merged in time order.
+    fn emit_interval<W: Write>(&mut self, t_end_s: f64, w: &mut FrameWriter<W>) -> io::Result<()> {
+        let Some(run) = self.run.as_ref() else { return Ok(()) };
+        let (t_a, theta2_a) = (run.done_s, run.theta2_done_rad);
+        let theta2_b = self.theta2_rad(self.motor.theta1_deg(t_end_s));
+        let mut edges = std::mem::take(&mut self.scratch);
+        edges.clear();
+        self.plate.crossings(
+            t_a,
+            t_end_s,
+            theta2_a,
+            theta2_b,
+            |t| self.theta2_rad(self.motor.theta1_deg(t)),
+            &mut edges,
+        );
+        let mut next_edge = 0;
+        loop {
+            let run = self.run.as_ref().expect("checked above");
+            let periodic = [
+                run.start_s + (run.n_motor + 1) as f64 * MOTOR_PERIOD_S,
+                run.start_s + (run.n_temperature as f64 + 0.5) * TEMPERATURE_PERIOD_S,
+                run.start_s + (run.n_counters + 1) as f64 * COUNTERS_PERIOD_S,
+            ];
+            let (which, t_p) = periodic
+                .iter()
+                .copied()
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("three entries");
+            let t_e = edges.get(next_edge).map_or(f64::INFINITY, |e| e.t_s);
+            if t_e.min(t_p) > t_end_s {
+                break;
+            }
+            if t_e <= t_p {
+                let e = edges[next_edge];
+                next_edge += 1;
+                w.send(&RigMsg::Index(IndexEdge {
+                    t_us: self.timer_us(e.t_s),
+                    encoder: self.encoder.register(self.motor.theta1_deg(e.t_s)),
+                    edge: e.edge,
+                }))?;
+                self.run.as_mut().expect("checked above").edges += 1;
+            } else {
+                let msg = match which {
+                    0 => self.motor_status(t_p),
+                    1 => RigMsg::Temperature(Temperature {
+                        t_us: self.timer_us(t_p),
+                        raw: self.thermal.out_temp_raw(t_p),
+                    }),
+                    _ => RigMsg::Counters(Counters {
+                        t_us: self.timer_us(t_p),
+                        frames_sent: w.frames_sent(),
+                        queue_drops: 0,
+                        samples_read: self.samples_read,
+                        gyro_overruns: 0,
+                        spi_errors: 0,
+                        rx_errors: self.rx_errors,
+                    }),
+                };
+                w.send(&msg)?;
+                let run = self.run.as_mut().expect("checked above");
+                match which {
+                    0 => run.n_motor += 1,
+                    1 => run.n_temperature += 1,
+                    _ => run.n_counters += 1,
+                }
+            }
+        }
+        self.scratch = edges;
+        let run = self.run.as_mut().expect("checked above");
+        run.done_s = t_end_s;
+        run.theta2_done_rad = theta2_b;
+        Ok(())
+    }
+
+    fn motor_status(&self, t_s: f64) -> RigMsg {
+        let run_tag = self.run.as_ref().map_or(0, |r| r.run_tag);
+        let state = self.motor.state(t_s);
+        // The firmware measures speed as the encoder difference over one report period.
+        let dc = self.encoder.counts(state.theta1_deg) - self.encoder.counts(self.motor.theta1_deg(t_s - MOTOR_PERIOD_S));
+        let cps_per_dps = f64::from(ENCODER_COUNTS_PER_REV) / 360.0;
+        let sp = state.setpoint_dps;
+        let duty = 1000.0 * sp / FULL_DUTY_DPS + if sp == 0.0 { 0.0 } else { FRICTION_DUTY_PERMILLE * sp.signum() };
+        RigMsg::Motor(MotorStatus {
+            t_us: self.timer_us(t_s),
+            speed_cps: (dc as f64 / MOTOR_PERIOD_S).round() as i32,
+            setpoint_cps: (sp * cps_per_dps).round() as i32,
+            duty_permille: duty.round().clamp(-1000.0, 1000.0) as i16,
+            faults: 0,
+            run_tag,
+        })
+    }
+
+    /// Sensed counts (before offset, noise, quantisation) at `t_s`.
+    fn sensed_counts(&self, chain: &SenseChain, t_s: f64) -> [f64; 3] {
+        let st = self.motor.state(t_s);
+        let theta2 = self.theta2_rad(st.theta1_deg);
+        let w2 = omega2(st.theta1_rate_dps, theta2, self.gear_ratio * st.theta1_rate_dps);
+        chain.counts(&w2, theta2)
+    }
+
+    /// The sample at data-ready `next_k` (its interval has been emitted).
+    fn emit_sample<W: Write>(&mut self, w: &mut FrameWriter<W>) -> io::Result<()> {
+        let mut run = self.run.take().expect("called during a run");
+        let t_s = self.data_ready_s(run.next_k);
+        let delay_s = self.effects.pure_delay_s();
+        let pre = match run.lowpass.as_mut() {
+            Some(f) => {
+                let t_prev = self.data_ready_s(run.next_k - 1);
+                let dt = (t_s - t_prev) / f64::from(OVERSAMPLING);
+                let mut y = [0.0; 3];
+                for j in 1..=OVERSAMPLING {
+                    y = f.step(self.sensed_counts(&run.chain, t_prev + f64::from(j) * dt - delay_s));
+                }
+                y
+            }
+            None => self.sensed_counts(&run.chain, t_s - delay_s),
+        };
+        let drift = self.thermal.offset_drift_dps(t_s);
+        let k = self.sensor.k_counts_per_dps(self.gyro.full_scale);
+        let mut rate_counts = [0i16; 3];
+        for i in 0..3 {
+            let z: f64 = StandardNormal.sample(&mut self.noise_rng);
+            let offset = k[i] * (self.sensor.offset_dps[i] + drift[i]);
+            rate_counts[i] = quantise(pre[i] + offset + self.noise_counts[i] * z);
+        }
+        let jitter_us = self.jitter.sample(&mut self.jitter_rng);
+        let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 + jitter_us).round() as i64) as u32;
+        let encoder = self.encoder.register(self.motor.theta1_deg(t_s));
+        w.send(&RigMsg::Sample(Sample {
+            t_us,
+            encoder,
+            rate_counts,
+            status: 0,
+        }))?;
+        self.samples_read = self.samples_read.wrapping_add(1);
+        run.samples += 1;
+        run.next_k += 1;
+        self.run = Some(run);
+        Ok(())
+    }
+
+    /// The truth so far: the sensor for the current gyro settings and the finished runs.
+    pub fn truth(&self) -> Truth {
+        let fs = self.gyro.full_scale;
+        let m = self.sensor.m_counts_per_dps(fs);
+        Truth {
+            seed: self.seed,
+            m_counts_per_dps: [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)])),
+            k_counts_per_dps: self.sensor.k_counts_per_dps(fs),
+            s: self.sensor.s.map(|v| [v[0], v[1], v[2]]),
+            tilt_deg: self.sensor.tilt_deg,
+            offset_counts: self.sensor.offset_counts(fs),
+            noise_dps_per_sqrt_hz: self.noise_density,
+            noise_counts_per_sample: self.noise_counts,
+            gyro: self.gyro,
+            odr_hz_actual: 1.0 / self.period_s,
+            odr_error_ppm: self.odr_error_ppm,
+            timestamp_jitter_us: TIMESTAMP_JITTER_US,
+            encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
+            gear_ratio_nominal: f64::from(GEAR_RATIO.num) / f64::from(GEAR_RATIO.den),
+            gear_ratio: self.gear_ratio,
+            index_offset_deg: self.effects.index_offset.map_or(0.0, |o| o.offset_deg),
+            index_plate_width_deg: self.plate_width_deg,
+            start_t_us: self.start_t_us,
+            start_encoder: self.encoder.start_counts,
+            ambient_c: self.thermal.ambient_c,
+            out_temp_at_0c: self.thermal.out_temp_at_0c,
+            lowpass_cutoff_hz: self
+                .effects
+                .lowpass()
+                .then(|| f64::from(self.gyro.bandwidth.cutoff_dhz(self.gyro.odr)) / 10.0),
+            effects: self.effects,
+            runs: self.runs.clone(),
+        }
+    }
+}

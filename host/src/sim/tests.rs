@@ -1,0 +1,536 @@
+//! End-to-end tests of the simulator through the host's own decoder: the bytes must decode with
+//! zero loss and carry exactly the physics and effects configured.
+
+use super::*;
+use crate::capture::{decode, Capture, Run};
+use crate::geometry::Pose;
+use protocol::{Direction, Edge, FullScale, GearRatio, RigMsg, StreamDecoder, ENCODER_COUNTS_PER_REV};
+use std::f64::consts::TAU;
+
+const CPR: f64 = ENCODER_COUNTS_PER_REV as f64;
+
+fn decode_clean(bytes: &[u8]) -> Capture {
+    let cap = decode(bytes);
+    assert!(cap.loss.is_clean(), "{:?}", cap.loss);
+    assert_eq!(cap.loss.bytes, bytes.len() as u64);
+    cap
+}
+
+/// Encoder counts at the centres of the run's index pulses (midpoint of a rising edge and the
+/// falling edge that follows it).
+fn index_centres(run: &Run) -> Vec<f64> {
+    run.index
+        .windows(2)
+        .filter(|w| w[0].edge == Edge::Rising && w[1].edge == Edge::Falling)
+        .map(|w| 0.5 * (w[0].encoder + w[1].encoder) as f64)
+        .collect()
+}
+
+/// Samples after the spin-up has ended, with a margin.
+fn steady(run: &Run, cfg: &SimConfig) -> Vec<crate::capture::RunSample> {
+    let t0 = run.samples[0].t_us;
+    let skip_us = ((cfg.spin_up_s + 0.5) * 1e6) as i64;
+    run.samples.iter().copied().filter(|s| s.t_us - t0 > skip_us).collect()
+}
+
+/// Least-squares time shift τ (s) of the samples against the truth model, `v(t) = m(t − τ)`,
+/// with θ2 from the encoder referenced to the first index centre plus `theta2_extra_rad`, and
+/// its standard error from the truth's noise (white noise plus rounding).
+fn fit_delay_s(run: &Run, cfg: &SimConfig, truth: &Truth, theta2_extra_rad: f64) -> (f64, f64) {
+    let rate = run.commanded_rate_dps();
+    let ratio = truth.gear_ratio_nominal;
+    let w2_rad_s = (ratio * rate).to_radians();
+    let c0 = index_centres(run)[0];
+    let (mut rg, mut gg) = (0.0, 0.0);
+    for s in steady(run, cfg) {
+        let th = ratio * (s.encoder as f64 - c0) / CPR * TAU + theta2_extra_rad;
+        let m = truth.model_counts(run.pose, rate, th, ratio * rate);
+        let h = 1e-5;
+        let dm = (truth.model_counts(run.pose, rate, th + h, ratio * rate)
+            - truth.model_counts(run.pose, rate, th - h, ratio * rate))
+            / (2.0 * h)
+            * w2_rad_s;
+        for i in 0..3 {
+            let r = f64::from(s.rate_counts[i]) - m[i];
+            rg += r * dm[i];
+            gg += dm[i] * dm[i];
+        }
+    }
+    let sigma = truth
+        .noise_counts_per_sample
+        .iter()
+        .fold(0.0f64, |a, &s| a.max((s * s + 1.0 / 12.0).sqrt()));
+    (-rg / gg, sigma / gg.sqrt())
+}
+
+/// Time of one encoder count at `rate_dps`, s: the resolution of an encoder-derived θ2 in time.
+fn encoder_quantum_s(rate_dps: f64) -> f64 {
+    360.0 / CPR / rate_dps.abs()
+}
+
+#[test]
+fn standard_capture_decodes_cleanly_with_the_configured_structure() {
+    let cfg = SimConfig::standard(7, 10.0);
+    let out = simulate(&cfg);
+    let cap = decode_clean(&out.bytes);
+    let hello = cap.hello.expect("Hello first");
+    assert_eq!(hello.protocol_version, protocol::PROTOCOL_VERSION);
+    assert_eq!(hello.encoder_counts_per_rev, 324_000);
+    assert_eq!(hello.gear_ratio, GearRatio { num: 1, den: 1 });
+    assert_eq!(hello.timestamp_hz, 1_000_000);
+    assert_eq!(hello.gyro, GyroConfig::DEFAULT);
+    assert_eq!(cap.runs.len(), 2);
+    for ((run, spec), rt) in cap.runs.iter().zip(&cfg.runs).zip(&out.truth.runs) {
+        assert_eq!(run.pose, spec.pose);
+        assert_eq!(run.rate_mdps, 180_000);
+        assert_eq!(run.direction, Direction::Ccw);
+        assert!(run.stopped);
+        assert_eq!(run.samples.len() as u64, rt.samples);
+        assert_eq!(run.index.len() as u64, rt.index_edges);
+        // Data-ready lattice at the actual ODR: N = duration·ODR, ±1 for the phase.
+        let expected = spec.duration_s * out.truth.odr_hz_actual;
+        assert!((run.samples.len() as f64 - expected).abs() <= 1.0, "{} vs {expected}", run.samples.len());
+        // 10 Hz motor status, 1 Hz temperature and counters, over 10 s.
+        assert_eq!(run.motor.len(), 100);
+        assert_eq!(run.temperatures.len(), 10);
+        assert_eq!(run.counters.len(), 10);
+        assert!(run.motor.iter().all(|(_, m)| m.run_tag == spec.pose.run_tag()));
+        // Every sample read is accounted for in the counters and no frame is ever dropped.
+        let last = run.counters.last().unwrap().1;
+        assert_eq!(last.queue_drops, 0);
+        assert!(last.samples_read > 0);
+    }
+    // 180 °/s for ~8.5 s after the ramp: 4 plate passages per run, 2 edges each, ±1 passage.
+    for run in &cap.runs {
+        assert!((8..=10).contains(&run.index.len()), "{}", run.index.len());
+    }
+}
+
+#[test]
+fn sample_rate_encoder_rate_and_index_period_match_the_configuration() {
+    let cfg = SimConfig::standard(11, 12.0);
+    let out = simulate(&cfg);
+    let cap = decode_clean(&out.bytes);
+    let truth = &out.truth;
+    assert!(truth.odr_error_ppm.abs() < 5.0 * 300.0);
+    for run in &cap.runs {
+        let s = &run.samples;
+        let n = (s.len() - 1) as f64;
+        // Mean interval: end points carry ±1 µs jitter and ±0.5 µs rounding each.
+        let mean_us = (s.last().unwrap().t_us - s[0].t_us) as f64 / n;
+        assert!((mean_us - 1e6 / truth.odr_hz_actual).abs() < 10.0 / n, "{mean_us}");
+        // Every interval is the period ± jitter (5 σ of the difference of two 1 µs jitters, plus
+        // rounding).
+        for w in s.windows(2) {
+            let d = (w[1].t_us - w[0].t_us) as f64 - 1e6 / truth.odr_hz_actual;
+            assert!(d.abs() < 5.0 * 2f64.sqrt() + 1.0, "{d}");
+        }
+        // Encoder rate at constant speed: 180 °/s = 162 000 counts/s; 1 count and a few µs of
+        // timestamp error over ≥ 10 s.
+        let st = steady(run, &cfg);
+        let (a, b) = (st[0], *st.last().unwrap());
+        let cps = (b.encoder - a.encoder) as f64 / ((b.t_us - a.t_us) as f64 * 1e-6);
+        assert!((cps - 162_000.0).abs() < 0.5, "{cps}");
+        // Index period: one plate passage per sensor-table turn = 324 000 counts at ratio 1,
+        // each centre to half a count.
+        let c = index_centres(run);
+        assert!(c.len() >= 4);
+        for w in c.windows(2) {
+            assert!((w[1] - w[0] - CPR).abs() <= 1.0, "{}", w[1] - w[0]);
+        }
+        // Pulse width = plate width (4°) in encoder counts, ±1.
+        for w in run.index.windows(2).filter(|w| w[0].edge == Edge::Rising) {
+            assert!(((w[1].encoder - w[0].encoder) as f64 - 3600.0).abs() <= 1.0);
+        }
+    }
+}
+
+#[test]
+fn index_centres_are_at_theta2_equal_to_the_index_offset_both_ways() {
+    // Noise-free so the phase fit is limited only by quantisation.
+    for (offset_deg, rate_dps) in [(0.0, 180.0), (3.0, 180.0), (3.0, -180.0), (-2.0, 90.0)] {
+        let mut cfg = SimConfig::with_runs(
+            3,
+            vec![RunSpec {
+                pose: Pose::Two,
+                rate_dps,
+                duration_s: 8.0,
+            }],
+        );
+        cfg.noise_dps_per_sqrt_hz = 0.0;
+        if offset_deg != 0.0 {
+            cfg.effects.enable(&format!("index_offset_deg={offset_deg}")).unwrap();
+        }
+        let out = simulate(&cfg);
+        let cap = decode_clean(&out.bytes);
+        let run = &cap.runs[0];
+        assert_eq!(out.truth.index_offset_deg, offset_deg);
+        // θ2 = index-derived θ2 + φ: fit φ. A time shift τ of the model is a θ2 shift of θ2'·τ,
+        // so the delay fit gives φ = −θ2'·τ when θ2 is taken without the offset.
+        let (tau_s, _) = fit_delay_s(run, &cfg, &out.truth, 0.0);
+        let phi_deg = -tau_s * rate_dps;
+        // Resolution: the encoder count (0.0011°), twice (edges and samples).
+        assert!((phi_deg - offset_deg).abs() < 0.003, "offset {offset_deg}, rate {rate_dps}: φ = {phi_deg}");
+    }
+}
+
+#[test]
+fn truth_has_m_equal_k_times_s_with_unit_axes_and_survives_json() {
+    let out = simulate(&SimConfig::standard(5, 1.0));
+    let t = &out.truth;
+    for i in 0..3 {
+        let s = nalgebra::Vector3::from(t.s[i]);
+        assert!((s.norm() - 1.0).abs() < 1e-12);
+        for j in 0..3 {
+            assert!((t.m_counts_per_dps[i][j] - t.k_counts_per_dps[i] * t.s[i][j]).abs() < 1e-9);
+        }
+        assert!((s[i].acos().to_degrees() - t.tilt_deg[i]).abs() < 1e-9);
+        // Nominal 57.14 counts/(°/s) at ±500 °/s, within 5 σ of the 1.5 % spread.
+        assert!((t.k_counts_per_dps[i] / (1e6 / 17_500.0) - 1.0).abs() < 0.075);
+    }
+    let back: Truth = serde_json::from_str(&t.to_json_pretty()).unwrap();
+    assert_eq!(&back, t);
+    let v: serde_json::Value = serde_json::from_str(&t.to_json_pretty()).unwrap();
+    for key in [
+        "seed",
+        "m_counts_per_dps",
+        "k_counts_per_dps",
+        "s",
+        "offset_counts",
+        "noise_dps_per_sqrt_hz",
+        "gyro",
+        "gear_ratio",
+        "index_offset_deg",
+        "runs",
+        "effects",
+    ] {
+        assert!(v.get(key).is_some(), "{key}");
+    }
+}
+
+#[test]
+fn deterministic_for_a_seed_and_the_sensor_independent_of_the_runs() {
+    let a = simulate(&SimConfig::standard(42, 2.0));
+    let b = simulate(&SimConfig::standard(42, 2.0));
+    assert_eq!(a.bytes, b.bytes);
+    assert_eq!(a.truth, b.truth);
+    let c = simulate(&SimConfig::standard(43, 2.0));
+    assert_ne!(a.truth.m_counts_per_dps, c.truth.m_counts_per_dps);
+    assert_ne!(a.bytes, c.bytes);
+    // Same seed, longer runs: same sensor, and the first run starts with the same samples.
+    let d = simulate(&SimConfig::standard(42, 5.0));
+    assert_eq!(a.truth.m_counts_per_dps, d.truth.m_counts_per_dps);
+    assert_eq!(a.truth.offset_counts, d.truth.offset_counts);
+    assert_eq!(a.truth.odr_hz_actual, d.truth.odr_hz_actual);
+    let (ra, rd) = (&decode_clean(&a.bytes).runs[0], &decode_clean(&d.bytes).runs[0]);
+    assert_eq!(ra.samples[..], rd.samples[..ra.samples.len()]);
+}
+
+#[test]
+fn simulate_to_streams_exactly_the_in_memory_bytes() {
+    let cfg = SimConfig::standard(9, 1.5);
+    let out = simulate(&cfg);
+    let mut streamed = Vec::new();
+    let truth = simulate_to(&cfg, &mut streamed).unwrap();
+    assert_eq!(streamed, out.bytes);
+    assert_eq!(truth, out.truth);
+    let mut bad = cfg.clone();
+    bad.runs[0].duration_s = f64::NAN;
+    let err = simulate_to(&bad, &mut Vec::new()).unwrap_err();
+    assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
+}
+
+#[test]
+fn several_speeds_and_both_directions_decode_with_their_rates() {
+    let runs = vec![
+        RunSpec {
+            pose: Pose::One,
+            rate_dps: 90.0,
+            duration_s: 6.0,
+        },
+        RunSpec {
+            pose: Pose::One,
+            rate_dps: -180.0,
+            duration_s: 6.0,
+        },
+        RunSpec {
+            pose: Pose::Two,
+            rate_dps: 270.0,
+            duration_s: 6.0,
+        },
+    ];
+    let cfg = SimConfig::with_runs(21, runs.clone());
+    let out = simulate(&cfg);
+    let cap = decode_clean(&out.bytes);
+    assert_eq!(cap.runs.len(), 3);
+    for (run, spec) in cap.runs.iter().zip(&runs) {
+        assert_eq!(run.commanded_rate_dps(), spec.rate_dps);
+        let st = steady(run, &cfg);
+        let (a, b) = (st[0], *st.last().unwrap());
+        let dps = (b.encoder - a.encoder) as f64 / CPR * 360.0 / ((b.t_us - a.t_us) as f64 * 1e-6);
+        assert!((dps - spec.rate_dps).abs() < 0.01, "{dps} vs {}", spec.rate_dps);
+        // The spin-up is in the stream: the first samples are nearly at rest.
+        let early = (run.samples[8].encoder - run.samples[0].encoder).abs();
+        assert!(early < 20, "{early}");
+        // Plate passages alternate rising/falling in either direction.
+        for w in run.index.windows(2) {
+            assert_ne!(w[0].edge, w[1].edge);
+        }
+        // The last motor status reports the setpoint and a measured speed near it.
+        let m = run.motor.last().unwrap().1;
+        assert_eq!(m.setpoint_cps, (spec.rate_dps * 900.0).round() as i32);
+        assert!((m.speed_cps - m.setpoint_cps).abs() <= 10);
+        assert_eq!(m.duty_permille.signum(), spec.rate_dps.signum() as i16);
+    }
+}
+
+#[test]
+fn timestamp_and_encoder_wrap_mid_run_decode_monotonic() {
+    let mut cfg = SimConfig::standard(4, 3.0);
+    // The timer wraps 1 s into the first run, the encoder early in its spin-up.
+    cfg.start_t_us = u32::MAX - 3_000_000;
+    cfg.start_encoder = u32::MAX - 2_000;
+    let out = simulate(&cfg);
+    let cap = decode_clean(&out.bytes);
+    let mut raw_wrapped = false;
+    StreamDecoder::new().feed::<RigMsg>(&out.bytes, |ev| {
+        if let protocol::Event::Frame {
+            msg: RigMsg::Sample(s),
+            ..
+        } = ev
+        {
+            raw_wrapped |= s.t_us < 1_000_000;
+        }
+    });
+    assert!(raw_wrapped, "the test must actually wrap");
+    for run in &cap.runs {
+        for w in run.samples.windows(2) {
+            let d = w[1].t_us - w[0].t_us;
+            assert!((1240..=1260).contains(&d), "{d}");
+            assert!(w[1].encoder >= w[0].encoder);
+        }
+    }
+    assert_eq!(cap.runs[0].samples.len(), decode_clean(&simulate(&SimConfig::standard(4, 3.0)).bytes).runs[0].samples.len());
+}
+
+#[test]
+fn clipping_comes_from_the_range_not_from_the_rate() {
+    let clipped = |fs: FullScale, rate_dps: f64| {
+        let mut cfg = SimConfig::with_runs(
+            8,
+            vec![RunSpec {
+                pose: Pose::One,
+                rate_dps,
+                duration_s: 5.0,
+            }],
+        );
+        cfg.gyro.full_scale = fs;
+        let cap = decode_clean(&simulate(&cfg).bytes);
+        let s = &cap.runs[0].samples;
+        s.iter()
+            .filter(|s| s.rate_counts.iter().any(|&c| c == i16::MAX || c == i16::MIN))
+            .count()
+    };
+    // ±250 °/s reads up to 32 767 × 8.75 m°/s = 286.7 °/s: pose 1 at 240 °/s peaks at 335 °/s.
+    assert!(clipped(FullScale::Dps250, 240.0) > 100);
+    assert_eq!(clipped(FullScale::Dps500, 240.0), 0);
+    // At 180 °/s pose 1 peaks at 251 °/s: over the rated ±250 but under the register's limit.
+    assert_eq!(clipped(FullScale::Dps250, 180.0), 0);
+}
+
+/// The same session with and without one effect.
+fn with_and_without(seed: u64, spec: &str, secs: f64) -> (SimConfig, SimOutput, Capture, SimOutput, Capture) {
+    let base_cfg = SimConfig::standard(seed, secs);
+    let mut cfg = base_cfg.clone();
+    cfg.effects.enable(spec).unwrap();
+    let base = simulate(&base_cfg);
+    let eff = simulate(&cfg);
+    let (cb, ce) = (decode_clean(&base.bytes), decode_clean(&eff.bytes));
+    assert_eq!(cb.hello, ce.hello, "{spec}: Hello must not reveal an effect");
+    assert_eq!(base.truth.m_counts_per_dps, eff.truth.m_counts_per_dps);
+    (cfg, base, cb, eff, ce)
+}
+
+fn encoders(c: &Capture) -> Vec<(i64, i64)> {
+    c.runs.iter().flat_map(|r| r.samples.iter().map(|s| (s.t_us, s.encoder))).collect()
+}
+
+fn index(c: &Capture) -> Vec<(i64, i64)> {
+    c.runs.iter().flat_map(|r| r.index.iter().map(|e| (e.t_us, e.encoder))).collect()
+}
+
+fn axis(c: &Capture, i: usize) -> Vec<i16> {
+    c.runs.iter().flat_map(|r| r.samples.iter().map(move |s| s.rate_counts[i])).collect()
+}
+
+fn temps(c: &Capture) -> Vec<i8> {
+    c.runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect()
+}
+
+#[test]
+fn pure_delay_shifts_the_samples_by_exactly_that_delay_and_nothing_else() {
+    let (cfg, base, cb, eff, ce) = with_and_without(31, "delay_ms=5", 10.0);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    assert_eq!(index(&cb), index(&ce));
+    assert_eq!(temps(&cb), temps(&ce));
+    for (run_b, run_e) in cb.runs.iter().zip(&ce.runs) {
+        let (tau0, sigma0) = fit_delay_s(run_b, &cfg, &base.truth, 0.0);
+        let (tau, sigma) = fit_delay_s(run_e, &cfg, &eff.truth, 0.0);
+        let tol = 5.0 * sigma.max(sigma0) + encoder_quantum_s(180.0);
+        eprintln!("DEBUG tau0 {tau0} tau {tau} sigma {sigma} tol {tol}");
+        assert!(tau0.abs() < tol, "baseline τ = {tau0} ± {sigma0}");
+        assert!((tau - 5e-3).abs() < tol, "τ = {tau} ± {sigma}");
+    }
+    assert!(eff.truth.runs.iter().all(|r| (r.total_delay_ms - 5.0).abs() < 1e-12));
+}
+
+#[test]
+fn lowpass_delays_by_its_reported_group_delay() {
+    for bw in [protocol::Bandwidth::Bw3, protocol::Bandwidth::Bw0] {
+        let mut cfg = SimConfig::standard(32, 10.0);
+        cfg.gyro.bandwidth = bw;
+        cfg.effects.enable("filter_delay").unwrap();
+        let out = simulate(&cfg);
+        let cap = decode_clean(&out.bytes);
+        let fc = f64::from(bw.cutoff_dhz(cfg.gyro.odr)) / 10.0;
+        assert_eq!(out.truth.lowpass_cutoff_hz, Some(fc));
+        for (run, rt) in cap.runs.iter().zip(&out.truth.runs) {
+            // Reported: close to the analogue √2/(2π·fc) (2.05 ms at 110 Hz, 7.50 ms at 30 Hz).
+            let analogue_ms = 1e3 * std::f64::consts::SQRT_2 / (TAU * fc);
+            assert!((rt.filter_group_delay_ms / analogue_ms - 1.0).abs() < 0.03);
+            let (tau, sigma) = fit_delay_s(run, &cfg, &out.truth, 0.0);
+            let tol = 5.0 * sigma + encoder_quantum_s(180.0);
+            assert!((tau - rt.total_delay_ms * 1e-3).abs() < tol, "{bw:?}: τ = {tau} ± {sigma} vs {rt:?}");
+        }
+    }
+}
+
+#[test]
+fn index_offset_moves_only_the_index() {
+    let (_, _, cb, eff, ce) = with_and_without(33, "index_offset_deg=3", 6.0);
+    for i in 0..3 {
+        assert_eq!(axis(&cb, i), axis(&ce, i));
+    }
+    assert_eq!(encoders(&cb), encoders(&ce));
+    assert_eq!(eff.truth.index_offset_deg, 3.0);
+    for (rb, re) in cb.runs.iter().zip(&ce.runs) {
+        // Plate moved +3° in θ2: each centre 2700 counts later (ratio 1), ± 1 count.
+        let (b, e) = (index_centres(rb), index_centres(re));
+        let shift = e[0] - b.iter().copied().find(|&c| c < e[0] && e[0] - c < CPR / 2.0).unwrap();
+        assert!((shift - 2700.0).abs() <= 1.0, "{shift}");
+    }
+}
+
+#[test]
+fn gear_ratio_error_changes_the_index_period_but_not_the_hello() {
+    let (_, _, cb, eff, ce) = with_and_without(34, "gear_ratio_error=200", 12.0);
+    assert_eq!(eff.truth.gear_ratio, 1.0 + 200e-6);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    for run in &ce.runs {
+        let c = index_centres(run);
+        let period = (c.last().unwrap() - c[0]) / (c.len() - 1) as f64;
+        assert!((period - CPR / (1.0 + 200e-6)).abs() < 0.5, "{period}");
+    }
+    assert_ne!(axis(&cb, 0), axis(&ce, 0));
+}
+
+#[test]
+fn mystery_harmonic_appears_on_one_axis_only_with_its_amplitude() {
+    let (cfg, _, cb, eff, ce) = with_and_without(35, "mystery_harmonic", 6.0);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    assert_eq!(axis(&cb, 1), axis(&ce, 1));
+    assert_eq!(axis(&cb, 2), axis(&ce, 2));
+    let m = cfg.effects.mystery_harmonic.unwrap();
+    let k0 = eff.truth.k_counts_per_dps[0];
+    // Identical noise, so the difference is the harmonic itself to within the two roundings.
+    for (rb, re) in cb.runs.iter().zip(&ce.runs) {
+        let c0 = index_centres(rb)[0];
+        let mut peak = 0.0f64;
+        for (sb, se) in rb.samples.iter().zip(&re.samples) {
+            let th = (se.encoder as f64 - c0) / CPR * TAU;
+            let want = m.amplitude_dps * k0 * (f64::from(m.order) * th + m.phase_rad).sin();
+            let got = f64::from(se.rate_counts[0]) - f64::from(sb.rate_counts[0]);
+            assert!((got - want).abs() <= 1.1, "{got} vs {want}");
+            peak = peak.max(got.abs());
+        }
+        assert!(peak > 0.9 * m.amplitude_dps * k0);
+    }
+}
+
+#[test]
+fn nonlinearity_adds_its_formula_to_the_samples_and_leaves_the_motion() {
+    let (cfg, base, cb, _, ce) = with_and_without(36, "nonlinearity", 6.0);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    assert_eq!(index(&cb), index(&ce));
+    let n = cfg.effects.nonlinearity.unwrap();
+    let t = &base.truth;
+    for (rb, re) in cb.runs.iter().zip(&ce.runs) {
+        let rate = rb.commanded_rate_dps();
+        let c0 = index_centres(rb)[0];
+        for (sb, se) in steady(rb, &cfg).iter().zip(steady(re, &cfg)) {
+            let th = (sb.encoder as f64 - c0) / CPR * TAU;
+            let v = t.model_counts(rb.pose, rate, th, rate) - t.offset();
+            for i in 0..3 {
+                let x = v[i] / t.k_counts_per_dps[i];
+                let extra = x * 0.5 * n.asymmetry * x.signum() + n.quadratic_fs * x * x.abs() / 500.0;
+                let want = extra * t.k_counts_per_dps[i];
+                let got = f64::from(se.rate_counts[i]) - f64::from(sb.rate_counts[i]);
+                // Two roundings, and θ2 from the encoder to one count (0.0011° ≈ 0.2 counts).
+                assert!((got - want).abs() <= 1.3, "axis {i}: {got} vs {want}");
+            }
+        }
+    }
+}
+
+#[test]
+fn offset_drift_follows_the_warm_up_in_samples_and_temperature() {
+    let (cfg, base, cb, _, ce) = with_and_without(37, "offset_drift", 60.0);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    let d = cfg.effects.offset_drift.unwrap();
+    let k = base.truth.k_counts_per_dps;
+    let rise = |t_s: f64| d.rise_c * (1.0 - (-t_s / d.tau_s).exp());
+    // Samples: the difference is the drift, to within the two roundings.
+    let t_first_us = ce.runs[0].samples[0].t_us;
+    let t_first_s = cfg.gap_s; // the first sample follows RunStarted by < 1.25 ms
+    for (rb, re) in cb.runs.iter().zip(&ce.runs) {
+        for (sb, se) in rb.samples.iter().zip(&re.samples).step_by(97) {
+            let t_s = t_first_s + (se.t_us - t_first_us) as f64 * 1e-6;
+            for i in 0..3 {
+                let want = k[i] * d.dps_per_c[i] * rise(t_s);
+                let got = f64::from(se.rate_counts[i]) - f64::from(sb.rate_counts[i]);
+                assert!((got - want).abs() <= 1.1, "t {t_s}, axis {i}: {got} vs {want}");
+            }
+        }
+    }
+    // Temperature register: −1 LSB/°C, so it falls by the rise (to the 1 LSB rounding).
+    let (tb, te) = (temps(&cb), temps(&ce));
+    assert!(tb.windows(2).all(|w| w[0] == w[1]), "constant without the effect");
+    let fall = i32::from(tb[0]) - i32::from(*te.last().unwrap());
+    let expected = rise(cfg.gap_s * 2.0 + 120.0);
+    assert!((f64::from(fall) - expected).abs() <= 1.0, "{fall} vs {expected}");
+}
+
+#[test]
+fn speed_ripple_is_in_the_encoder_derived_rate() {
+    let (cfg, _, cb, _, ce) = with_and_without(38, "speed_ripple", 12.0);
+    assert_ne!(encoders(&cb), encoders(&ce));
+    assert_eq!(temps(&cb), temps(&ce));
+    let h1 = cfg.effects.speed_ripple.unwrap().harmonics[0];
+    for run in &ce.runs {
+        // Rate over 8-sample (10 ms) spans, against θ1, projected on the 1× harmonic.
+        let st = steady(run, &cfg);
+        let (mut c, mut s, mut n) = (0.0, 0.0, 0.0);
+        for w in st.windows(9).step_by(8) {
+            let dps = (w[8].encoder - w[0].encoder) as f64 / CPR * 360.0 / ((w[8].t_us - w[0].t_us) as f64 * 1e-6);
+            let th1 = 0.5 * (w[8].encoder + w[0].encoder) as f64 / CPR * TAU;
+            let rel = dps / 180.0 - 1.0;
+            c += rel * th1.cos();
+            s += rel * th1.sin();
+            n += 1.0;
+        }
+        let amp = 2.0 * (c * c + s * s).sqrt() / n;
+        // The span averages the 2×/12× terms out of the 1× projection only over whole turns:
+        // ~2 turns here, so allow 10 % of the amplitude.
+        assert!((amp - h1.amplitude).abs() < 0.1 * h1.amplitude, "{amp}");
+    }
+}
