@@ -2,8 +2,9 @@
 //! as plain Rust that builds for the MCU and for the host alike. The rtic app in `main.rs` only
 //! moves register values into [`rig::Rig`] and its answers back out to the pins.
 //!
-//! With the `sim` feature (or in tests) the crate also carries the simulated plant ([`plant`]) and
-//! the [`virtual_rig`] that runs this core against it in simulated time.
+//! With the `plant` feature (implied by `sim` and `qemu`, and in tests) the crate also carries the
+//! simulated plant ([`plant`]) and the [`virtual_rig`] that runs this core against it in simulated
+//! time; both are `no_std`, so the QEMU image runs them on the MCU.
 #![cfg_attr(not(any(test, feature = "sim")), no_std)]
 #![deny(missing_docs)]
 
@@ -17,9 +18,9 @@ pub mod speed_loop;
 pub mod supervisor;
 pub mod tx_queue;
 
-#[cfg(any(test, feature = "sim"))]
+#[cfg(any(test, feature = "plant"))]
 pub mod plant;
-#[cfg(any(test, feature = "sim"))]
+#[cfg(any(test, feature = "plant"))]
 pub mod virtual_rig;
 
 use protocol::{GearRatio, Version};

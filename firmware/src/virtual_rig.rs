@@ -19,7 +19,7 @@ use crate::speed_loop::LOOP_HZ;
 use protocol::GyroConfig;
 
 /// Nanoseconds per loop period.
-const TICK_NS: u64 = 1_000_000_000 / LOOP_HZ as u64;
+pub const TICK_NS: u64 = 1_000_000_000 / LOOP_HZ as u64;
 
 /// Longest physics step, ns: 20 µs, ≪ the 5.6 ms mechanical time constant and short enough
 /// that the index plate (≈ 28 ms long at 1 Hz) cannot be crossed twice in one step.

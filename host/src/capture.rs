@@ -46,8 +46,8 @@ pub struct RunTemperature {
 pub enum RunOrigin {
     /// From its `RunStarted` frame.
     Started,
-    /// Its `RunStarted` frame was lost; pose from the motor status run tag, gyro settings from the
-    /// last `Hello`.
+    /// Its `RunStarted` frame was lost; pose from the motor status run tag, commanded rate from
+    /// the largest setpoint reported, gyro settings from the last `Hello`.
     Recovered,
 }
 
@@ -315,6 +315,16 @@ impl CaptureDecoder {
                     self.recover_run(offset, t_us, &m);
                 }
                 if let Some(run) = self.open.as_mut() {
+                    if run.origin == RunOrigin::Recovered {
+                        // The lost RunStarted carried the commanded rate; the ramped setpoint
+                        // reaches it once the ramp is over.
+                        let deg_per_count = 360.0 / f64::from(run.hello.encoder_counts_per_rev);
+                        let mdps = (f64::from(m.setpoint_cps.unsigned_abs()) * deg_per_count * 1000.0).round() as u32;
+                        if mdps > run.rate_mdps {
+                            run.rate_mdps = mdps;
+                            run.direction = if m.setpoint_cps < 0 { Direction::Cw } else { Direction::Ccw };
+                        }
+                    }
                     run.motor.push((t_us, m));
                 }
             }

@@ -1,1 +1,82 @@
-//! Shared helpers for the end-to-end tests.
+//! Shared helpers for the end-to-end tests: the committed captures, frame boundaries of a clean
+//! stream, and the comparison of a calibration with the truth it was simulated from.
+
+use host::calib::CalReport;
+use host::sim::Truth;
+use std::path::PathBuf;
+
+/// 3σ for one parameter.
+pub const Z_1D: f64 = 3.0;
+/// The 2-D equivalent of 3σ (99.73 % of a 2-D normal lies within this Mahalanobis distance):
+/// a direction has two tilt components.
+pub const Z_2D: f64 = 3.44;
+
+/// Path of a file under `tests/data/`.
+pub fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
+}
+
+/// Reads a committed capture and its truth.
+pub fn committed(stem: &str) -> (Vec<u8>, Truth) {
+    let bytes = std::fs::read(data(&format!("{stem}.cap"))).expect("committed capture");
+    let truth = serde_json::from_str(&std::fs::read_to_string(data(&format!("{stem}.truth.json"))).expect("truth"))
+        .expect("truth parses");
+    (bytes, truth)
+}
+
+/// `(start, len)` of every frame of a clean stream, delimiter excluded.
+pub fn frames(bytes: &[u8]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut start = 0;
+    for (i, &b) in bytes.iter().enumerate() {
+        if b == 0 {
+            out.push((start, i - start));
+            start = i + 1;
+        }
+    }
+    out
+}
+
+/// How far a calibration is from the truth, per axis, in units of its own uncertainty.
+#[derive(Debug, Clone, Copy)]
+pub struct AxisError {
+    /// (k − k_true)/σ_k.
+    pub k_z: f64,
+    /// Mahalanobis distance of the direction error over its two tilt components.
+    pub direction_md: f64,
+    /// k error, ppm.
+    pub k_ppm: f64,
+    /// Angle between estimated and true direction, degrees.
+    pub direction_deg: f64,
+}
+
+/// Compares every axis with the truth.
+pub fn errors(report: &CalReport, truth: &Truth) -> [AxisError; 3] {
+    std::array::from_fn(|i| {
+        let a = &report.axes[i];
+        let s = truth.s[i];
+        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
+        let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
+        let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
+        let cos = (0..3).map(|c| a.s[c] * s[c]).sum::<f64>().clamp(-1.0, 1.0);
+        AxisError {
+            k_z: (a.k_counts_per_dps - truth.k_counts_per_dps[i]) / a.k_sigma,
+            direction_md: host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2),
+            k_ppm: (a.k_counts_per_dps / truth.k_counts_per_dps[i] - 1.0) * 1e6,
+            direction_deg: cos.acos().to_degrees(),
+        }
+    })
+}
+
+/// Panics with the report if any axis is outside 3σ of the truth.
+pub fn assert_within_3_sigma(report: &CalReport, truth: &Truth, context: &str) {
+    for (i, e) in errors(report, truth).iter().enumerate() {
+        assert!(
+            e.k_z.abs() <= Z_1D && e.direction_md <= Z_2D,
+            "{context}: axis {i} off the truth: k {:.2} σ, direction {:.2} σ\n{}",
+            e.k_z,
+            e.direction_md,
+            report.summary()
+        );
+    }
+}

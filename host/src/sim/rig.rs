@@ -200,3 +200,223 @@ fn write_patiently(port: &mut dyn Port, mut bytes: &[u8], stop: &AtomicBool) -> 
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::capture::decode;
+    use crate::sim::tests::{decode_clean, residual_rms};
+    use crate::sim::{simulate, SimConfig};
+    use protocol::{encode_frame, Bandwidth, Direction, FaultReport, GyroConfig, StartRun, MAX_FRAME_LEN};
+    use serialport::{SerialPort, TTYPort};
+    use std::sync::Arc;
+
+    fn frame(seq: u16, cmd: &Command) -> Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(seq, cmd, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    /// Start command; the run tag names the pose (`Pose::run_tag`).
+    fn start(rate_mdps: u32, run_tag: u8) -> Command {
+        Command::Start(StartRun {
+            rate_mdps,
+            direction: Direction::Ccw,
+            run_tag,
+        })
+    }
+
+    /// Every rig frame in `bytes`, in order.
+    fn frames(bytes: &[u8]) -> Vec<RigMsg> {
+        let mut v = Vec::new();
+        StreamDecoder::new().feed::<RigMsg>(bytes, |ev| match ev {
+            Event::Frame { msg, .. } => v.push(msg),
+            Event::Error { .. } => panic!("corrupt rig output"),
+        });
+        v
+    }
+
+    fn acks(bytes: &[u8]) -> Vec<(u16, CmdResult)> {
+        frames(bytes)
+            .into_iter()
+            .filter_map(|m| match m {
+                RigMsg::Ack(a) => Some((a.cmd_seq, a.result)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rig_answers_every_command_and_streams_runs_in_memory() {
+        let cfg = SimConfig::with_runs(12, Vec::new());
+        let mut rig = SimRig::new(&cfg);
+        let mut all = rig.take_output();
+        assert!(matches!(frames(&all)[..], [RigMsg::Hello(_)]), "Hello at power-up");
+        let f = exchange(&mut rig, &mut all, 0, Command::Identify);
+        assert!(matches!(
+            f[..],
+            [
+                RigMsg::Hello(_),
+                RigMsg::Ack(Ack {
+                    cmd_seq: 0,
+                    result: CmdResult::Ok
+                })
+            ]
+        ));
+        // Unknown pose tag, zero and excessive speeds are refused.
+        assert_eq!(acks(&frame_bytes(exchange(&mut rig, &mut all, 1, start(180_000, 9)))), [(1, CmdResult::InvalidArgument)]);
+        assert_eq!(acks(&frame_bytes(exchange(&mut rig, &mut all, 2, start(0, 1)))), [(2, CmdResult::InvalidArgument)]);
+        assert_eq!(
+            acks(&frame_bytes(exchange(&mut rig, &mut all, 3, start(MAX_RATE_MDPS + 1, 1)))),
+            [(3, CmdResult::InvalidArgument)]
+        );
+        // Run 1: pose 2 for 5 s with heartbeats every 0.5 s.
+        rig.advance_to(1.0);
+        let f = exchange(&mut rig, &mut all, 4, start(180_000, Pose::Two.run_tag()));
+        assert!(matches!(f[..], [RigMsg::RunStarted(_), RigMsg::Ack(_)]));
+        let busy = exchange(&mut rig, &mut all, 5, Command::ConfigureGyro(GyroConfig::DEFAULT));
+        assert_eq!(acks(&frame_bytes(busy)), [(5, CmdResult::Busy)]);
+        let busy = exchange(&mut rig, &mut all, 6, start(180_000, 1));
+        assert_eq!(acks(&frame_bytes(busy)), [(6, CmdResult::Busy)]);
+        let mut seq = 7;
+        for k in 1..=10 {
+            rig.advance_to(1.0 + 0.5 * f64::from(k));
+            all.extend_from_slice(&rig.take_output());
+            exchange(&mut rig, &mut all, seq, Command::Heartbeat);
+            seq += 1;
+        }
+        let f = exchange(&mut rig, &mut all, seq, Command::Stop);
+        assert!(matches!(f[..], [.., RigMsg::RunStopped(_), RigMsg::Ack(_)]));
+        // Idle: the gyro may be reconfigured; the rig answers with the new Hello.
+        let bw0 = GyroConfig {
+            bandwidth: Bandwidth::Bw0,
+            ..GyroConfig::DEFAULT
+        };
+        let f = exchange(&mut rig, &mut all, seq + 1, Command::ConfigureGyro(bw0));
+        assert!(matches!(f[..], [RigMsg::Hello(h), RigMsg::Ack(_)] if h.gyro == bw0));
+        // Run 2: pose 1, and the host falls silent: the rig stops 2 s after its last frame.
+        rig.advance_to(8.0);
+        exchange(&mut rig, &mut all, seq + 2, start(180_000, 1));
+        rig.advance_to(12.0);
+        all.extend_from_slice(&rig.take_output());
+        assert!(!rig.running());
+
+        let cap = decode_clean(&all);
+        assert_eq!(cap.runs.len(), 2);
+        let (r1, r2) = (&cap.runs[0], &cap.runs[1]);
+        assert_eq!((r1.pose, r2.pose), (Pose::Two, Pose::One));
+        assert_eq!(r2.gyro, bw0);
+        assert!(r1.faults.is_empty());
+        assert!(matches!(r2.faults[..], [(_, FaultReport { fault: Fault::HostLinkLost, .. })]));
+        let truth = rig.truth();
+        assert_eq!(truth.runs.len(), 2);
+        assert!((truth.runs[0].duration_s - 5.0).abs() < 1e-12);
+        assert!((truth.runs[1].duration_s - HOST_LINK_TIMEOUT_S).abs() < 1e-12);
+        assert!(truth.runs[1].faulted && !truth.runs[0].faulted);
+        for (run, rt) in cap.runs.iter().zip(&truth.runs) {
+            assert_eq!(run.samples.len() as u64, rt.samples);
+            assert!((rt.samples as f64 - rt.duration_s * truth.odr_hz_actual).abs() <= 1.0);
+        }
+        // The same sensor as a batch simulation with the same seed, and the samples agree with
+        // it: residuals at the noise level (white noise plus rounding), within 5 %.
+        let batch = simulate(&SimConfig::standard(12, 1.0)).truth;
+        assert_eq!(batch.m_counts_per_dps, truth.m_counts_per_dps);
+        assert_eq!(batch.offset_counts, truth.offset_counts);
+        let sigma = (truth.noise_counts_per_sample.iter().map(|s| s * s + 1.0 / 12.0).sum::<f64>() / 3.0).sqrt();
+        let rms = residual_rms(r1, &cfg, &truth);
+        assert!((rms / sigma - 1.0).abs() < 0.05, "{rms} vs {sigma}");
+        // Every command was acknowledged, in order.
+        let seqs: Vec<u16> = acks(&all).iter().map(|a| a.0).collect();
+        assert_eq!(seqs, (0..=seq + 2).collect::<Vec<_>>());
+        assert!(frames(&all).iter().any(|m| matches!(m, RigMsg::Fault(_))));
+    }
+
+    /// Sends one command and returns the frames it caused, keeping all bytes in `all`.
+    fn exchange(rig: &mut SimRig, all: &mut Vec<u8>, seq: u16, cmd: Command) -> Vec<RigMsg> {
+        rig.receive(&frame(seq, &cmd));
+        let out = rig.take_output();
+        all.extend_from_slice(&out);
+        frames(&out)
+    }
+
+    fn frame_bytes(msgs: Vec<RigMsg>) -> Vec<u8> {
+        let mut w = FrameWriter::new(Vec::new());
+        for m in &msgs {
+            w.send(m).unwrap();
+        }
+        w.into_inner()
+    }
+
+    #[test]
+    fn rig_serves_a_run_over_a_pty_at_ten_times_real_time() {
+        let (mut rig_end, mut host) = TTYPort::pair().expect("pty pair");
+        rig_end.set_timeout(Duration::from_millis(5)).unwrap();
+        host.set_timeout(Duration::from_millis(5)).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let server = {
+            let stop = Arc::clone(&stop);
+            std::thread::spawn(move || {
+                let mut rig = SimRig::new(&SimConfig::with_runs(13, Vec::new()));
+                serve(&mut rig_end, &mut rig, 10.0, &stop).map(|()| rig)
+            })
+        };
+        let mut captured = Vec::new();
+        let mut buf = [0u8; 4096];
+        let mut seq = 0u16;
+        let mut send = |host: &mut TTYPort, cmd: Command| {
+            host.write_all(&frame(seq, &cmd)).unwrap();
+            seq += 1;
+        };
+        send(&mut host, Command::Identify);
+        send(&mut host, start(180_000, 1));
+        let t0 = Instant::now();
+        let mut last_beat = Instant::now();
+        let mut stopped_sent = false;
+        let deadline = t0 + Duration::from_secs(10);
+        loop {
+            match host.read(&mut buf) {
+                Ok(n) => captured.extend_from_slice(&buf[..n]),
+                Err(e) if is_idle(&e) => {}
+                Err(e) => panic!("{e}"),
+            }
+            if last_beat.elapsed() > Duration::from_millis(50) {
+                send(&mut host, Command::Heartbeat);
+                last_beat = Instant::now();
+            }
+            if !stopped_sent && t0.elapsed() > Duration::from_millis(1000) {
+                send(&mut host, Command::Stop);
+                stopped_sent = true;
+            }
+            let done = frames(&captured).iter().any(|m| matches!(m, RigMsg::RunStopped(_)));
+            if done || Instant::now() > deadline {
+                break;
+            }
+        }
+        // Drain what is in flight, then stop the server.
+        let drain = Instant::now();
+        while drain.elapsed() < Duration::from_millis(50) {
+            if let Ok(n) = host.read(&mut buf) {
+                captured.extend_from_slice(&buf[..n]);
+            }
+        }
+        stop.store(true, Ordering::Relaxed);
+        let rig = server.join().unwrap().expect("serve ended cleanly");
+
+        let cap = decode(&captured);
+        assert!(cap.loss.is_clean(), "{:?}", cap.loss);
+        assert_eq!(cap.runs.len(), 1);
+        let run = &cap.runs[0];
+        assert_eq!(run.pose, Pose::One);
+        assert!(run.stopped && run.faults.is_empty());
+        let truth = rig.truth();
+        let rt = &truth.runs[0];
+        // ~1 s of wall clock at 10×: 10 s simulated, ± scheduling slack.
+        assert!((7.0..14.0).contains(&rt.duration_s), "{}", rt.duration_s);
+        assert_eq!(run.samples.len() as u64, rt.samples);
+        assert!((rt.samples as f64 - rt.duration_s * truth.odr_hz_actual).abs() <= 1.0);
+        // Identify, Start and Stop were all acknowledged Ok.
+        let a = acks(&captured);
+        assert!(a.iter().all(|&(_, r)| r == CmdResult::Ok));
+        assert!(a.len() >= 3);
+    }
+}

@@ -3,7 +3,7 @@
 
 use super::effects::Effects;
 use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
-use super::motion::{EdgeCrossing, Encoder, IndexPlate, Motor};
+use super::motion::{BaseState, EdgeCrossing, Encoder, IndexPlate, Motor};
 use super::sensor::{quantise, SenseChain, SensorTruth, Thermal};
 use super::stream::FrameWriter;
 use super::truth::{RunTruth, Truth};
@@ -78,6 +78,8 @@ struct ActiveRun {
     next_k: u64,
     /// Everything up to this time has been emitted.
     done_s: f64,
+    /// Base-table state at `done_s` (reused by the sample at that data-ready).
+    base_done: BaseState,
     theta2_done_rad: f64,
     n_motor: u64,
     n_temperature: u64,
@@ -253,6 +255,7 @@ impl Session {
             lowpass: self.lowpass_coef.map(Filter3::new),
             next_k,
             done_s: t_s,
+            base_done: self.motor.state(t_s),
             theta2_done_rad: self.theta2_rad(self.motor.theta1_deg(t_s)),
             n_motor: 0,
             n_temperature: 0,
@@ -326,7 +329,8 @@ impl Session {
     fn emit_interval<W: Write>(&mut self, t_end_s: f64, w: &mut FrameWriter<W>) -> io::Result<()> {
         let Some(run) = self.run.as_ref() else { return Ok(()) };
         let (t_a, theta2_a) = (run.done_s, run.theta2_done_rad);
-        let theta2_b = self.theta2_rad(self.motor.theta1_deg(t_end_s));
+        let base_b = self.motor.state(t_end_s);
+        let theta2_b = self.theta2_rad(base_b.theta1_deg);
         let mut edges = std::mem::take(&mut self.scratch);
         edges.clear();
         self.plate.crossings(
@@ -393,6 +397,7 @@ impl Session {
         self.scratch = edges;
         let run = self.run.as_mut().expect("checked above");
         run.done_s = t_end_s;
+        run.base_done = base_b;
         run.theta2_done_rad = theta2_b;
         Ok(())
     }
@@ -417,7 +422,11 @@ impl Session {
 
     /// Sensed counts (before offset, noise, quantisation) at `t_s`.
     fn sensed_counts(&self, chain: &SenseChain, t_s: f64) -> [f64; 3] {
-        let st = self.motor.state(t_s);
+        self.sensed_counts_at(chain, &self.motor.state(t_s))
+    }
+
+    /// Sensed counts for a base-table state.
+    fn sensed_counts_at(&self, chain: &SenseChain, st: &BaseState) -> [f64; 3] {
         let theta2 = self.theta2_rad(st.theta1_deg);
         let w2 = omega2(st.theta1_rate_dps, theta2, self.gear_ratio * st.theta1_rate_dps);
         chain.counts(&w2, theta2)
@@ -438,6 +447,7 @@ impl Session {
                 }
                 y
             }
+            None if delay_s == 0.0 => self.sensed_counts_at(&run.chain, &run.base_done),
             None => self.sensed_counts(&run.chain, t_s - delay_s),
         };
         let drift = self.thermal.offset_drift_dps(t_s);
@@ -450,7 +460,8 @@ impl Session {
         }
         let jitter_us = self.jitter.sample(&mut self.jitter_rng);
         let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 + jitter_us).round() as i64) as u32;
-        let encoder = self.encoder.register(self.motor.theta1_deg(t_s));
+        debug_assert_eq!(run.done_s, t_s, "the sample's interval is emitted first");
+        let encoder = self.encoder.register(run.base_done.theta1_deg);
         w.send(&RigMsg::Sample(Sample {
             t_us,
             encoder,

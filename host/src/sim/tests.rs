@@ -9,7 +9,7 @@ use std::f64::consts::TAU;
 
 const CPR: f64 = ENCODER_COUNTS_PER_REV as f64;
 
-fn decode_clean(bytes: &[u8]) -> Capture {
+pub(super) fn decode_clean(bytes: &[u8]) -> Capture {
     let cap = decode(bytes);
     assert!(cap.loss.is_clean(), "{:?}", cap.loss);
     assert_eq!(cap.loss.bytes, bytes.len() as u64);
@@ -18,7 +18,7 @@ fn decode_clean(bytes: &[u8]) -> Capture {
 
 /// Encoder counts at the centres of the run's index pulses (midpoint of a rising edge and the
 /// falling edge that follows it).
-fn index_centres(run: &Run) -> Vec<f64> {
+pub(super) fn index_centres(run: &Run) -> Vec<f64> {
     run.index
         .windows(2)
         .filter(|w| w[0].edge == Edge::Rising && w[1].edge == Edge::Falling)
@@ -27,7 +27,7 @@ fn index_centres(run: &Run) -> Vec<f64> {
 }
 
 /// Samples after the spin-up has ended, with a margin.
-fn steady(run: &Run, cfg: &SimConfig) -> Vec<crate::capture::RunSample> {
+pub(super) fn steady(run: &Run, cfg: &SimConfig) -> Vec<crate::capture::RunSample> {
     let t0 = run.samples[0].t_us;
     let skip_us = ((cfg.spin_up_s + 0.5) * 1e6) as i64;
     run.samples.iter().copied().filter(|s| s.t_us - t0 > skip_us).collect()
@@ -36,7 +36,7 @@ fn steady(run: &Run, cfg: &SimConfig) -> Vec<crate::capture::RunSample> {
 /// Least-squares time shift τ (s) of the samples against the truth model, `v(t) = m(t − τ)`,
 /// with θ2 from the encoder referenced to the first index centre plus `theta2_extra_rad`, and
 /// its standard error from the truth's noise (white noise plus rounding).
-fn fit_delay_s(run: &Run, cfg: &SimConfig, truth: &Truth, theta2_extra_rad: f64) -> (f64, f64) {
+pub(super) fn fit_delay_s(run: &Run, cfg: &SimConfig, truth: &Truth, theta2_extra_rad: f64) -> (f64, f64) {
     let rate = run.commanded_rate_dps();
     let ratio = truth.gear_ratio_nominal;
     let w2_rad_s = (ratio * rate).to_radians();
@@ -63,8 +63,24 @@ fn fit_delay_s(run: &Run, cfg: &SimConfig, truth: &Truth, theta2_extra_rad: f64)
     (-rg / gg, sigma / gg.sqrt())
 }
 
+/// Rms of the steady samples' difference from the truth model over all axes, counts.
+pub(super) fn residual_rms(run: &Run, cfg: &SimConfig, truth: &Truth) -> f64 {
+    let rate = run.commanded_rate_dps();
+    let c0 = index_centres(run)[0];
+    let (mut ss, mut n) = (0.0, 0.0);
+    for s in steady(run, cfg) {
+        let th = (s.encoder as f64 - c0) / CPR * TAU;
+        let m = truth.model_counts(run.pose, rate, th, rate);
+        for i in 0..3 {
+            ss += (f64::from(s.rate_counts[i]) - m[i]).powi(2);
+            n += 1.0;
+        }
+    }
+    (ss / n).sqrt()
+}
+
 /// Time of one encoder count at `rate_dps`, s: the resolution of an encoder-derived θ2 in time.
-fn encoder_quantum_s(rate_dps: f64) -> f64 {
+pub(super) fn encoder_quantum_s(rate_dps: f64) -> f64 {
     360.0 / CPR / rate_dps.abs()
 }
 
@@ -377,7 +393,6 @@ fn pure_delay_shifts_the_samples_by_exactly_that_delay_and_nothing_else() {
         let (tau0, sigma0) = fit_delay_s(run_b, &cfg, &base.truth, 0.0);
         let (tau, sigma) = fit_delay_s(run_e, &cfg, &eff.truth, 0.0);
         let tol = 5.0 * sigma.max(sigma0) + encoder_quantum_s(180.0);
-        eprintln!("DEBUG tau0 {tau0} tau {tau} sigma {sigma} tol {tol}");
         assert!(tau0.abs() < tol, "baseline τ = {tau0} ± {sigma0}");
         assert!((tau - 5e-3).abs() < tol, "τ = {tau} ± {sigma}");
     }
@@ -395,9 +410,10 @@ fn lowpass_delays_by_its_reported_group_delay() {
         let fc = f64::from(bw.cutoff_dhz(cfg.gyro.odr)) / 10.0;
         assert_eq!(out.truth.lowpass_cutoff_hz, Some(fc));
         for (run, rt) in cap.runs.iter().zip(&out.truth.runs) {
-            // Reported: close to the analogue √2/(2π·fc) (2.05 ms at 110 Hz, 7.50 ms at 30 Hz).
+            // Reported: near the analogue √2/(2π·fc) (2.05 ms at 110 Hz, 7.50 ms at 30 Hz); the
+            // bilinear map at the 800 Hz ODR shortens it by (πfc/ODR)²-order terms, 6 % at 110 Hz.
             let analogue_ms = 1e3 * std::f64::consts::SQRT_2 / (TAU * fc);
-            assert!((rt.filter_group_delay_ms / analogue_ms - 1.0).abs() < 0.03);
+            assert!((rt.filter_group_delay_ms / analogue_ms - 1.0).abs() < 0.08);
             let (tau, sigma) = fit_delay_s(run, &cfg, &out.truth, 0.0);
             let tol = 5.0 * sigma + encoder_quantum_s(180.0);
             assert!((tau - rt.total_delay_ms * 1e-3).abs() < tol, "{bw:?}: τ = {tau} ± {sigma} vs {rt:?}");
@@ -532,5 +548,45 @@ fn speed_ripple_is_in_the_encoder_derived_rate() {
         // The span averages the 2×/12× terms out of the 1× projection only over whole turns:
         // ~2 turns here, so allow 10 % of the amplitude.
         assert!((amp - h1.amplitude).abs() < 0.1 * h1.amplitude, "{amp}");
+    }
+}
+
+/// Throughput check for planning long captures: a 1-hour two-pose capture (5.76 M samples) must
+/// stream in well under 10 s. Ignored by default (meaningful only in release):
+/// `cargo test --release -p host --lib sim::tests::one_hour -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn one_hour_two_pose_capture_streams_in_under_ten_seconds() {
+    let plain = SimConfig::standard(1, 3600.0);
+    let mut all_effects = plain.clone();
+    for (name, _) in Effects::NAMES {
+        all_effects.effects.enable(name).unwrap();
+    }
+    for (label, cfg) in [("no effects", plain), ("all effects", all_effects)] {
+        let mut sink = CountingSink(0);
+        let t = std::time::Instant::now();
+        let truth = simulate_to(&cfg, &mut sink).unwrap();
+        let secs = t.elapsed().as_secs_f64();
+        let samples: u64 = truth.runs.iter().map(|r| r.samples).sum();
+        eprintln!(
+            "{label}: {samples} samples, {} bytes ({:.0} B/s of capture) in {secs:.2} s",
+            sink.0,
+            sink.0 as f64 / 7200.0
+        );
+        assert!((samples as f64 - 7200.0 * truth.odr_hz_actual).abs() <= 2.0);
+        assert!(secs < 10.0, "{label}: {secs} s");
+    }
+}
+
+/// A writer that only counts.
+struct CountingSink(u64);
+
+impl std::io::Write for CountingSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0 += buf.len() as u64;
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
     }
 }
