@@ -389,6 +389,21 @@ impl CaptureDecoder {
     }
 }
 
+/// Decodes a capture from a reader in 1 MiB chunks, so an hour-long capture (160 MB) is never
+/// held in memory as bytes.
+pub fn decode_reader(mut reader: impl std::io::Read) -> std::io::Result<Capture> {
+    let mut dec = CaptureDecoder::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        match reader.read(&mut buf) {
+            Ok(0) => return Ok(dec.finish()),
+            Ok(n) => dec.feed(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+}
+
 /// Decodes a whole capture held in memory.
 pub fn decode(bytes: &[u8]) -> Capture {
     let mut dec = CaptureDecoder::new();

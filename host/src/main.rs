@@ -205,8 +205,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
 
 /// Reads and decodes a capture file.
 fn read_capture(path: &Path) -> Result<Capture> {
-    let bytes = fs::read(path).with_context(|| format!("cannot read capture {}", path.display()))?;
-    Ok(capture::decode(&bytes))
+    let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
+    capture::decode_reader(file).with_context(|| format!("cannot read capture {}", path.display()))
 }
 
 /// Ctrl-C sets a flag that the session loops check, so the motor is stopped and the file closed.

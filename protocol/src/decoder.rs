@@ -30,6 +30,7 @@ pub enum Event<M> {
 /// every byte that is not part of a valid frame is reported once, with its offset.
 pub struct StreamDecoder {
     buf: [u8; MAX_FRAME_LEN],
+    scratch: [u8; MAX_FRAME_LEN],
     len: usize,
     /// Bytes of the current frame beyond the buffer (a frame that is too long).
     overflow: u64,
@@ -50,6 +51,7 @@ impl StreamDecoder {
     pub const fn new() -> Self {
         Self {
             buf: [0; MAX_FRAME_LEN],
+            scratch: [0; MAX_FRAME_LEN],
             len: 0,
             overflow: 0,
             start: 0,
@@ -65,7 +67,15 @@ impl StreamDecoder {
     /// Feeds bytes; calls `on_event` for every frame or error completed by them.
     pub fn feed<M: DeserializeOwned>(&mut self, mut data: &[u8], mut on_event: impl FnMut(Event<M>)) {
         while !data.is_empty() {
-            match data.iter().position(|&b| b == 0) {
+            match memchr::memchr(0, data) {
+                // The whole frame is in `data`: decode it from there, without buffering.
+                Some(i) if self.len == 0 && self.overflow == 0 => {
+                    self.pos += i as u64 + 1;
+                    if let Some(ev) = self.decode(&data[..i]) {
+                        on_event(ev);
+                    }
+                    data = &data[i + 1..];
+                }
                 Some(i) => {
                     self.append(&data[..i]);
                     self.pos += 1; // the delimiter
@@ -113,21 +123,28 @@ impl StreamDecoder {
         let n = self.len;
         self.len = 0;
         self.overflow = 0;
+        if overflow > 0 {
+            self.start = self.pos;
+            return Some(Event::Error { offset, len, error: FrameError::TooLong });
+        }
+        let frame = self.buf;
+        self.decode(&frame[..n])
+    }
+
+    /// Decodes one complete frame (delimiter already counted in `pos`) that began at `start`.
+    fn decode<M: DeserializeOwned>(&mut self, frame: &[u8]) -> Option<Event<M>> {
+        let offset = self.start;
         self.start = self.pos;
-        if len == 0 {
+        if frame.is_empty() {
             // Back-to-back delimiters are allowed (a sender may emit one to resynchronise).
             return None;
         }
-        if overflow > 0 {
-            return Some(Event::Error {
-                offset,
-                len,
-                error: FrameError::TooLong,
-            });
+        if frame.len() > MAX_FRAME_LEN {
+            return Some(Event::Error { offset, len: frame.len() as u64, error: FrameError::TooLong });
         }
-        Some(match decode_frame::<M>(&mut self.buf[..n]) {
+        Some(match decode_frame::<M>(frame, &mut self.scratch) {
             Ok((seq, msg)) => Event::Frame { offset, seq, msg },
-            Err(error) => Event::Error { offset, len, error },
+            Err(error) => Event::Error { offset, len: frame.len() as u64, error },
         })
     }
 }

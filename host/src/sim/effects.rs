@@ -44,20 +44,14 @@ pub struct FilterDelay {
 
 impl Default for FilterDelay {
     fn default() -> Self {
-        Self {
-            lowpass: true,
-            pure_delay_ms: 0.0,
-        }
+        Self { lowpass: true, pure_delay_ms: 0.0 }
     }
 }
 
 impl FilterDelay {
     /// A pure delay of `delay_ms` without the low-pass.
     pub fn pure_ms(delay_ms: f64) -> Self {
-        Self {
-            lowpass: false,
-            pure_delay_ms: delay_ms,
-        }
+        Self { lowpass: false, pure_delay_ms: delay_ms }
     }
 }
 
@@ -94,11 +88,7 @@ pub struct OffsetDrift {
 
 impl Default for OffsetDrift {
     fn default() -> Self {
-        Self {
-            rise_c: 10.0,
-            tau_s: 90.0,
-            dps_per_c: [0.03, -0.02, 0.04],
-        }
+        Self { rise_c: 10.0, tau_s: 90.0, dps_per_c: [0.03, -0.02, 0.04] }
     }
 }
 
@@ -130,21 +120,9 @@ impl Default for SpeedRipple {
     fn default() -> Self {
         Self {
             harmonics: [
-                RippleHarmonic {
-                    order: 1,
-                    amplitude: 0.005,
-                    phase_rad: 0.7,
-                },
-                RippleHarmonic {
-                    order: 2,
-                    amplitude: 0.0025,
-                    phase_rad: 2.1,
-                },
-                RippleHarmonic {
-                    order: 12,
-                    amplitude: 0.001,
-                    phase_rad: 0.0,
-                },
+                RippleHarmonic { order: 1, amplitude: 0.005, phase_rad: 0.7 },
+                RippleHarmonic { order: 2, amplitude: 0.0025, phase_rad: 2.1 },
+                RippleHarmonic { order: 12, amplitude: 0.001, phase_rad: 0.0 },
             ],
         }
     }
@@ -167,10 +145,7 @@ pub struct Nonlinearity {
 
 impl Default for Nonlinearity {
     fn default() -> Self {
-        Self {
-            quadratic_fs: 0.002,
-            asymmetry: 0.004,
-        }
+        Self { quadratic_fs: 0.002, asymmetry: 0.004 }
     }
 }
 
@@ -207,12 +182,7 @@ pub struct MysteryHarmonic {
 
 impl Default for MysteryHarmonic {
     fn default() -> Self {
-        Self {
-            axis: 0,
-            order: 3,
-            amplitude_dps: 0.3,
-            phase_rad: 0.4,
-        }
+        Self { axis: 0, order: 3, amplitude_dps: 0.3, phase_rad: 0.4 }
     }
 }
 
@@ -251,10 +221,8 @@ impl Effects {
     pub fn enable(&mut self, spec: &str) -> Result<(), EffectSpecError> {
         let (name, value) = match spec.split_once('=') {
             Some((n, v)) => {
-                let v: f64 = v
-                    .trim()
-                    .parse()
-                    .map_err(|_| EffectSpecError(format!("effect {spec:?}: value is not a number")))?;
+                let v: f64 =
+                    v.trim().parse().map_err(|_| EffectSpecError(format!("effect {spec:?}: value is not a number")))?;
                 if !v.is_finite() {
                     return Err(EffectSpecError(format!("effect {spec:?}: value is not finite")));
                 }
@@ -277,9 +245,7 @@ impl Effects {
                 self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0)).pure_delay_ms = ms;
             }
             "index_offset_deg" => {
-                self.index_offset = Some(IndexOffset {
-                    offset_deg: value.unwrap_or(IndexOffset::default().offset_deg),
-                })
+                self.index_offset = Some(IndexOffset { offset_deg: value.unwrap_or(IndexOffset::default().offset_deg) })
             }
             "offset_drift" => {
                 let mut d = OffsetDrift::default();
@@ -303,9 +269,7 @@ impl Effects {
                 self.nonlinearity = Some(n);
             }
             "gear_ratio_error" => {
-                self.gear_ratio_error = Some(GearRatioError {
-                    ppm: value.unwrap_or(GearRatioError::default().ppm),
-                })
+                self.gear_ratio_error = Some(GearRatioError { ppm: value.unwrap_or(GearRatioError::default().ppm) })
             }
             "mystery_harmonic" => {
                 let mut m = MysteryHarmonic::default();
@@ -316,10 +280,7 @@ impl Effects {
             }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();
-                return Err(EffectSpecError(format!(
-                    "unknown effect {name:?}; known: {}",
-                    known.join(", ")
-                )));
+                return Err(EffectSpecError(format!("unknown effect {name:?}; known: {}", known.join(", "))));
             }
         }
         Ok(())
@@ -357,13 +318,7 @@ mod tests {
         e.enable("delay_ms=5").unwrap();
         assert_eq!(e.filter_delay, Some(FilterDelay::pure_ms(5.0)));
         e.enable("filter_delay").unwrap();
-        assert_eq!(
-            e.filter_delay,
-            Some(FilterDelay {
-                lowpass: true,
-                pure_delay_ms: 5.0
-            })
-        );
+        assert_eq!(e.filter_delay, Some(FilterDelay { lowpass: true, pure_delay_ms: 5.0 }));
         e.enable("gear_ratio_error=-50").unwrap();
         assert_eq!(e.true_gear_ratio(1.0), 1.0 - 50e-6);
         e.enable("index_offset_deg").unwrap();

@@ -48,7 +48,6 @@ impl Butterworth2 {
         let dphi = (self.response(f1, fs_hz) / self.response(f0, fs_hz)).arg();
         -dphi / (2.0 * PI * (f1 - f0))
     }
-
 }
 
 /// Three channels of one biquad, transposed direct form II.

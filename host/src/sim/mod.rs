@@ -96,14 +96,7 @@ impl SimConfig {
     pub fn standard(seed: u64, duration_s: f64) -> Self {
         Self::with_runs(
             seed,
-            Pose::ALL
-                .iter()
-                .map(|&pose| RunSpec {
-                    pose,
-                    rate_dps: STANDARD_RATE_DPS,
-                    duration_s,
-                })
-                .collect(),
+            Pose::ALL.iter().map(|&pose| RunSpec { pose, rate_dps: STANDARD_RATE_DPS, duration_s }).collect(),
         )
     }
 
@@ -141,17 +134,11 @@ impl SimConfig {
                 r.rate_dps.is_finite() && r.rate_dps != 0.0 && r.rate_dps.abs() <= 1e4,
                 &format!("runs[{i}].rate_dps must be non-zero and within ±10 000 °/s"),
             )?;
-            check(
-                r.duration_s.is_finite() && r.duration_s > 0.0,
-                &format!("runs[{i}].duration_s must be > 0"),
-            )?;
+            check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s must be > 0"))?;
         }
         let e = &self.effects;
         if let Some(f) = e.filter_delay {
-            check(
-                f.pure_delay_ms.is_finite() && f.pure_delay_ms >= 0.0,
-                "filter_delay.pure_delay_ms must be ≥ 0",
-            )?;
+            check(f.pure_delay_ms.is_finite() && f.pure_delay_ms >= 0.0, "filter_delay.pure_delay_ms must be ≥ 0")?;
         }
         if let Some(d) = e.offset_drift {
             check(

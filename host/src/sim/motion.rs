@@ -67,13 +67,7 @@ impl Motor {
     /// A motor at rest at θ1 = 0 from t = 0.
     pub fn new(ripple: Option<SpeedRipple>) -> Self {
         Self {
-            segments: vec![Segment {
-                t0_s: 0.0,
-                theta0_deg: 0.0,
-                rate0_dps: 0.0,
-                target_dps: 0.0,
-                ramp_s: 0.0,
-            }],
+            segments: vec![Segment { t0_s: 0.0, theta0_deg: 0.0, rate0_dps: 0.0, target_dps: 0.0, ramp_s: 0.0 }],
             ripple,
         }
     }
@@ -84,24 +78,13 @@ impl Motor {
         let last = self.segments.last().expect("never empty");
         assert!(t_s >= last.t0_s, "setpoint changes must be in time order");
         let (theta0_deg, rate0_dps) = last.at(t_s);
-        self.segments.push(Segment {
-            t0_s: t_s,
-            theta0_deg,
-            rate0_dps,
-            target_dps,
-            ramp_s,
-        });
+        self.segments.push(Segment { t0_s: t_s, theta0_deg, rate0_dps, target_dps, ramp_s });
     }
 
     /// State at `t_s` (any time ≥ 0; before 0 the table was at rest).
     pub fn state(&self, t_s: f64) -> BaseState {
         // Evaluations are almost always in the newest segment: search from the end.
-        let seg = self
-            .segments
-            .iter()
-            .rev()
-            .find(|s| s.t0_s <= t_s)
-            .unwrap_or(&self.segments[0]);
+        let seg = self.segments.iter().rev().find(|s| s.t0_s <= t_s).unwrap_or(&self.segments[0]);
         let (theta_nom_deg, rate_nom_dps) = seg.at(t_s.max(seg.t0_s));
         let rate_nom_dps = if t_s < seg.t0_s { 0.0 } else { rate_nom_dps };
         let (mut theta1_deg, mut theta1_rate_dps) = (theta_nom_deg, rate_nom_dps);
@@ -118,11 +101,7 @@ impl Motor {
             theta1_deg += dtheta_rad.to_degrees();
             theta1_rate_dps *= 1.0 + drate;
         }
-        BaseState {
-            theta1_deg,
-            theta1_rate_dps,
-            setpoint_dps: rate_nom_dps,
-        }
+        BaseState { theta1_deg, theta1_rate_dps, setpoint_dps: rate_nom_dps }
     }
 
     /// θ1 only, degrees.
@@ -190,10 +169,9 @@ impl IndexPlate {
         let first = out.len();
         let increasing = theta2_b > theta2_a;
         let (lo, hi) = if increasing { (theta2_a, theta2_b) } else { (theta2_b, theta2_a) };
-        for (base, is_leading) in [
-            (self.centre_rad - 0.5 * self.width_rad, true),
-            (self.centre_rad + 0.5 * self.width_rad, false),
-        ] {
+        for (base, is_leading) in
+            [(self.centre_rad - 0.5 * self.width_rad, true), (self.centre_rad + 0.5 * self.width_rad, false)]
+        {
             // A boundary b is crossed when θ2 ≥ b changes truth value over the interval.
             let n_lo = ((lo - base) / TAU).floor() as i64;
             let n_hi = ((hi - base) / TAU).ceil() as i64;
@@ -265,10 +243,7 @@ mod tests {
 
     #[test]
     fn encoder_floors_and_wraps() {
-        let e = Encoder {
-            counts_per_rev: 324_000,
-            start_counts: u32::MAX - 1,
-        };
+        let e = Encoder { counts_per_rev: 324_000, start_counts: u32::MAX - 1 };
         assert_eq!(e.counts(1.0), 900);
         assert_eq!(e.counts(-1e-9), -1);
         assert_eq!(e.register(0.0), u32::MAX - 1);
@@ -277,10 +252,7 @@ mod tests {
 
     #[test]
     fn plate_edges_straddle_the_centre_in_both_directions() {
-        let plate = IndexPlate {
-            centre_rad: 0.3,
-            width_rad: 4f64.to_radians(),
-        };
+        let plate = IndexPlate { centre_rad: 0.3, width_rad: 4f64.to_radians() };
         for rate in [1.0, -1.0] {
             let th = |t: f64| rate * t;
             let mut out = Vec::new();

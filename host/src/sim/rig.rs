@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 /// (`protocol::Command::Heartbeat`).
 pub const HOST_LINK_TIMEOUT_S: f64 = 2.0;
 
-/// Highest speed a `Start` may ask for, m°/s (assumed over-speed limit: 2 rev/s, well inside
-/// the ±500 °/s range at pose 1 only up to ~360 °/s, but the rig itself allows it).
+/// Highest speed a `Start` may ask for, m°/s (assumed over-speed limit of the rig: 2 rev/s).
+/// The gyro, not the rig, limits useful speeds: pose 1 exceeds ±500 °/s above ≈ 359 °/s.
 pub const MAX_RATE_MDPS: u32 = 720_000;
 
 /// A simulated rig that speaks the protocol. One sensor (from the seed) for its whole life, so a
@@ -163,7 +163,11 @@ pub fn serve(port: &mut dyn Port, rig: &mut SimRig, speedup: f64, stop: &AtomicB
     let mut buf = [0u8; 1024];
     while !stop.load(Ordering::Relaxed) {
         rig.advance_to(now(rig.now_s()));
-        write_patiently(port, &rig.take_output(), stop)?;
+        let out = rig.take_output();
+        if !out.is_empty() {
+            write_patiently(port, &out, stop)?;
+            port.flush()?;
+        }
         match port.read(&mut buf) {
             Ok(0) => std::thread::sleep(Duration::from_millis(1)),
             Ok(n) => {
@@ -178,10 +182,7 @@ pub fn serve(port: &mut dyn Port, rig: &mut SimRig, speedup: f64, stop: &AtomicB
 }
 
 fn is_idle(e: &io::Error) -> bool {
-    matches!(
-        e.kind(),
-        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
-    )
+    matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted)
 }
 
 /// Writes all of `bytes`, retrying while the port is momentarily full, unless `stop` is set.
@@ -219,11 +220,7 @@ mod tests {
 
     /// Start command; the run tag names the pose (`Pose::run_tag`).
     fn start(rate_mdps: u32, run_tag: u8) -> Command {
-        Command::Start(StartRun {
-            rate_mdps,
-            direction: Direction::Ccw,
-            run_tag,
-        })
+        Command::Start(StartRun { rate_mdps, direction: Direction::Ccw, run_tag })
     }
 
     /// Every rig frame in `bytes`, in order.
@@ -236,9 +233,8 @@ mod tests {
         v
     }
 
-    fn acks(bytes: &[u8]) -> Vec<(u16, CmdResult)> {
-        frames(bytes)
-            .into_iter()
+    fn acks(msgs: &[RigMsg]) -> Vec<(u16, CmdResult)> {
+        msgs.iter()
             .filter_map(|m| match m {
                 RigMsg::Ack(a) => Some((a.cmd_seq, a.result)),
                 _ => None,
@@ -253,21 +249,12 @@ mod tests {
         let mut all = rig.take_output();
         assert!(matches!(frames(&all)[..], [RigMsg::Hello(_)]), "Hello at power-up");
         let f = exchange(&mut rig, &mut all, 0, Command::Identify);
-        assert!(matches!(
-            f[..],
-            [
-                RigMsg::Hello(_),
-                RigMsg::Ack(Ack {
-                    cmd_seq: 0,
-                    result: CmdResult::Ok
-                })
-            ]
-        ));
+        assert!(matches!(f[..], [RigMsg::Hello(_), RigMsg::Ack(Ack { cmd_seq: 0, result: CmdResult::Ok })]));
         // Unknown pose tag, zero and excessive speeds are refused.
-        assert_eq!(acks(&frame_bytes(exchange(&mut rig, &mut all, 1, start(180_000, 9)))), [(1, CmdResult::InvalidArgument)]);
-        assert_eq!(acks(&frame_bytes(exchange(&mut rig, &mut all, 2, start(0, 1)))), [(2, CmdResult::InvalidArgument)]);
+        assert_eq!(acks(&exchange(&mut rig, &mut all, 1, start(180_000, 9))), [(1, CmdResult::InvalidArgument)]);
+        assert_eq!(acks(&exchange(&mut rig, &mut all, 2, start(0, 1))), [(2, CmdResult::InvalidArgument)]);
         assert_eq!(
-            acks(&frame_bytes(exchange(&mut rig, &mut all, 3, start(MAX_RATE_MDPS + 1, 1)))),
+            acks(&exchange(&mut rig, &mut all, 3, start(MAX_RATE_MDPS + 1, 1))),
             [(3, CmdResult::InvalidArgument)]
         );
         // Run 1: pose 2 for 5 s with heartbeats every 0.5 s.
@@ -275,9 +262,9 @@ mod tests {
         let f = exchange(&mut rig, &mut all, 4, start(180_000, Pose::Two.run_tag()));
         assert!(matches!(f[..], [RigMsg::RunStarted(_), RigMsg::Ack(_)]));
         let busy = exchange(&mut rig, &mut all, 5, Command::ConfigureGyro(GyroConfig::DEFAULT));
-        assert_eq!(acks(&frame_bytes(busy)), [(5, CmdResult::Busy)]);
+        assert_eq!(acks(&busy), [(5, CmdResult::Busy)]);
         let busy = exchange(&mut rig, &mut all, 6, start(180_000, 1));
-        assert_eq!(acks(&frame_bytes(busy)), [(6, CmdResult::Busy)]);
+        assert_eq!(acks(&busy), [(6, CmdResult::Busy)]);
         let mut seq = 7;
         for k in 1..=10 {
             rig.advance_to(1.0 + 0.5 * f64::from(k));
@@ -288,10 +275,7 @@ mod tests {
         let f = exchange(&mut rig, &mut all, seq, Command::Stop);
         assert!(matches!(f[..], [.., RigMsg::RunStopped(_), RigMsg::Ack(_)]));
         // Idle: the gyro may be reconfigured; the rig answers with the new Hello.
-        let bw0 = GyroConfig {
-            bandwidth: Bandwidth::Bw0,
-            ..GyroConfig::DEFAULT
-        };
+        let bw0 = GyroConfig { bandwidth: Bandwidth::Bw0, ..GyroConfig::DEFAULT };
         let f = exchange(&mut rig, &mut all, seq + 1, Command::ConfigureGyro(bw0));
         assert!(matches!(f[..], [RigMsg::Hello(h), RigMsg::Ack(_)] if h.gyro == bw0));
         // Run 2: pose 1, and the host falls silent: the rig stops 2 s after its last frame.
@@ -326,7 +310,7 @@ mod tests {
         let rms = residual_rms(r1, &cfg, &truth);
         assert!((rms / sigma - 1.0).abs() < 0.05, "{rms} vs {sigma}");
         // Every command was acknowledged, in order.
-        let seqs: Vec<u16> = acks(&all).iter().map(|a| a.0).collect();
+        let seqs: Vec<u16> = acks(&frames(&all)).iter().map(|a| a.0).collect();
         assert_eq!(seqs, (0..=seq + 2).collect::<Vec<_>>());
         assert!(frames(&all).iter().any(|m| matches!(m, RigMsg::Fault(_))));
     }
@@ -337,14 +321,6 @@ mod tests {
         let out = rig.take_output();
         all.extend_from_slice(&out);
         frames(&out)
-    }
-
-    fn frame_bytes(msgs: Vec<RigMsg>) -> Vec<u8> {
-        let mut w = FrameWriter::new(Vec::new());
-        for m in &msgs {
-            w.send(m).unwrap();
-        }
-        w.into_inner()
     }
 
     #[test]
@@ -415,7 +391,7 @@ mod tests {
         assert_eq!(run.samples.len() as u64, rt.samples);
         assert!((rt.samples as f64 - rt.duration_s * truth.odr_hz_actual).abs() <= 1.0);
         // Identify, Start and Stop were all acknowledged Ok.
-        let a = acks(&captured);
+        let a = acks(&frames(&captured));
         assert!(a.iter().all(|&(_, r)| r == CmdResult::Ok));
         assert!(a.len() >= 3);
     }

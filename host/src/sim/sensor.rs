@@ -65,12 +65,7 @@ impl SensorTruth {
             let z: f64 = StandardNormal.sample(rng);
             offset_dps[i] = z * offset_sigma_dps;
         }
-        Self {
-            s,
-            tilt_deg,
-            k_rel,
-            offset_dps,
-        }
+        Self { s, tilt_deg, k_rel, offset_dps }
     }
 
     /// Sensitivities, counts per °/s.
@@ -117,9 +112,7 @@ impl Thermal {
 
     /// OUT_TEMP register at `t_s`.
     pub fn out_temp_raw(&self, t_s: f64) -> i8 {
-        (self.out_temp_at_0c - self.temperature_c(t_s))
-            .round()
-            .clamp(f64::from(i8::MIN), f64::from(i8::MAX)) as i8
+        (self.out_temp_at_0c - self.temperature_c(t_s)).round().clamp(f64::from(i8::MIN), f64::from(i8::MAX)) as i8
     }
 
     /// Offset change from the reference value at `t_s`, °/s per axis.
@@ -195,12 +188,12 @@ mod tests {
             let t = SensorTruth::draw(&mut ChaCha8Rng::seed_from_u64(seed));
             let m = t.m_counts_per_dps(FullScale::Dps500);
             let k = t.k_counts_per_dps(FullScale::Dps500);
-            for i in 0..3 {
+            for (i, k_i) in k.into_iter().enumerate() {
                 assert!((t.s[i].norm() - 1.0).abs() < 1e-12);
                 let tilt = t.s[i][i].acos().to_degrees();
                 assert!((tilt - t.tilt_deg[i]).abs() < 1e-9, "{tilt} vs {}", t.tilt_deg[i]);
                 assert!((TILT_RANGE_DEG.0..TILT_RANGE_DEG.1).contains(&tilt));
-                assert!((m.row(i).norm() - k[i]).abs() < 1e-9);
+                assert!((m.row(i).norm() - k_i).abs() < 1e-9);
                 // 5 σ of the sensitivity spread.
                 assert!((t.k_rel[i] - 1.0).abs() < 5.0 * SENSITIVITY_SIGMA);
             }
@@ -209,11 +202,7 @@ mod tests {
 
     #[test]
     fn warm_up_moves_temperature_register_and_offsets_together() {
-        let th = Thermal {
-            ambient_c: 25.0,
-            out_temp_at_0c: 50.0,
-            drift: Some(OffsetDrift::default()),
-        };
+        let th = Thermal { ambient_c: 25.0, out_temp_at_0c: 50.0, drift: Some(OffsetDrift::default()) };
         assert_eq!(th.out_temp_raw(0.0), 25);
         // After 5 time constants the rise is complete to 0.7 %: 10 °C warmer, 10 LSB lower.
         assert_eq!(th.out_temp_raw(450.0), 15);
@@ -240,19 +229,13 @@ mod tests {
             k_rel: [1.0; 3],
             offset_dps: [0.0; 3],
         };
-        let effects = Effects {
-            nonlinearity: Some(Nonlinearity::default()),
-            ..Effects::default()
-        };
+        let effects = Effects { nonlinearity: Some(Nonlinearity::default()), ..Effects::default() };
         let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
         let k = nominal_counts_per_dps(FullScale::Dps500);
         let c = chain.counts(&Vector3::new(500.0, -500.0, 0.0), 0.0);
         assert!((c[0] / k - 500.0 * (1.002 + 0.002)).abs() < 1e-9);
         assert!((c[1] / k + 500.0 * (0.998 + 0.002)).abs() < 1e-9);
-        let effects = Effects {
-            mystery_harmonic: Some(MysteryHarmonic::default()),
-            ..Effects::default()
-        };
+        let effects = Effects { mystery_harmonic: Some(MysteryHarmonic::default()), ..Effects::default() };
         let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
         let c = chain.counts(&Vector3::zeros(), 0.5);
         assert!((c[0] / k - 0.3 * (1.5f64 + 0.4).sin()).abs() < 1e-12);

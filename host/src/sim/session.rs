@@ -19,11 +19,7 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use std::io::{self, Write};
 
 /// Firmware version the simulator announces: the version of the firmware it emulates.
-pub const FIRMWARE_VERSION: Version = Version {
-    major: 0,
-    minor: 1,
-    patch: 0,
-};
+pub const FIRMWARE_VERSION: Version = Version { major: 0, minor: 1, patch: 0 };
 
 /// Gear ratio announced in `Hello`: the prototype's 1:1 magnetic gears (EXCITER.md, "Mechanism").
 pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
@@ -121,7 +117,7 @@ pub struct Session {
 }
 
 impl Session {
-    /// A rig at power-up (t = 0). `cfg.runs` is not used here.
+    /// A rig at power-up (t = 0); the caller drives the runs (`cfg.runs` is not read).
     pub fn new(cfg: &SimConfig) -> Self {
         let sensor = SensorTruth::draw(&mut rng(cfg.seed, Stream::Sensor));
         let mut rig = rng(cfg.seed, Stream::Rig);
@@ -140,16 +136,9 @@ impl Session {
             plate_width_deg: cfg.index_plate_width_deg,
             start_t_us: cfg.start_t_us,
             sensor,
-            thermal: Thermal {
-                ambient_c: AMBIENT_C,
-                out_temp_at_0c,
-                drift: cfg.effects.offset_drift,
-            },
+            thermal: Thermal { ambient_c: AMBIENT_C, out_temp_at_0c, drift: cfg.effects.offset_drift },
             motor: Motor::new(cfg.effects.speed_ripple),
-            encoder: Encoder {
-                counts_per_rev: ENCODER_COUNTS_PER_REV,
-                start_counts: cfg.start_encoder,
-            },
+            encoder: Encoder { counts_per_rev: ENCODER_COUNTS_PER_REV, start_counts: cfg.start_encoder },
             plate: IndexPlate {
                 centre_rad: cfg.effects.index_offset_rad(),
                 width_rad: cfg.index_plate_width_deg.to_radians(),
@@ -246,6 +235,7 @@ impl Session {
         self.motor.set_target(t_s, rate_dps, self.spin_up_s);
         let next_k = ((t_s - self.clock_phase_s) / self.period_s).floor().max(0.0) as u64 + 1;
         let chain = SenseChain::new(&self.sensor, &pose.rotation(), self.gyro.full_scale, &self.effects);
+        let base_done = self.motor.state(t_s);
         let mut run = ActiveRun {
             pose,
             run_tag,
@@ -255,8 +245,8 @@ impl Session {
             lowpass: self.lowpass_coef.map(Filter3::new),
             next_k,
             done_s: t_s,
-            base_done: self.motor.state(t_s),
-            theta2_done_rad: self.theta2_rad(self.motor.theta1_deg(t_s)),
+            base_done,
+            theta2_done_rad: self.theta2_rad(base_done.theta1_deg),
             n_motor: 0,
             n_temperature: 0,
             n_counters: 0,
@@ -294,21 +284,14 @@ impl Session {
         }
         self.emit_interval(t_s, w)?;
         if let Some(fault) = fault {
-            w.send(&RigMsg::Fault(FaultReport {
-                t_us: self.timer_us(t_s),
-                fault,
-            }))?;
+            w.send(&RigMsg::Fault(FaultReport { t_us: self.timer_us(t_s), fault }))?;
         }
         let run = self.run.take().expect("checked above");
-        w.send(&RigMsg::RunStopped(RunStopped {
-            t_us: self.timer_us(t_s),
-            run_tag: run.run_tag,
-        }))?;
+        w.send(&RigMsg::RunStopped(RunStopped { t_us: self.timer_us(t_s), run_tag: run.run_tag }))?;
         self.motor.set_target(t_s, 0.0, self.spin_up_s);
         let drive_hz = (run.rate_dps * self.gear_ratio).abs() / 360.0;
-        let filter_ms = self
-            .lowpass_coef
-            .map_or(0.0, |c| 1e3 * c.group_delay_s(drive_hz, f64::from(OVERSAMPLING) / self.period_s));
+        let filter_ms =
+            self.lowpass_coef.map_or(0.0, |c| 1e3 * c.group_delay_s(drive_hz, f64::from(OVERSAMPLING) / self.period_s));
         self.runs.push(RunTruth {
             pose: run.pose,
             rate_dps: run.rate_dps,
@@ -349,12 +332,8 @@ impl Session {
                 run.start_s + (run.n_temperature as f64 + 0.5) * TEMPERATURE_PERIOD_S,
                 run.start_s + (run.n_counters + 1) as f64 * COUNTERS_PERIOD_S,
             ];
-            let (which, t_p) = periodic
-                .iter()
-                .copied()
-                .enumerate()
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .expect("three entries");
+            let (which, t_p) =
+                periodic.iter().copied().enumerate().min_by(|a, b| a.1.total_cmp(&b.1)).expect("three entries");
             let t_e = edges.get(next_edge).map_or(f64::INFINITY, |e| e.t_s);
             if t_e.min(t_p) > t_end_s {
                 break;
@@ -362,6 +341,7 @@ impl Session {
             if t_e <= t_p {
                 let e = edges[next_edge];
                 next_edge += 1;
+                // Captured by a timer input: exact to the µs tick, no interrupt jitter.
                 w.send(&RigMsg::Index(IndexEdge {
                     t_us: self.timer_us(e.t_s),
                     encoder: self.encoder.register(self.motor.theta1_deg(e.t_s)),
@@ -406,7 +386,8 @@ impl Session {
         let run_tag = self.run.as_ref().map_or(0, |r| r.run_tag);
         let state = self.motor.state(t_s);
         // The firmware measures speed as the encoder difference over one report period.
-        let dc = self.encoder.counts(state.theta1_deg) - self.encoder.counts(self.motor.theta1_deg(t_s - MOTOR_PERIOD_S));
+        let dc =
+            self.encoder.counts(state.theta1_deg) - self.encoder.counts(self.motor.theta1_deg(t_s - MOTOR_PERIOD_S));
         let cps_per_dps = f64::from(ENCODER_COUNTS_PER_REV) / 360.0;
         let sp = state.setpoint_dps;
         let duty = 1000.0 * sp / FULL_DUTY_DPS + if sp == 0.0 { 0.0 } else { FRICTION_DUTY_PERMILLE * sp.signum() };
@@ -462,12 +443,7 @@ impl Session {
         let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 + jitter_us).round() as i64) as u32;
         debug_assert_eq!(run.done_s, t_s, "the sample's interval is emitted first");
         let encoder = self.encoder.register(run.base_done.theta1_deg);
-        w.send(&RigMsg::Sample(Sample {
-            t_us,
-            encoder,
-            rate_counts,
-            status: 0,
-        }))?;
+        w.send(&RigMsg::Sample(Sample { t_us, encoder, rate_counts, status: 0 }))?;
         self.samples_read = self.samples_read.wrapping_add(1);
         run.samples += 1;
         run.next_k += 1;

@@ -16,13 +16,7 @@ pub struct FrameWriter<W: Write> {
 impl<W: Write> FrameWriter<W> {
     /// A writer whose first frame gets sequence number 0.
     pub fn new(out: W) -> Self {
-        Self {
-            out,
-            seq: 0,
-            frames: 0,
-            bytes: 0,
-            buf: [0; MAX_FRAME_LEN],
-        }
+        Self { out, seq: 0, frames: 0, bytes: 0, buf: [0; MAX_FRAME_LEN] }
     }
 
     /// Encodes and writes one frame.
@@ -73,11 +67,7 @@ mod tests {
         let bytes = w.into_inner();
         let mut seqs = Vec::new();
         StreamDecoder::new().feed::<RigMsg>(&bytes, |ev| match ev {
-            Event::Frame {
-                seq,
-                msg: RigMsg::RunStopped(r),
-                ..
-            } => seqs.push((seq, r.run_tag)),
+            Event::Frame { seq, msg: RigMsg::RunStopped(r), .. } => seqs.push((seq, r.run_tag)),
             other => panic!("{other:?}"),
         });
         assert_eq!(seqs, (0..5).map(|i| (i as u16, i as u8)).collect::<Vec<_>>());

@@ -56,10 +56,7 @@ pub(super) fn fit_delay_s(run: &Run, cfg: &SimConfig, truth: &Truth, theta2_extr
             gg += dm[i] * dm[i];
         }
     }
-    let sigma = truth
-        .noise_counts_per_sample
-        .iter()
-        .fold(0.0f64, |a, &s| a.max((s * s + 1.0 / 12.0).sqrt()));
+    let sigma = truth.noise_counts_per_sample.iter().fold(0.0f64, |a, &s| a.max((s * s + 1.0 / 12.0).sqrt()));
     (-rg / gg, sigma / gg.sqrt())
 }
 
@@ -116,7 +113,7 @@ fn standard_capture_decodes_cleanly_with_the_configured_structure() {
         assert_eq!(last.queue_drops, 0);
         assert!(last.samples_read > 0);
     }
-    // 180 °/s for ~8.5 s after the ramp: 4 plate passages per run, 2 edges each, ±1 passage.
+    // 135° of ramp then 8.5 s at 180 °/s: 4.6 turns, so 4 or 5 plate passages of 2 edges.
     for run in &cap.runs {
         assert!((8..=10).contains(&run.index.len()), "{}", run.index.len());
     }
@@ -165,14 +162,7 @@ fn sample_rate_encoder_rate_and_index_period_match_the_configuration() {
 fn index_centres_are_at_theta2_equal_to_the_index_offset_both_ways() {
     // Noise-free so the phase fit is limited only by quantisation.
     for (offset_deg, rate_dps) in [(0.0, 180.0), (3.0, 180.0), (3.0, -180.0), (-2.0, 90.0)] {
-        let mut cfg = SimConfig::with_runs(
-            3,
-            vec![RunSpec {
-                pose: Pose::Two,
-                rate_dps,
-                duration_s: 8.0,
-            }],
-        );
+        let mut cfg = SimConfig::with_runs(3, vec![RunSpec { pose: Pose::Two, rate_dps, duration_s: 8.0 }]);
         cfg.noise_dps_per_sqrt_hz = 0.0;
         if offset_deg != 0.0 {
             cfg.effects.enable(&format!("index_offset_deg={offset_deg}")).unwrap();
@@ -259,21 +249,9 @@ fn simulate_to_streams_exactly_the_in_memory_bytes() {
 #[test]
 fn several_speeds_and_both_directions_decode_with_their_rates() {
     let runs = vec![
-        RunSpec {
-            pose: Pose::One,
-            rate_dps: 90.0,
-            duration_s: 6.0,
-        },
-        RunSpec {
-            pose: Pose::One,
-            rate_dps: -180.0,
-            duration_s: 6.0,
-        },
-        RunSpec {
-            pose: Pose::Two,
-            rate_dps: 270.0,
-            duration_s: 6.0,
-        },
+        RunSpec { pose: Pose::One, rate_dps: 90.0, duration_s: 6.0 },
+        RunSpec { pose: Pose::One, rate_dps: -180.0, duration_s: 6.0 },
+        RunSpec { pose: Pose::Two, rate_dps: 270.0, duration_s: 6.0 },
     ];
     let cfg = SimConfig::with_runs(21, runs.clone());
     let out = simulate(&cfg);
@@ -310,11 +288,7 @@ fn timestamp_and_encoder_wrap_mid_run_decode_monotonic() {
     let cap = decode_clean(&out.bytes);
     let mut raw_wrapped = false;
     StreamDecoder::new().feed::<RigMsg>(&out.bytes, |ev| {
-        if let protocol::Event::Frame {
-            msg: RigMsg::Sample(s),
-            ..
-        } = ev
-        {
+        if let protocol::Event::Frame { msg: RigMsg::Sample(s), .. } = ev {
             raw_wrapped |= s.t_us < 1_000_000;
         }
     });
@@ -326,26 +300,20 @@ fn timestamp_and_encoder_wrap_mid_run_decode_monotonic() {
             assert!(w[1].encoder >= w[0].encoder);
         }
     }
-    assert_eq!(cap.runs[0].samples.len(), decode_clean(&simulate(&SimConfig::standard(4, 3.0)).bytes).runs[0].samples.len());
+    assert_eq!(
+        cap.runs[0].samples.len(),
+        decode_clean(&simulate(&SimConfig::standard(4, 3.0)).bytes).runs[0].samples.len()
+    );
 }
 
 #[test]
 fn clipping_comes_from_the_range_not_from_the_rate() {
     let clipped = |fs: FullScale, rate_dps: f64| {
-        let mut cfg = SimConfig::with_runs(
-            8,
-            vec![RunSpec {
-                pose: Pose::One,
-                rate_dps,
-                duration_s: 5.0,
-            }],
-        );
+        let mut cfg = SimConfig::with_runs(8, vec![RunSpec { pose: Pose::One, rate_dps, duration_s: 5.0 }]);
         cfg.gyro.full_scale = fs;
         let cap = decode_clean(&simulate(&cfg).bytes);
         let s = &cap.runs[0].samples;
-        s.iter()
-            .filter(|s| s.rate_counts.iter().any(|&c| c == i16::MAX || c == i16::MIN))
-            .count()
+        s.iter().filter(|s| s.rate_counts.iter().any(|&c| c == i16::MAX || c == i16::MIN)).count()
     };
     // ±250 °/s reads up to 32 767 × 8.75 m°/s = 286.7 °/s: pose 1 at 240 °/s peaks at 335 °/s.
     assert!(clipped(FullScale::Dps250, 240.0) > 100);
@@ -511,19 +479,25 @@ fn offset_drift_follows_the_warm_up_in_samples_and_temperature() {
     for (rb, re) in cb.runs.iter().zip(&ce.runs) {
         for (sb, se) in rb.samples.iter().zip(&re.samples).step_by(97) {
             let t_s = t_first_s + (se.t_us - t_first_us) as f64 * 1e-6;
-            for i in 0..3 {
-                let want = k[i] * d.dps_per_c[i] * rise(t_s);
+            for (i, (k_i, c_i)) in k.into_iter().zip(d.dps_per_c).enumerate() {
+                let want = k_i * c_i * rise(t_s);
                 let got = f64::from(se.rate_counts[i]) - f64::from(sb.rate_counts[i]);
                 assert!((got - want).abs() <= 1.1, "t {t_s}, axis {i}: {got} vs {want}");
             }
         }
     }
     // Temperature register: −1 LSB/°C, so it falls by the rise (to the 1 LSB rounding).
-    let (tb, te) = (temps(&cb), temps(&ce));
-    assert!(tb.windows(2).all(|w| w[0] == w[1]), "constant without the effect");
-    let fall = i32::from(tb[0]) - i32::from(*te.last().unwrap());
-    let expected = rise(cfg.gap_s * 2.0 + 120.0);
-    assert!((f64::from(fall) - expected).abs() <= 1.0, "{fall} vs {expected}");
+    assert!(temps(&cb).windows(2).all(|w| w[0] == w[1]), "constant without the effect");
+    let t0_raw = temps(&cb)[0];
+    for run in &ce.runs {
+        for t in &run.temperatures {
+            let t_s = t_first_s + (t.t_us - t_first_us) as f64 * 1e-6;
+            let fall = f64::from(t0_raw) - f64::from(t.raw);
+            assert!((fall - rise(t_s)).abs() <= 1.0, "t {t_s}: {fall} vs {}", rise(t_s));
+        }
+    }
+    let last = ce.runs[1].temperatures.last().unwrap().raw;
+    assert!(i32::from(t0_raw) - i32::from(last) >= 6, "the test must span most of the warm-up");
 }
 
 #[test]

@@ -104,7 +104,13 @@ impl Truth {
 
     /// The noise-free, effect-free output, counts: M R_qᵀ ω2(θ1', θ2, θ2') + v_off (EXCITER.md
     /// eq. 1-2, 6). `theta2_rad` is the true θ2: the index-derived θ2 plus `index_offset_deg`.
-    pub fn model_counts(&self, pose: Pose, theta1_rate_dps: f64, theta2_rad: f64, theta2_rate_dps: f64) -> Vector3<f64> {
+    pub fn model_counts(
+        &self,
+        pose: Pose,
+        theta1_rate_dps: f64,
+        theta2_rad: f64,
+        theta2_rate_dps: f64,
+    ) -> Vector3<f64> {
         self.m() * crate::geometry::omega_package(pose, theta1_rate_dps, theta2_rad, theta2_rate_dps) + self.offset()
     }
 
