@@ -79,8 +79,8 @@ enum Cmd {
         #[arg(long)]
         cal: PathBuf,
         /// One raw reading, x,y,z counts.
-        #[arg(long, value_delimiter = ',', num_args = 3, allow_negative_numbers = true, conflicts_with = "capture", required_unless_present = "capture")]
-        counts: Option<Vec<i16>>,
+        #[arg(long, value_parser = parse_counts, allow_hyphen_values = true, conflicts_with = "capture", required_unless_present = "capture")]
+        counts: Option<[i16; 3]>,
         /// A capture: prints t_s,pose,x_dps,y_dps,z_dps for every sample as CSV.
         #[arg(long)]
         capture: Option<PathBuf>,
@@ -131,6 +131,14 @@ fn parse_pose(s: &str) -> Result<Pose, String> {
         "2" => Ok(Pose::Two),
         _ => Err(format!("pose must be 1 or 2, not {s:?}")),
     }
+}
+
+fn parse_counts(s: &str) -> Result<[i16; 3], String> {
+    let v: Vec<i16> = s
+        .split(',')
+        .map(|x| x.trim().parse::<i16>().map_err(|_| format!("{x:?} is not a count in -32768..=32767")))
+        .collect::<Result<_, _>>()?;
+    v.try_into().map_err(|v: Vec<i16>| format!("expected 3 counts x,y,z, got {}", v.len()))
 }
 
 fn parse_full_scale(s: &str) -> Result<u16, String> {
@@ -288,10 +296,10 @@ fn load_calibration(path: &Path) -> Result<calib::Calibration> {
     calib::Calibration::from_json(&text).with_context(|| format!("{} is not a calibration", path.display()))
 }
 
-fn apply(cal_path: &Path, counts: Option<Vec<i16>>, capture_path: Option<&Path>) -> Result<ExitCode> {
+fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>) -> Result<ExitCode> {
     let cal = load_calibration(cal_path)?;
     if let Some(c) = counts {
-        let w = cal.apply([c[0], c[1], c[2]]);
+        let w = cal.apply(c);
         println!("{:.4},{:.4},{:.4}", w[0], w[1], w[2]);
         return Ok(ExitCode::SUCCESS);
     }
