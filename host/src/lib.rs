@@ -4,5 +4,6 @@ pub mod capture;
 pub mod geometry;
 pub mod inspect;
 pub mod link;
+pub mod report;
 pub mod session;
 pub mod sim;
