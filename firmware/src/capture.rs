@@ -73,10 +73,7 @@ impl Captures {
         tim2.cr1().write(|w| w.cen().set_bit());
 
         // TIM5: 1 MHz free-running, the same captures for time.
-        tim5.psc().write(|w| {
-            w.psc()
-                .set((timclk1_hz / protocol::TIMESTAMP_HZ - 1) as u16)
-        });
+        tim5.psc().write(|w| w.psc().set((timclk1_hz / protocol::TIMESTAMP_HZ - 1) as u16));
         tim5.arr().write(|w| w.arr().set(u32::MAX));
         tim5.egr().write(|w| w.ug().set_bit()); // load the prescaler now
         tim5.sr().write(|w| w.uif().clear_bit());
@@ -108,15 +105,9 @@ impl Captures {
         }
         let overcaptured = sr.cc4of().bit_is_set();
         if overcaptured {
-            self.tim5
-                .sr()
-                .write(|w| unsafe { w.bits(!0) }.cc4of().clear_bit());
+            self.tim5.sr().write(|w| unsafe { w.bits(!0) }.cc4of().clear_bit());
         }
-        Some(Capture {
-            t_us: self.tim5.ccr4().read().bits(),
-            encoder: self.tim2.ccr4().read().bits(),
-            overcaptured,
-        })
+        Some(Capture { t_us: self.tim5.ccr4().read().bits(), encoder: self.tim2.ccr4().read().bits(), overcaptured })
     }
 
     /// A pending index capture (reading CCR3 clears CC3IF).
@@ -127,14 +118,8 @@ impl Captures {
         }
         let overcaptured = sr.cc3of().bit_is_set();
         if overcaptured {
-            self.tim5
-                .sr()
-                .write(|w| unsafe { w.bits(!0) }.cc3of().clear_bit());
+            self.tim5.sr().write(|w| unsafe { w.bits(!0) }.cc3of().clear_bit());
         }
-        Some(Capture {
-            t_us: self.tim5.ccr3().read().bits(),
-            encoder: self.tim2.ccr3().read().bits(),
-            overcaptured,
-        })
+        Some(Capture { t_us: self.tim5.ccr3().read().bits(), encoder: self.tim2.ccr3().read().bits(), overcaptured })
     }
 }

@@ -11,8 +11,7 @@ use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, StartRun, ENCODER_CO
 /// 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
 pub fn rate_cps(rate_mdps: u32) -> u32 {
     const MDEG_PER_REV: u64 = 360_000;
-    ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV)
-        as u32
+    ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV) as u32
 }
 
 /// Signed setpoint for a start request, or why it is refused.
@@ -62,10 +61,7 @@ impl Rig {
             }
             Command::Heartbeat => CmdResult::Ok,
         };
-        self.link.send(&RigMsg::Ack(Ack {
-            cmd_seq: rx.seq,
-            result,
-        }));
+        self.link.send(&RigMsg::Ack(Ack { cmd_seq: rx.seq, result }));
     }
 
     fn start(&mut self, t_us: u32, start: &StartRun) -> CmdResult {
@@ -109,23 +105,10 @@ mod tests {
 
     #[test]
     fn start_validation() {
-        let run = |rate_mdps, direction| StartRun {
-            rate_mdps,
-            direction,
-            run_tag: 1,
-        };
+        let run = |rate_mdps, direction| StartRun { rate_mdps, direction, run_tag: 1 };
         assert_eq!(setpoint_cps(&run(180_000, Direction::Cw)), Ok(-162_000));
-        assert_eq!(
-            setpoint_cps(&run(MAX_RATE_MDPS, Direction::Ccw)),
-            Ok(324_000)
-        );
-        assert_eq!(
-            setpoint_cps(&run(0, Direction::Ccw)),
-            Err(CmdResult::InvalidArgument)
-        );
-        assert_eq!(
-            setpoint_cps(&run(MAX_RATE_MDPS + 1, Direction::Ccw)),
-            Err(CmdResult::InvalidArgument)
-        );
+        assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS, Direction::Ccw)), Ok(324_000));
+        assert_eq!(setpoint_cps(&run(0, Direction::Ccw)), Err(CmdResult::InvalidArgument));
+        assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS + 1, Direction::Ccw)), Err(CmdResult::InvalidArgument));
     }
 }

@@ -19,39 +19,21 @@ pub struct IndexTracker {
 impl IndexTracker {
     /// Nothing seen yet.
     pub const fn new() -> Self {
-        Self {
-            last: None,
-            edges: 0,
-            missed: 0,
-        }
+        Self { last: None, edges: 0, missed: 0 }
     }
 
     /// One capture: timestamp and encoder count latched by the timers, and the input level
     /// (true = beam blocked) after the edge. `overcaptured` is the timer's CCxOF flag: another
     /// edge was captured over this one before it was read.
-    pub fn capture(
-        &mut self,
-        t_us: u32,
-        encoder: u32,
-        level_after: bool,
-        overcaptured: bool,
-    ) -> IndexEdge {
-        let edge = if level_after {
-            Edge::Rising
-        } else {
-            Edge::Falling
-        };
+    pub fn capture(&mut self, t_us: u32, encoder: u32, level_after: bool, overcaptured: bool) -> IndexEdge {
+        let edge = if level_after { Edge::Rising } else { Edge::Falling };
         // Edges alternate; two alike in a row mean one was lost in between.
         if self.last == Some(edge) || overcaptured {
             self.missed += 1;
         }
         self.last = Some(edge);
         self.edges += 1;
-        IndexEdge {
-            t_us,
-            encoder,
-            edge,
-        }
+        IndexEdge { t_us, encoder, edge }
     }
 
     /// Edges captured.
@@ -73,14 +55,7 @@ mod tests {
     fn captures_pass_through_and_polarity_follows_the_level() {
         let mut ix = IndexTracker::new();
         let e = ix.capture(u32::MAX, 7, true, false);
-        assert_eq!(
-            e,
-            IndexEdge {
-                t_us: u32::MAX,
-                encoder: 7,
-                edge: Edge::Rising
-            }
-        );
+        assert_eq!(e, IndexEdge { t_us: u32::MAX, encoder: 7, edge: Edge::Rising });
         assert_eq!(ix.capture(55_000, 9_007, false, false).edge, Edge::Falling);
         assert_eq!((ix.edges(), ix.missed()), (2, 0));
     }

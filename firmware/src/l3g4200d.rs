@@ -148,11 +148,7 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
             Operation::Read(&mut buf),
         ])?;
         let axis = |i: usize| i16::from_le_bytes([buf[2 + 2 * i], buf[3 + 2 * i]]);
-        Ok(Measurement {
-            temp_raw: buf[0] as i8,
-            status: buf[1],
-            rate_counts: [axis(0), axis(1), axis(2)],
-        })
+        Ok(Measurement { temp_raw: buf[0] as i8, status: buf[1], rate_counts: [axis(0), axis(1), axis(2)] })
     }
 
     /// Reads OUT_TEMP alone.
@@ -168,10 +164,7 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
     /// Reads one register.
     pub fn read_register(&mut self, address: u8) -> Result<u8, SPI::Error> {
         let mut value = [0u8];
-        self.spi.transaction(&mut [
-            Operation::Write(&[READ | address]),
-            Operation::Read(&mut value),
-        ])?;
+        self.spi.transaction(&mut [Operation::Write(&[READ | address]), Operation::Read(&mut value)])?;
         Ok(value[0])
     }
 
@@ -193,12 +186,7 @@ mod tests {
     use protocol::{Bandwidth, FullScale, Odr};
 
     fn read_reg(addr: u8, value: u8) -> [T<u8>; 4] {
-        [
-            T::transaction_start(),
-            T::write(0x80 | addr),
-            T::read(value),
-            T::transaction_end(),
-        ]
+        [T::transaction_start(), T::write(0x80 | addr), T::read(value), T::transaction_end()]
     }
 
     #[test]
@@ -218,18 +206,10 @@ mod tests {
 
     #[test]
     fn other_configs_encode_their_fields() {
-        let cfg = GyroConfig {
-            full_scale: FullScale::Dps2000,
-            odr: Odr::Hz100,
-            bandwidth: Bandwidth::Bw1,
-        };
+        let cfg = GyroConfig { full_scale: FullScale::Dps2000, odr: Odr::Hz100, bandwidth: Bandwidth::Bw1 };
         // DR=00 BW=01 PD XYZ = 0x1F; BDU | FS=10 = 0xA0.
         assert_eq!(control_registers(cfg), [0x1F, 0x00, 0x08, 0xA0, 0x00]);
-        let cfg = GyroConfig {
-            full_scale: FullScale::Dps250,
-            odr: Odr::Hz200,
-            bandwidth: Bandwidth::Bw2,
-        };
+        let cfg = GyroConfig { full_scale: FullScale::Dps250, odr: Odr::Hz200, bandwidth: Bandwidth::Bw2 };
         assert_eq!(control_registers(cfg), [0x6F, 0x00, 0x08, 0x80, 0x00]);
     }
 
@@ -237,10 +217,7 @@ mod tests {
     fn wrong_identity_is_reported_and_nothing_is_written() {
         let mut spi = Mock::new(&read_reg(0x0F, 0xD4));
         let mut gyro = L3g4200d::new(spi.clone());
-        assert_eq!(
-            gyro.init(GyroConfig::DEFAULT),
-            Err(Error::WrongDevice(0xD4))
-        );
+        assert_eq!(gyro.init(GyroConfig::DEFAULT), Err(Error::WrongDevice(0xD4)));
         spi.done();
     }
 

@@ -26,11 +26,7 @@ pub mod virtual_rig;
 use protocol::{GearRatio, Version};
 
 /// This firmware's version, as reported in [`protocol::Hello`]; must match `Cargo.toml`.
-pub const FIRMWARE_VERSION: Version = Version {
-    major: 0,
-    minor: 1,
-    patch: 0,
-};
+pub const FIRMWARE_VERSION: Version = Version { major: 0, minor: 1, patch: 0 };
 
 /// Sensor-table turns per base-table turn: the magnetic gears are 1:1 (EXCITER.md, "Mechanism").
 pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
@@ -47,9 +43,6 @@ mod tests {
     #[test]
     fn firmware_version_matches_the_package() {
         let v = super::FIRMWARE_VERSION;
-        assert_eq!(
-            format!("{}.{}.{}", v.major, v.minor, v.patch),
-            env!("CARGO_PKG_VERSION")
-        );
+        assert_eq!(format!("{}.{}.{}", v.major, v.minor, v.patch), env!("CARGO_PKG_VERSION"));
     }
 }

@@ -33,12 +33,7 @@ impl Default for Link {
 impl Link {
     /// A link with nothing sent or received.
     pub const fn new() -> Self {
-        Self {
-            tx: TxQueue::new(),
-            next_seq: 0,
-            decoder: StreamDecoder::new(),
-            rx_errors: 0,
-        }
+        Self { tx: TxQueue::new(), next_seq: 0, decoder: StreamDecoder::new(), rx_errors: 0 }
     }
 
     /// Frames `msg` and queues it; a full queue drops it (counted in the queue).
@@ -106,10 +101,7 @@ mod tests {
     #[test]
     fn frames_are_numbered_and_dropped_frames_leave_a_gap() {
         let mut link = Link::new();
-        let ack = RigMsg::Ack(Ack {
-            cmd_seq: 7,
-            result: CmdResult::Ok,
-        });
+        let ack = RigMsg::Ack(Ack { cmd_seq: 7, result: CmdResult::Ok });
         let mut offered = 0u16;
         while link.queue_drops() == 0 {
             link.send(&ack);
@@ -117,10 +109,7 @@ mod tests {
         }
         let first = drain(&mut link);
         assert_eq!(first.len(), usize::from(offered) - 1);
-        assert!(first
-            .iter()
-            .enumerate()
-            .all(|(i, (seq, m))| *seq == i as u16 && *m == ack));
+        assert!(first.iter().enumerate().all(|(i, (seq, m))| *seq == i as u16 && *m == ack));
         link.send(&ack);
         // The dropped frame's number is skipped: the host counts it as missing.
         assert_eq!(drain(&mut link), vec![(offered, ack)]);
@@ -136,13 +125,7 @@ mod tests {
         bytes.extend_from_slice(&buf[..n]);
         let mut got = Vec::new();
         link.receive(&bytes, |r| got.push(r));
-        assert_eq!(
-            got,
-            vec![Received {
-                seq: 42,
-                command: Command::Heartbeat
-            }]
-        );
+        assert_eq!(got, vec![Received { seq: 42, command: Command::Heartbeat }]);
         assert_eq!(link.rx_errors(), 1);
     }
 }

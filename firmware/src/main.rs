@@ -9,14 +9,19 @@
 //! | 1        | OTG_FS            | USB CDC-ACM: host bytes in, queued frames out             |
 //!
 //! Sampling preempts everything, so a slow host or a long USB transfer never delays a read.
+//!
+//! With the `qemu` feature the image is instead [`qemu`]'s app: the same core against the
+//! simulated plant, for QEMU's `netduinoplus2`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
 mod board;
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
 mod capture;
+#[cfg(all(target_os = "none", feature = "qemu"))]
+mod qemu;
 
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
 use stm32f4xx_hal::pac;
 
 #[cfg(target_os = "none")]
@@ -27,7 +32,7 @@ use {defmt_rtt as _, panic_probe as _};
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
     use crate::board::{self, Motor, GYRO_SPI_HZ};
@@ -88,9 +93,7 @@ mod app {
         dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
 
         // 8 MHz HSE crystal → 168 MHz core, 48 MHz for USB; APB1 timers 84 MHz, APB2 168 MHz.
-        let mut rcc = dp
-            .RCC
-            .freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
+        let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
         let timclk1 = rcc.clocks.timclk1().raw();
 
         let gpioa = dp.GPIOA.split(&mut rcc);
@@ -144,25 +147,17 @@ mod app {
 
         // Control loop tick: TIM3 update at LOOP_HZ.
         let tim3 = dp.TIM3;
-        tim3.psc()
-            .write(|w| w.psc().set((timclk1 / 1_000_000 - 1) as u16));
-        tim3.arr()
-            .write(|w| w.arr().set((1_000_000 / LOOP_HZ - 1) as u16));
+        tim3.psc().write(|w| w.psc().set((timclk1 / 1_000_000 - 1) as u16));
+        tim3.arr().write(|w| w.arr().set((1_000_000 / LOOP_HZ - 1) as u16));
         tim3.egr().write(|w| w.ug().set_bit());
         tim3.sr().write(|w| w.uif().clear_bit());
         tim3.dier().write(|w| w.uie().set_bit());
         tim3.cr1().write(|w| w.cen().set_bit());
 
         // USB CDC-ACM.
-        let usb = USB::new(
-            (dp.OTG_FS_GLOBAL, dp.OTG_FS_DEVICE, dp.OTG_FS_PWRCLK),
-            (gpioa.pa11, gpioa.pa12),
-            &rcc.clocks,
-        );
-        let usb_bus: &'static _ = cx
-            .local
-            .usb_bus
-            .insert(UsbBus::new(usb, cx.local.ep_memory));
+        let usb =
+            USB::new((dp.OTG_FS_GLOBAL, dp.OTG_FS_DEVICE, dp.OTG_FS_PWRCLK), (gpioa.pa11, gpioa.pa12), &rcc.clocks);
+        let usb_bus: &'static _ = cx.local.usb_bus.insert(UsbBus::new(usb, cx.local.ep_memory));
         let serial = SerialPort::new(usb_bus);
         let usb_dev = UsbDeviceBuilder::new(usb_bus, UsbVidPid(0x16c0, 0x27dd))
             .device_class(usbd_serial::USB_CLASS_CDC)
@@ -180,19 +175,7 @@ mod app {
         watchdog.start(WATCHDOG_MS.millis());
         defmt::info!("rig up; watchdog reset: {}", watchdog_reset);
 
-        (
-            Shared { rig, gyro },
-            Local {
-                captures,
-                counters,
-                clock: counters,
-                tim3,
-                motor,
-                watchdog,
-                usb_dev,
-                serial,
-            },
-        )
+        (Shared { rig, gyro }, Local { captures, counters, clock: counters, tim3, motor, watchdog, usb_dev, serial })
     }
 
     #[idle]
@@ -205,9 +188,7 @@ mod app {
     /// Data-ready and index edges, captured by TIM2/TIM5.
     #[task(binds = TIM5, priority = 3, shared = [rig, gyro], local = [captures])]
     fn edges(cx: edges::Context) {
-        let edges::SharedResources {
-            mut rig, mut gyro, ..
-        } = cx.shared;
+        let edges::SharedResources { mut rig, mut gyro, .. } = cx.shared;
         let captures = cx.local.captures;
         if let Some(c) = captures.data_ready() {
             let read = gyro.lock(|g| g.read());
@@ -236,18 +217,8 @@ mod app {
     #[task(binds = OTG_FS, priority = 1, shared = [rig, gyro],
            local = [usb_dev, serial, clock, pending: [u8; 64] = [0; 64], sent: usize = 0, len: usize = 0])]
     fn usb(cx: usb::Context) {
-        let usb::SharedResources {
-            mut rig, mut gyro, ..
-        } = cx.shared;
-        let usb::LocalResources {
-            usb_dev,
-            serial,
-            clock,
-            pending,
-            sent,
-            len,
-            ..
-        } = cx.local;
+        let usb::SharedResources { mut rig, mut gyro, .. } = cx.shared;
+        let usb::LocalResources { usb_dev, serial, clock, pending, sent, len, .. } = cx.local;
         if usb_dev.poll(&mut [serial]) {
             let mut rx = [0u8; 64];
             if let Ok(n) = serial.read(&mut rx) {

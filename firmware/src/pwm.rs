@@ -22,11 +22,7 @@ pub struct MotorCommand {
 
 impl MotorCommand {
     /// Bridge disabled.
-    pub const OFF: MotorCommand = MotorCommand {
-        enable: false,
-        reverse: false,
-        compare: 0,
-    };
+    pub const OFF: MotorCommand = MotorCommand { enable: false, reverse: false, compare: 0 };
 
     /// Applied duty as a signed fraction of the supply (0 when disabled).
     pub fn duty(&self) -> f32 {
@@ -51,9 +47,7 @@ pub struct PwmModulator {
 impl PwmModulator {
     /// At rest.
     pub const fn new() -> Self {
-        Self {
-            residual_ticks: 0.0,
-        }
+        Self { residual_ticks: 0.0 }
     }
 
     /// Forget the carried error (bridge off).
@@ -67,11 +61,7 @@ impl PwmModulator {
         let period = f32::from(PWM_PERIOD_TICKS);
         let ticks = crate::limit(libm::floorf(wanted + 0.5), period);
         self.residual_ticks = crate::limit(wanted - ticks, 1.0);
-        MotorCommand {
-            enable: true,
-            reverse: ticks < 0.0,
-            compare: ticks.abs() as u16,
-        }
+        MotorCommand { enable: true, reverse: ticks < 0.0, compare: ticks.abs() as u16 }
     }
 }
 
@@ -88,10 +78,7 @@ mod tests {
         for n in 1..=1000u64 {
             total += u64::from(m.drive(duty).compare);
             // Plain rounding would drift by 0.42 tick per period: 420 ticks after 1000.
-            assert!(
-                (total as f64 - wanted * n as f64).abs() <= 1.0,
-                "period {n}"
-            );
+            assert!((total as f64 - wanted * n as f64).abs() <= 1.0, "period {n}");
         }
     }
 

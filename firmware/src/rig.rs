@@ -11,9 +11,8 @@ use crate::supervisor::Supervisor;
 use crate::{FIRMWARE_VERSION, GEAR_RATIO};
 use embedded_hal::spi::SpiDevice;
 use protocol::{
-    motor_faults, sample_status, Counters, Fault, FaultReport, GyroConfig, Hello, MotorStatus,
-    RigMsg, RunStopped, Sample, Temperature, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION,
-    TIMESTAMP_HZ,
+    motor_faults, sample_status, Counters, Fault, FaultReport, GyroConfig, Hello, MotorStatus, RigMsg, RunStopped,
+    Sample, Temperature, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION, TIMESTAMP_HZ,
 };
 
 /// No host frame for this long during a run stops the motor (protocol: [`protocol::Command::Heartbeat`]).
@@ -172,8 +171,7 @@ impl Rig {
                 if self.stopped_periods >= STOPPED_PERIODS {
                     self.motor_off();
                     self.run = Run::Idle;
-                    self.link
-                        .send(&RigMsg::RunStopped(RunStopped { t_us, run_tag: tag }));
+                    self.link.send(&RigMsg::RunStopped(RunStopped { t_us, run_tag: tag }));
                     MotorCommand::OFF
                 } else {
                     cmd
@@ -213,16 +211,8 @@ impl Rig {
                 if !m.fresh() {
                     status |= sample_status::STALE;
                 }
-                self.temperature = Some(Temperature {
-                    t_us,
-                    raw: m.temp_raw,
-                });
-                self.link.send(&RigMsg::Sample(Sample {
-                    t_us,
-                    encoder,
-                    rate_counts: m.rate_counts,
-                    status,
-                }));
+                self.temperature = Some(Temperature { t_us, raw: m.temp_raw });
+                self.link.send(&RigMsg::Sample(Sample { t_us, encoder, rate_counts: m.rate_counts, status }));
                 m.fresh()
             }
             Err(_) => {
@@ -230,11 +220,7 @@ impl Rig {
                 false
             }
         };
-        self.bad_reads = if fresh {
-            0
-        } else {
-            self.bad_reads.saturating_add(1)
-        };
+        self.bad_reads = if fresh { 0 } else { self.bad_reads.saturating_add(1) };
         if self.bad_reads >= GYRO_BAD_READS && self.gyro_fault.is_none() {
             self.gyro_failed(t_us, Fault::GyroSpi);
         }
@@ -253,8 +239,7 @@ impl Rig {
         // same link that decodes.
         for byte in bytes {
             let mut received = None;
-            self.link
-                .receive(core::slice::from_ref(byte), |r| received = Some(r));
+            self.link.receive(core::slice::from_ref(byte), |r| received = Some(r));
             if let Some(r) = received {
                 self.last_host_us = t_us;
                 self.execute(t_us, r, gyro);
@@ -358,8 +343,7 @@ impl Rig {
         };
         self.report(t_us, fault);
         if let Some(run_tag) = self.run.tag() {
-            self.link
-                .send(&RigMsg::RunStopped(RunStopped { t_us, run_tag }));
+            self.link.send(&RigMsg::RunStopped(RunStopped { t_us, run_tag }));
         }
         self.run = Run::Idle;
     }

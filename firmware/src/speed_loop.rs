@@ -29,13 +29,11 @@ pub mod design {
     /// and counterweight, kg·m².
     pub const J_TABLE_KGM2: f32 = 0.012 + 33.5e-7 * GEAR_RATIO * GEAR_RATIO;
     /// Encoder counts per radian of the base table.
-    pub const COUNTS_PER_RAD: f32 =
-        protocol::ENCODER_COUNTS_PER_REV as f32 / (2.0 * core::f32::consts::PI);
+    pub const COUNTS_PER_RAD: f32 = protocol::ENCODER_COUNTS_PER_REV as f32 / (2.0 * core::f32::consts::PI);
     /// Steady-state speed per unit duty, counts/s: `VBUS / (KE · N)` rad/s at the table.
     pub const K_CPS_PER_DUTY: f32 = VBUS_V / (KE_VS_PER_RAD * GEAR_RATIO) * COUNTS_PER_RAD;
     /// Mechanical time constant with the table load, s: `R · J / (KE · N)²` ≈ 5.6 ms.
-    pub const TAU_S: f32 =
-        R_OHM * J_TABLE_KGM2 / (KE_VS_PER_RAD * GEAR_RATIO * KE_VS_PER_RAD * GEAR_RATIO);
+    pub const TAU_S: f32 = R_OHM * J_TABLE_KGM2 / (KE_VS_PER_RAD * GEAR_RATIO * KE_VS_PER_RAD * GEAR_RATIO);
     /// Loop crossover, rad/s: 15 Hz. In the simulated plant 25 and 35 Hz gave more ripple (the
     /// 1-count encoder flicker amplified) and no better rejection of the 6 Hz gear cogging.
     pub const CROSSOVER_RAD_S: f32 = 2.0 * core::f32::consts::PI * 15.0;
@@ -63,13 +61,7 @@ impl Gains {
     pub const RE30_GP32: Gains = {
         use design::*;
         let kp = CROSSOVER_RAD_S * TAU_S / K_CPS_PER_DUTY;
-        Gains {
-            kff: 1.0 / K_CPS_PER_DUTY,
-            kp,
-            ki: kp / TAU_S,
-            duty_limit: 0.95,
-            ramp_cps_per_s: 81_000.0,
-        }
+        Gains { kff: 1.0 / K_CPS_PER_DUTY, kp, ki: kp / TAU_S, duty_limit: 0.95, ramp_cps_per_s: 81_000.0 }
     };
 }
 
@@ -86,13 +78,7 @@ pub struct SpeedLoop {
 impl SpeedLoop {
     /// A loop at rest.
     pub const fn new(gains: Gains) -> Self {
-        Self {
-            gains,
-            target_cps: 0.0,
-            setpoint_cps: 0.0,
-            integral_counts: 0.0,
-            duty: 0.0,
-        }
+        Self { gains, target_cps: 0.0, setpoint_cps: 0.0, integral_counts: 0.0, duty: 0.0 }
     }
 
     /// Where the ramp is heading, counts/s (signed).
@@ -223,10 +209,6 @@ mod tests {
         let ff = -162_000.0 / design::K_CPS_PER_DUTY;
         // Residue: one count of quantisation through kp (1000 cps) and ki (1 count).
         let tolerance = Gains::RE30_GP32.kp * 1_000.0 + Gains::RE30_GP32.ki * 2.0;
-        assert!(
-            (l.duty() - ff).abs() < tolerance,
-            "duty {} vs {ff}",
-            l.duty()
-        );
+        assert!((l.duty() - ff).abs() < tolerance, "duty {} vs {ff}", l.duty());
     }
 }

@@ -29,11 +29,7 @@ impl<const N: usize> Default for TxQueue<N> {
 impl<const N: usize> TxQueue<N> {
     /// An empty queue.
     pub const fn new() -> Self {
-        Self {
-            bytes: Deque::new(),
-            frames_queued: 0,
-            frames_dropped: 0,
-        }
+        Self { bytes: Deque::new(), frames_queued: 0, frames_dropped: 0 }
     }
 
     /// Appends one encoded frame, or drops it whole (and counts it) if it does not fit.

@@ -104,11 +104,7 @@ impl VirtualRig {
 
     /// The prototype plant, a healthy gyro, TIM5 starting 3 s before its wrap.
     pub fn prototype() -> Self {
-        Self::new(
-            Plant::prototype(),
-            L3g4200dModel::new(),
-            u32::MAX - 3_000_000,
-        )
+        Self::new(Plant::prototype(), L3g4200dModel::new(), u32::MAX - 3_000_000)
     }
 
     /// Simulated time, ns.
@@ -122,20 +118,11 @@ impl VirtualRig {
     }
 
     /// Runs until `end_ns`, calling `probe` after every control tick.
-    pub fn run_until(
-        &mut self,
-        end_ns: u64,
-        host: &mut impl HostLink,
-        mut probe: impl FnMut(&Probe),
-    ) {
+    pub fn run_until(&mut self, end_ns: u64, host: &mut impl HostLink, mut probe: impl FnMut(&Probe)) {
         while self.now_ns < end_ns {
             let now_s = self.now_ns as f64 * 1e-9;
-            let next_sample_ns = self
-                .gyro
-                .spi_mut()
-                .next_sample_s(now_s)
-                .map(|t| libm::round(t * 1e9) as u64)
-                .unwrap_or(u64::MAX);
+            let next_sample_ns =
+                self.gyro.spi_mut().next_sample_s(now_s).map(|t| libm::round(t * 1e9) as u64).unwrap_or(u64::MAX);
             let next_event = self.next_tick_ns.min(next_sample_ns).min(end_ns);
             self.advance_to(next_event);
             if self.now_ns == next_sample_ns {
@@ -177,11 +164,7 @@ impl VirtualRig {
         let temp = self.plant.temp_raw;
         self.gyro.spi_mut().latch(rates, temp);
         #[cfg(any(test, feature = "sim"))]
-        self.truth.samples.push((
-            self.now_ns,
-            self.plant.encoder_count(),
-            self.gyro.spi_mut().outputs(),
-        ));
+        self.truth.samples.push((self.now_ns, self.plant.encoder_count(), self.gyro.spi_mut().outputs()));
         let drdy = self.gyro.spi_mut().drdy();
         let rising = drdy && !self.drdy;
         if rising {

@@ -14,11 +14,7 @@ const TAG: u8 = 0x21;
 
 fn running() -> Session {
     let mut s = Session::prototype();
-    s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: TAG,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: TAG }));
     s.run(4 * S);
     assert!(s.faults().is_empty());
     s
@@ -33,18 +29,10 @@ fn assert_tripped(s: &Session, fault: Fault, bit: u8, since_ns: u64, within_ns: 
         matches!(s.frames[fault_at + 1].2, RigMsg::RunStopped(r) if r.run_tag == TAG),
         "RunStopped right after the fault"
     );
-    let off_from = s
-        .probes
-        .iter()
-        .rposition(|p| p.motor.enable)
-        .map(|i| s.probes[i + 1].t_ns)
-        .unwrap();
+    let off_from = s.probes.iter().rposition(|p| p.motor.enable).map(|i| s.probes[i + 1].t_ns).unwrap();
     assert!(off_from >= since_ns, "off before the fault was injected");
     let reaction = off_from - since_ns;
-    println!(
-        "{fault:?}: motor off {:.1} ms after injection",
-        reaction as f64 * 1e-6
-    );
+    println!("{fault:?}: motor off {:.1} ms after injection", reaction as f64 * 1e-6);
     assert!(reaction <= within_ns, "motor off only after {reaction} ns");
     let last_status = s
         .msgs()
@@ -54,14 +42,7 @@ fn assert_tripped(s: &Session, fault: Fault, bit: u8, since_ns: u64, within_ns: 
         })
         .last()
         .unwrap();
-    assert_eq!(
-        (
-            last_status.faults,
-            last_status.run_tag,
-            last_status.duty_permille
-        ),
-        (bit, 0, 0)
-    );
+    assert_eq!((last_status.faults, last_status.run_tag, last_status.duty_permille), (bit, 0, 0));
 }
 
 #[test]
@@ -74,11 +55,7 @@ fn stalled_motor_trips_within_the_stall_window() {
     assert_tripped(&s, Fault::Stall, motor_faults::STALL, t, window + MS);
     // A new start clears the motor fault and runs again.
     s.vr.plant.motor.locked = false;
-    let again = s.command(Command::Start(StartRun {
-        rate_mdps: 90_000,
-        direction: Direction::Cw,
-        run_tag: 2,
-    }));
+    let again = s.command(Command::Start(StartRun { rate_mdps: 90_000, direction: Direction::Cw, run_tag: 2 }));
     s.run(3 * S);
     assert_eq!(s.ack_for(again), Some(CmdResult::Ok));
     assert!(s.probes.last().unwrap().speed_cps < -80_000.0);
@@ -90,11 +67,7 @@ fn swapped_encoder_wires_run_away_into_over_speed() {
     plant.encoder.reversed = true;
     let mut s = Session::new(VirtualRig::new(plant, L3g4200dModel::new(), 0));
     let t = s.vr.now_ns();
-    s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: TAG,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: TAG }));
     s.run(2 * S);
     assert_tripped(&s, Fault::OverSpeed, motor_faults::OVER_SPEED, t, 2 * S);
     let peak = s.probes.iter().map(|p| p.speed_cps).fold(0.0, f64::max);
@@ -111,21 +84,8 @@ fn silent_host_stops_the_motor_after_two_seconds() {
     let t = s.vr.now_ns();
     s.run(3 * S);
     // The last heartbeat was sent at most 500 ms before `t`.
-    assert_tripped(
-        &s,
-        Fault::HostLinkLost,
-        motor_faults::HOST_LINK_LOST,
-        t,
-        u64::from(HOST_LINK_TIMEOUT_US) * 1_000,
-    );
-    assert!(
-        s.probes
-            .iter()
-            .filter(|p| p.t_ns > t)
-            .filter(|p| p.motor.enable)
-            .count()
-            >= 1_500
-    );
+    assert_tripped(&s, Fault::HostLinkLost, motor_faults::HOST_LINK_LOST, t, u64::from(HOST_LINK_TIMEOUT_US) * 1_000);
+    assert!(s.probes.iter().filter(|p| p.t_ns > t).filter(|p| p.motor.enable).count() >= 1_500);
 }
 
 #[test]
@@ -137,30 +97,18 @@ fn miso_stuck_low_is_a_dead_bus() {
     // Eight stale reads at 809.6 Hz, then the next control tick: < 11 ms.
     let window = (u64::from(GYRO_BAD_READS) + 1) * 1_000_000_000 / 809 + MS;
     assert_tripped(&s, Fault::GyroSpi, motor_faults::INTERLOCK, t, window);
-    let stale = s
-        .msgs()
-        .filter(
-            |m| matches!(m, RigMsg::Sample(x) if x.status & protocol::sample_status::STALE != 0),
-        )
-        .count();
+    let stale =
+        s.msgs().filter(|m| matches!(m, RigMsg::Sample(x) if x.status & protocol::sample_status::STALE != 0)).count();
     assert!(stale >= usize::from(GYRO_BAD_READS));
     // Refused to start again until the gyro is reconfigured successfully.
-    let refused = s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: 3,
-    }));
+    let refused = s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: 3 }));
     let reconfigure = s.command(Command::ConfigureGyro(protocol::GyroConfig::DEFAULT));
     s.run(200 * MS);
     assert_eq!(s.ack_for(refused), Some(CmdResult::Faulted));
     assert_eq!(s.ack_for(reconfigure), Some(CmdResult::Faulted));
     s.vr.gyro.spi_mut().fault = BusFault::None;
     let reconfigure = s.command(Command::ConfigureGyro(protocol::GyroConfig::DEFAULT));
-    let accepted = s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: 4,
-    }));
+    let accepted = s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: 4 }));
     s.run(200 * MS);
     assert_eq!(s.ack_for(reconfigure), Some(CmdResult::Ok));
     assert_eq!(s.ack_for(accepted), Some(CmdResult::Ok));
@@ -201,21 +149,11 @@ fn wrong_who_am_i_is_reported_at_power_up_and_blocks_runs() {
     let mut chip = L3g4200dModel::new();
     chip.set_who_am_i(0xD4);
     let mut s = Session::new(VirtualRig::new(Plant::prototype(), chip, 0));
-    let start = s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: 1,
-    }));
+    let start = s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: 1 }));
     s.run(S);
     assert!(matches!(s.frames[0].2, RigMsg::Hello(_)));
-    assert!(
-        matches!(s.frames[1].2, RigMsg::Fault(f) if f.fault == Fault::GyroAbsent { who_am_i: 0xD4 })
-    );
-    assert_eq!(
-        s.faults().len(),
-        1,
-        "reported once, not as a silent gyro too"
-    );
+    assert!(matches!(s.frames[1].2, RigMsg::Fault(f) if f.fault == Fault::GyroAbsent { who_am_i: 0xD4 }));
+    assert_eq!(s.faults().len(), 1, "reported once, not as a silent gyro too");
     assert_eq!(s.ack_for(start), Some(CmdResult::Faulted));
     assert!(s.probes.iter().all(|p| !p.motor.enable));
 }

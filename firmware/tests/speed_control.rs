@@ -20,16 +20,9 @@ struct Figures {
 /// good. Ripple: over the last `window` after settling, peak-to-peak and RMS of the deviation.
 fn figures(probes: &[Probe], start_ns: u64, target_cps: f64) -> Figures {
     let dev = |p: &Probe| (p.speed_cps - target_cps) / target_cps.abs();
-    let last_out = probes
-        .iter()
-        .rposition(|p| dev(p).abs() > TOLERANCE)
-        .expect("must start outside the band");
+    let last_out = probes.iter().rposition(|p| dev(p).abs() > TOLERANCE).expect("must start outside the band");
     let settled = &probes[last_out + 1..];
-    assert!(
-        settled.len() > 5_000,
-        "settled only in the last {} ms",
-        settled.len()
-    );
+    assert!(settled.len() > 5_000, "settled only in the last {} ms", settled.len());
     let devs: Vec<f64> = settled.iter().map(dev).collect();
     let max = devs.iter().cloned().fold(f64::MIN, f64::max);
     let min = devs.iter().cloned().fold(f64::MAX, f64::min);
@@ -46,19 +39,10 @@ fn run_at(rate_mdps: u32, direction: Direction) -> (Session, Figures) {
     let mut s = Session::prototype();
     s.run(200 * MS);
     let start_ns = s.vr.now_ns();
-    s.command(Command::Start(StartRun {
-        rate_mdps,
-        direction,
-        run_tag: 3,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps, direction, run_tag: 3 }));
     s.run(12 * S);
     let target = f64::from(direction.sign()) * f64::from(firmware::commands::rate_cps(rate_mdps));
-    let probes: Vec<Probe> = s
-        .probes
-        .iter()
-        .filter(|p| p.t_ns > start_ns)
-        .copied()
-        .collect();
+    let probes: Vec<Probe> = s.probes.iter().filter(|p| p.t_ns > start_ns).copied().collect();
     let f = figures(&probes, start_ns, target);
     println!(
         "{rate_mdps} m°/s {direction:?}: settling {:.3} s, ripple {:.4} % p-p, {:.4} % RMS, worst {:.4} %",
@@ -72,11 +56,7 @@ fn settles_within_a_tenth_of_a_percent_at_half_a_hertz_both_ways() {
     for direction in [Direction::Ccw, Direction::Cw] {
         let (s, f) = run_at(180_000, direction);
         // The ramp alone takes 2.0 s (162 000 cps at 81 000 cps/s).
-        assert!(
-            f.settling_s > 2.0 && f.settling_s < 2.5,
-            "settling {} s",
-            f.settling_s
-        );
+        assert!(f.settling_s > 2.0 && f.settling_s < 2.5, "settling {} s", f.settling_s);
         assert!(f.worst_pct < 0.1);
         // What the host sees: MotorStatus speed (100 ms mean from the encoder) in the band too.
         let target = direction.sign() * 162_000;
@@ -102,11 +82,7 @@ fn holds_the_mean_at_a_tenth_of_the_speed() {
     // (one encoder count and one PWM tick), so the instantaneous speed cannot hold 0.1 %; the
     // 100 ms mean the host receives must.
     let mut s = Session::prototype();
-    s.command(Command::Start(StartRun {
-        rate_mdps: 18_000,
-        direction: Direction::Ccw,
-        run_tag: 4,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps: 18_000, direction: Direction::Ccw, run_tag: 4 }));
     s.run(6 * S);
     let means: Vec<i32> = s
         .frames
@@ -119,15 +95,8 @@ fn holds_the_mean_at_a_tenth_of_the_speed() {
         .collect();
     assert!(means.len() > 30);
     let worst = means.iter().map(|v| (v - 16_200).abs()).max().unwrap();
-    let late: Vec<f64> = s
-        .probes
-        .iter()
-        .filter(|p| p.t_ns > 2 * S)
-        .map(|p| p.speed_cps)
-        .collect();
-    let (lo, hi) = late
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
+    let late: Vec<f64> = s.probes.iter().filter(|p| p.t_ns > 2 * S).map(|p| p.speed_cps).collect();
+    let (lo, hi) = late.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
     println!(
         "18000 m°/s: 100 ms means within {worst} cps ({:.3} %), instantaneous {:.0}..{:.0} cps",
         f64::from(worst) / 162.0,
@@ -140,11 +109,7 @@ fn holds_the_mean_at_a_tenth_of_the_speed() {
 #[test]
 fn rejects_a_load_step() {
     let mut s = Session::prototype();
-    s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag: 1,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag: 1 }));
     s.run(5 * S);
     // 50 mN·m of extra drag on the table (a cable, a finger): a third of the total friction.
     s.vr.plant.motor.load_nm = 0.05;
@@ -153,25 +118,15 @@ fn rejects_a_load_step() {
     let after: Vec<&Probe> = s.probes.iter().filter(|p| p.t_ns > step_ns).collect();
     let dev = |p: &Probe| (p.speed_cps - 162_000.0).abs() / 162_000.0;
     let dip = after.iter().map(|p| dev(p)).fold(0.0, f64::max);
-    let back = after
-        .iter()
-        .rposition(|p| dev(p) > TOLERANCE)
-        .map_or(0.0, |i| (after[i].t_ns - step_ns) as f64 * 1e-6);
-    println!(
-        "load step 50 mN·m: dip {:.3} %, back within 0.1 % after {back:.1} ms",
-        dip * 100.0
-    );
+    let back = after.iter().rposition(|p| dev(p) > TOLERANCE).map_or(0.0, |i| (after[i].t_ns - step_ns) as f64 * 1e-6);
+    println!("load step 50 mN·m: dip {:.3} %, back within 0.1 % after {back:.1} ms", dip * 100.0);
     assert!(back < 200.0, "took {back} ms");
 }
 
 #[test]
 fn stop_ramps_down_and_ends_the_run() {
     let mut s = Session::prototype();
-    s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Cw,
-        run_tag: 9,
-    }));
+    s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Cw, run_tag: 9 }));
     s.run(4 * S);
     let stop_ns = s.vr.now_ns();
     let stop = s.command(Command::Stop);
@@ -188,10 +143,7 @@ fn stop_ramps_down_and_ends_the_run() {
     assert_eq!(stopped.1, 9);
     let ramp_down_s = (stopped.0 - stop_ns) as f64 * 1e-9;
     // 2 s of ramp plus the 50 ms stillness check, delivered at the next 500 ms chunk.
-    assert!(
-        (2.0..2.6).contains(&ramp_down_s),
-        "stopped after {ramp_down_s} s"
-    );
+    assert!((2.0..2.6).contains(&ramp_down_s), "stopped after {ramp_down_s} s");
     let last = s.probes.last().unwrap();
     assert!(!last.motor.enable);
     assert_eq!(last.speed_cps, 0.0);

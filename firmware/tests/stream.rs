@@ -8,16 +8,12 @@ use firmware::plant::l3g4200d_model::L3g4200dModel;
 use firmware::plant::Plant;
 use firmware::virtual_rig::VirtualRig;
 use protocol::{
-    Bandwidth, CmdResult, Command, Counters, Direction, Edge, FullScale, GyroConfig, Odr, RigMsg,
-    StartRun, ENCODER_COUNTS_PER_REV,
+    Bandwidth, CmdResult, Command, Counters, Direction, Edge, FullScale, GyroConfig, Odr, RigMsg, StartRun,
+    ENCODER_COUNTS_PER_REV,
 };
 
 fn start(s: &mut Session, run_tag: u8) -> u16 {
-    s.command(Command::Start(StartRun {
-        rate_mdps: 180_000,
-        direction: Direction::Ccw,
-        run_tag,
-    }))
+    s.command(Command::Start(StartRun { rate_mdps: 180_000, direction: Direction::Ccw, run_tag }))
 }
 
 fn last_counters(s: &Session) -> Counters {
@@ -47,11 +43,7 @@ fn every_sample_is_timestamped_counted_and_carries_its_encoder_count() {
     assert_eq!(samples.len(), truth.len());
     assert_eq!(u64::from(s.vr.gyro.spi_mut().samples), truth.len() as u64);
     for (got, (t_ns, encoder, outputs)) in samples.iter().zip(truth) {
-        assert_eq!(
-            got.t_us,
-            s.vr.timer_us(*t_ns),
-            "timestamp is the capture, floor(µs)"
-        );
+        assert_eq!(got.t_us, s.vr.timer_us(*t_ns), "timestamp is the capture, floor(µs)");
         assert_eq!(got.encoder, *encoder);
         assert_eq!(got.rate_counts, *outputs);
         assert_eq!(got.status, 0, "no overrun, no stale data");
@@ -61,21 +53,12 @@ fn every_sample_is_timestamped_counted_and_carries_its_encoder_count() {
     let last = s.unwrap_us(samples.last().unwrap().t_us);
     assert!(last > 3_000_000, "the run crossed the timer wrap");
     let period_us = (last - first) as f64 / (samples.len() - 1) as f64;
-    assert!(
-        (period_us - 1e6 / 809.6).abs() < 0.01,
-        "period {period_us} µs"
-    );
+    assert!((period_us - 1e6 / 809.6).abs() < 0.01, "period {period_us} µs");
     // The rig's own count agrees; the last Counters frame came at most 1 s before the end.
     let c = last_counters(&s);
-    let at_counters = samples
-        .iter()
-        .filter(|x| s.unwrap_us(x.t_us) <= s.unwrap_us(c.t_us))
-        .count();
+    let at_counters = samples.iter().filter(|x| s.unwrap_us(x.t_us) <= s.unwrap_us(c.t_us)).count();
     assert_eq!(c.samples_read as usize, at_counters);
-    assert_eq!(
-        (c.queue_drops, c.spi_errors, c.rx_errors, c.gyro_overruns),
-        (0, 0, 0, 0)
-    );
+    assert_eq!((c.queue_drops, c.spi_errors, c.rx_errors, c.gyro_overruns), (0, 0, 0, 0));
     assert_eq!(s.seq_gaps, 0);
 }
 
@@ -93,19 +76,12 @@ fn index_edges_are_exact_to_one_timer_tick_and_one_count() {
         .collect();
     let truth = &s.vr.truth.index_edges;
     assert_eq!(edges.len(), truth.len());
-    assert!(
-        edges.len() >= 9,
-        "≈ 5 turns of θ2 in 12 s: {} edges",
-        edges.len()
-    );
+    assert!(edges.len() >= 9, "≈ 5 turns of θ2 in 12 s: {} edges", edges.len());
     for (e, (t_ns, encoder, level)) in edges.iter().zip(truth) {
         // Within one 1 µs tick of the true instant, never ahead of it.
         let true_us = t_ns / 1_000.0;
         let got_us = s.unwrap_us(e.t_us) as f64;
-        assert!(
-            got_us <= true_us && true_us - got_us < 1.0,
-            "{got_us} vs {true_us}"
-        );
+        assert!(got_us <= true_us && true_us - got_us < 1.0, "{got_us} vs {true_us}");
         assert_eq!(e.encoder, *encoder);
         assert_eq!(e.edge == Edge::Rising, *level);
     }
@@ -144,22 +120,14 @@ fn a_stalled_link_drops_whole_frames_and_counts_every_one() {
     assert_eq!(u64::from(c.queue_drops), s.seq_gaps);
     assert_eq!(c.frames_sent as usize + c.queue_drops as usize, {
         // frames offered up to that Counters frame = its own sequence number
-        let (_, seq, _) = s
-            .frames
-            .iter()
-            .rfind(|(_, _, m)| matches!(m, RigMsg::Counters(_)))
-            .unwrap();
+        let (_, seq, _) = s.frames.iter().rfind(|(_, _, m)| matches!(m, RigMsg::Counters(_))).unwrap();
         usize::from(*seq)
     });
     // Sampling never stopped: the gyro never overran while the link was stalled.
     assert_eq!(c.gyro_overruns, 0);
     assert_eq!(c.samples_read as usize, {
         let t = s.unwrap_us(c.t_us) * 1_000;
-        s.vr.truth
-            .samples
-            .iter()
-            .filter(|(ns, _, _)| *ns <= t)
-            .count()
+        s.vr.truth.samples.iter().filter(|(ns, _, _)| *ns <= t).count()
     });
 }
 
@@ -168,43 +136,22 @@ fn commands_are_executed_in_order_and_acknowledged_after_their_effects() {
     let mut s = Session::prototype();
     s.run(100 * MS);
     // Power-up hello comes first.
-    assert!(
-        matches!(s.frames[0].2, RigMsg::Hello(h) if h.gyro == GyroConfig::DEFAULT
-        && h.encoder_counts_per_rev == 324_000 && h.timestamp_hz == 1_000_000)
-    );
+    assert!(matches!(s.frames[0].2, RigMsg::Hello(h) if h.gyro == GyroConfig::DEFAULT
+        && h.encoder_counts_per_rev == 324_000 && h.timestamp_hz == 1_000_000));
 
     let identify = s.command(Command::Identify);
     s.run(100 * MS);
     let hello_at = s.position(|m| matches!(m, RigMsg::Hello(_))).unwrap();
-    let hello2 = s
-        .frames
-        .iter()
-        .skip(hello_at + 1)
-        .position(|(_, _, m)| matches!(m, RigMsg::Hello(_)));
-    let ack_at = s
-        .position(|m| matches!(m, RigMsg::Ack(a) if a.cmd_seq == identify))
-        .unwrap();
-    assert!(
-        hello_at + 1 + hello2.unwrap() < ack_at,
-        "Hello before its Ack"
-    );
+    let hello2 = s.frames.iter().skip(hello_at + 1).position(|(_, _, m)| matches!(m, RigMsg::Hello(_)));
+    let ack_at = s.position(|m| matches!(m, RigMsg::Ack(a) if a.cmd_seq == identify)).unwrap();
+    assert!(hello_at + 1 + hello2.unwrap() < ack_at, "Hello before its Ack");
 
-    let slow = GyroConfig {
-        full_scale: FullScale::Dps2000,
-        odr: Odr::Hz100,
-        bandwidth: Bandwidth::Bw0,
-    };
+    let slow = GyroConfig { full_scale: FullScale::Dps2000, odr: Odr::Hz100, bandwidth: Bandwidth::Bw0 };
     let configure = s.command(Command::ConfigureGyro(slow));
     s.run(S);
     assert_eq!(s.ack_for(configure), Some(CmdResult::Ok));
-    assert!(s
-        .msgs()
-        .any(|m| matches!(m, RigMsg::Hello(h) if h.gyro == slow)));
-    assert_eq!(
-        s.vr.gyro.spi_mut().register(0x20),
-        0x0F,
-        "DR=00 BW=00 PD XYZ"
-    );
+    assert!(s.msgs().any(|m| matches!(m, RigMsg::Hello(h) if h.gyro == slow)));
+    assert_eq!(s.vr.gyro.spi_mut().register(0x20), 0x0F, "DR=00 BW=00 PD XYZ");
     assert_eq!(s.vr.gyro.spi_mut().register(0x23), 0xA0, "BDU, ±2000 °/s");
 
     let go = start(&mut s, 0x5A);
@@ -223,37 +170,18 @@ fn commands_are_executed_in_order_and_acknowledged_after_their_effects() {
             _ => None,
         })
         .unwrap();
-    assert_eq!(
-        (started.run_tag, started.rate_mdps, started.gyro),
-        (0x5A, 180_000, slow)
-    );
+    assert_eq!((started.run_tag, started.rate_mdps, started.gyro), (0x5A, 180_000, slow));
     // MotorStatus carries the tag while running.
-    assert!(s.msgs().any(
-        |m| matches!(m, RigMsg::Motor(ms) if ms.run_tag == 0x5A && ms.setpoint_cps == 162_000)
-    ));
+    assert!(s.msgs().any(|m| matches!(m, RigMsg::Motor(ms) if ms.run_tag == 0x5A && ms.setpoint_cps == 162_000)));
     // Samples now arrive at the new ODR: ≈ 101.2 Hz.
-    let per_s =
-        s.vr.truth
-            .samples
-            .iter()
-            .filter(|(t, _, _)| *t > s.vr.now_ns() - S)
-            .count();
-    assert!(
-        (100..=102).contains(&per_s),
-        "{per_s} samples in the last second"
-    );
+    let per_s = s.vr.truth.samples.iter().filter(|(t, _, _)| *t > s.vr.now_ns() - S).count();
+    assert!((100..=102).contains(&per_s), "{per_s} samples in the last second");
 
     let stop = s.command(Command::Stop);
     s.run(3 * S);
     assert_eq!(s.ack_for(stop), Some(CmdResult::Ok));
-    assert!(s
-        .msgs()
-        .any(|m| matches!(m, RigMsg::RunStopped(r) if r.run_tag == 0x5A)));
-    let out_of_range = s.command(Command::Start(StartRun {
-        rate_mdps: 360_001,
-        direction: Direction::Cw,
-        run_tag: 1,
-    }));
+    assert!(s.msgs().any(|m| matches!(m, RigMsg::RunStopped(r) if r.run_tag == 0x5A)));
+    let out_of_range = s.command(Command::Start(StartRun { rate_mdps: 360_001, direction: Direction::Cw, run_tag: 1 }));
     s.run(100 * MS);
     assert_eq!(s.ack_for(out_of_range), Some(CmdResult::InvalidArgument));
     assert_eq!(last_counters(&s).rx_errors, 0);

@@ -30,17 +30,11 @@ mod tests {
 
     #[test]
     fn one_turn_is_324000_counts_and_the_counter_wraps() {
-        let e = Encoder {
-            offset_counts: u32::MAX - 10,
-            reversed: false,
-        };
+        let e = Encoder { offset_counts: u32::MAX - 10, reversed: false };
         assert_eq!(e.count(0.0), u32::MAX - 10);
         assert_eq!(e.count(TAU).wrapping_sub(e.count(0.0)), 324_000);
         assert_eq!(e.count(-TAU / 324_000.0 * 0.5), u32::MAX - 11);
-        let r = Encoder {
-            reversed: true,
-            ..e
-        };
+        let r = Encoder { reversed: true, ..e };
         assert_eq!(r.count(TAU).wrapping_sub(r.count(0.0)) as i32, -324_000);
     }
 }

@@ -36,11 +36,7 @@ impl spi::Error for BusError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
     Command,
-    Data {
-        address: u8,
-        read: bool,
-        increment: bool,
-    },
+    Data { address: u8, read: bool, increment: bool },
 }
 
 /// An L3G4200D.
@@ -161,18 +157,10 @@ impl L3g4200dModel {
     fn clock(&mut self, mosi: u8) -> u8 {
         match self.phase {
             Phase::Command => {
-                self.phase = Phase::Data {
-                    address: mosi & 0x3F,
-                    read: mosi & 0x80 != 0,
-                    increment: mosi & 0x40 != 0,
-                };
+                self.phase = Phase::Data { address: mosi & 0x3F, read: mosi & 0x80 != 0, increment: mosi & 0x40 != 0 };
                 0x00
             }
-            Phase::Data {
-                address,
-                read,
-                increment,
-            } => {
+            Phase::Data { address, read, increment } => {
                 let miso = if read {
                     self.read(address)
                 } else {
@@ -180,11 +168,7 @@ impl L3g4200dModel {
                     0x00
                 };
                 if increment {
-                    self.phase = Phase::Data {
-                        address: (address + 1) & 0x3F,
-                        read,
-                        increment,
-                    };
+                    self.phase = Phase::Data { address: (address + 1) & 0x3F, read, increment };
                 }
                 miso
             }
@@ -283,11 +267,7 @@ mod tests {
     #[test]
     fn unread_sample_overwritten_sets_overrun() {
         let mut gyro = L3g4200d::new(L3g4200dModel::new());
-        let cfg = GyroConfig {
-            full_scale: FullScale::Dps2000,
-            odr: Odr::Hz100,
-            ..GyroConfig::DEFAULT
-        };
+        let cfg = GyroConfig { full_scale: FullScale::Dps2000, odr: Odr::Hz100, ..GyroConfig::DEFAULT };
         gyro.init(cfg).unwrap();
         gyro.spi_mut().latch([1.0; 3], 0);
         gyro.spi_mut().latch([1000.0; 3], 0);
@@ -302,10 +282,7 @@ mod tests {
         let mut chip = L3g4200dModel::new();
         chip.fault = BusFault::MisoStuckLow;
         let mut gyro = L3g4200d::new(chip);
-        assert_eq!(
-            gyro.init(GyroConfig::DEFAULT),
-            Err(crate::l3g4200d::Error::WrongDevice(0x00))
-        );
+        assert_eq!(gyro.init(GyroConfig::DEFAULT), Err(crate::l3g4200d::Error::WrongDevice(0x00)));
         gyro.spi_mut().fault = BusFault::Error;
         assert_eq!(gyro.who_am_i(), Err(BusError));
         let mut gyro = L3g4200d::new(L3g4200dModel::new());
@@ -313,9 +290,6 @@ mod tests {
         SpiDevice::write(gyro.spi_mut(), &[reg::WHO_AM_I, 0x00]).unwrap();
         assert_eq!(gyro.who_am_i(), Ok(DEVICE_ID));
         gyro.spi_mut().set_who_am_i(0xD4);
-        assert_eq!(
-            gyro.init(GyroConfig::DEFAULT),
-            Err(crate::l3g4200d::Error::WrongDevice(0xD4))
-        );
+        assert_eq!(gyro.init(GyroConfig::DEFAULT), Err(crate::l3g4200d::Error::WrongDevice(0xD4)));
     }
 }

@@ -25,24 +25,10 @@ pub struct Pose {
 impl Pose {
     /// `Rx(α) Ry(β) Rz(γ)`, angles in radians.
     pub fn from_euler(alpha: f64, beta: f64, gamma: f64) -> Self {
-        let rx = [
-            [1.0, 0.0, 0.0],
-            [0.0, cos(alpha), -sin(alpha)],
-            [0.0, sin(alpha), cos(alpha)],
-        ];
-        let ry = [
-            [cos(beta), 0.0, sin(beta)],
-            [0.0, 1.0, 0.0],
-            [-sin(beta), 0.0, cos(beta)],
-        ];
-        let rz = [
-            [cos(gamma), -sin(gamma), 0.0],
-            [sin(gamma), cos(gamma), 0.0],
-            [0.0, 0.0, 1.0],
-        ];
-        Self {
-            r: mul(&mul(&rx, &ry), &rz),
-        }
+        let rx = [[1.0, 0.0, 0.0], [0.0, cos(alpha), -sin(alpha)], [0.0, sin(alpha), cos(alpha)]];
+        let ry = [[cos(beta), 0.0, sin(beta)], [0.0, 1.0, 0.0], [-sin(beta), 0.0, cos(beta)]];
+        let rz = [[cos(gamma), -sin(gamma), 0.0], [sin(gamma), cos(gamma), 0.0], [0.0, 0.0, 1.0]];
+        Self { r: mul(&mul(&rx, &ry), &rz) }
     }
 
     /// Pose 1: α = φ with cos φ = 1/√3 (54.7356°), β = 0, γ = 45° (EXCITER.md).
@@ -53,9 +39,7 @@ impl Pose {
     /// Pose 2: pose 1 turned −90° about the table's y axis, `R2 = Ry(−90°) · R1` (EXCITER.md).
     pub fn pose2() -> Self {
         let ry = Self::from_euler(0.0, -core::f64::consts::FRAC_PI_2, 0.0);
-        Self {
-            r: mul(&ry.r, &Self::pose1().r),
-        }
+        Self { r: mul(&ry.r, &Self::pose1().r) }
     }
 
     /// The pose a run tag names, as the host encodes it (1, 2); the virtual rig's "automatic
@@ -114,19 +98,14 @@ pub struct Plant {
 }
 
 impl Plant {
-    /// The prototype: RE 30 drive, plate 10° wide at θ2 = 0.3 rad, gyro in pose 1, encoder
-    /// counter starting 2 s of 0.5 Hz travel short of its 32-bit wrap.
+    /// The prototype: RE 30 drive, plate 10° wide centred on θ2 = 0 (the host's reference: θ2 = 0
+    /// at the pulse centre, host/src/calib/kinematics.rs), gyro in pose 1, encoder counter
+    /// starting 2 s of 0.5 Hz travel short of its 32-bit wrap.
     pub fn prototype() -> Self {
         Self {
             motor: Motor::new(DriveParams::PROTOTYPE),
-            encoder: Encoder {
-                offset_counts: u32::MAX - 324_000,
-                reversed: false,
-            },
-            index: PhotoInterrupter {
-                plate_start_rad: 0.3,
-                plate_width_rad: 10f64.to_radians(),
-            },
+            encoder: Encoder { offset_counts: u32::MAX - 324_000, reversed: false },
+            index: PhotoInterrupter { plate_start_rad: -5f64.to_radians(), plate_width_rad: 10f64.to_radians() },
             pose: Pose::pose1(),
             theta2_offset_rad: 0.0,
             sensor_ks: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
@@ -138,9 +117,7 @@ impl Plant {
 
     /// Applies the bridge command: the mean terminal voltage over a PWM period.
     pub fn set_drive(&mut self, cmd: MotorCommand) {
-        self.volts = cmd
-            .enable
-            .then(|| f64::from(cmd.duty()) * self.motor.params.vbus_v);
+        self.volts = cmd.enable.then(|| f64::from(cmd.duty()) * self.motor.params.vbus_v);
     }
 
     /// Sensor-table angle θ2: the 1:1 magnetic gears turn it with the base.
@@ -170,8 +147,7 @@ impl Plant {
         let table = [w1 * sin(th2), w1 * cos(th2), w1];
         let package = self.pose.to_package(table).map(f64::to_degrees);
         let ks = &self.sensor_ks;
-        [0, 1, 2]
-            .map(|i| (0..3).map(|j| ks[i][j] * package[j]).sum::<f64>() + self.sensor_offset_dps[i])
+        [0, 1, 2].map(|i| (0..3).map(|j| ks[i][j] * package[j]).sum::<f64>() + self.sensor_offset_dps[i])
     }
 
     /// Advances by `dt_s`; reports an index edge inside the step, with the encoder counter at
@@ -182,11 +158,7 @@ impl Plant {
         self.motor.step(dt_s, self.volts, theta2_before);
         let Crossing { fraction, level } = self.index.crossing(theta2_before, self.theta2_rad())?;
         let theta1_at = theta1_before + fraction * (self.motor.theta_rad - theta1_before);
-        Some(IndexCrossing {
-            fraction,
-            level,
-            encoder: self.encoder.count(theta1_at),
-        })
+        Some(IndexCrossing { fraction, level, encoder: self.encoder.count(theta1_at) })
     }
 }
 
@@ -205,11 +177,8 @@ mod tests {
             let th2 = plant.theta2_rad();
             let a = 180.0 * sqrt(6.0) / 3.0;
             let b = 180.0 / sqrt(3.0);
-            let expected = [
-                a * sin(th2 + FRAC_PI_6) + b,
-                a * sin(th2 + 5.0 * FRAC_PI_6) + b,
-                a * sin(th2 + 3.0 * FRAC_PI_2) + b,
-            ];
+            let expected =
+                [a * sin(th2 + FRAC_PI_6) + b, a * sin(th2 + 5.0 * FRAC_PI_6) + b, a * sin(th2 + 3.0 * FRAC_PI_2) + b];
             let got = plant.gyro_rates_dps();
             for i in 0..3 {
                 assert!((got[i] - expected[i]).abs() < 1e-9, "θ2={th2} axis {i}");
@@ -225,21 +194,9 @@ mod tests {
             let x = 180.0 / sqrt(2.0) * (sin(th2 + FRAC_PI_2 + phi) + 1.0);
             let y = 180.0 / sqrt(2.0) * (sin(th2 + FRAC_PI_2 + phi) - 1.0);
             let z = 180.0 * sin(th2 + PI + phi);
-            assert!(
-                (got[0] - x).abs() < 1e-9,
-                "pose 2 x at θ2={th2}: {} vs {x}",
-                got[0]
-            );
-            assert!(
-                (got[1] - y).abs() < 1e-9,
-                "pose 2 y at θ2={th2}: {} vs {y}",
-                got[1]
-            );
-            assert!(
-                (got[2] - z).abs() < 1e-9,
-                "pose 2 z at θ2={th2}: {} vs {z}",
-                got[2]
-            );
+            assert!((got[0] - x).abs() < 1e-9, "pose 2 x at θ2={th2}: {} vs {x}", got[0]);
+            assert!((got[1] - y).abs() < 1e-9, "pose 2 y at θ2={th2}: {} vs {y}", got[1]);
+            assert!((got[2] - z).abs() < 1e-9, "pose 2 z at θ2={th2}: {} vs {z}", got[2]);
         }
         plant.pose = Pose::pose1();
         // And the EXCITER.md peak: 147 + 104 = 251 °/s.

@@ -68,13 +68,7 @@ pub struct Motor {
 impl Motor {
     /// At rest at angle 0.
     pub fn new(params: DriveParams) -> Self {
-        Self {
-            params,
-            theta_rad: 0.0,
-            omega_rad_s: 0.0,
-            load_nm: 0.0,
-            locked: false,
-        }
+        Self { params, theta_rad: 0.0, omega_rad_s: 0.0, load_nm: 0.0, locked: false }
     }
 
     /// Armature current for terminal voltage `volts` (None: bridge off, motor coasting).
@@ -104,18 +98,10 @@ impl Motor {
         if omega == 0.0 && drive.abs() <= p.coulomb_nm {
             return; // stiction holds
         }
-        let friction = if omega != 0.0 {
-            p.coulomb_nm * omega.signum()
-        } else {
-            p.coulomb_nm * drive.signum()
-        };
+        let friction = if omega != 0.0 { p.coulomb_nm * omega.signum() } else { p.coulomb_nm * drive.signum() };
         let next = omega + dt_s * (drive - friction) / p.j_kgm2;
         // Dry friction stops the rotor; it never reverses it.
-        self.omega_rad_s = if omega != 0.0 && next.signum() != omega.signum() {
-            0.0
-        } else {
-            next
-        };
+        self.omega_rad_s = if omega != 0.0 && next.signum() != omega.signum() { 0.0 } else { next };
         self.theta_rad += dt_s * self.omega_rad_s;
     }
 }

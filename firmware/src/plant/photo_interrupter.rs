@@ -45,15 +45,9 @@ impl PhotoInterrupter {
         };
         let edges = [boundary(0.0), boundary(self.plate_width_rad)];
         let span = to_rad - from_rad;
-        let fraction = edges
-            .iter()
-            .map(|&e| (e - from_rad) / span)
-            .filter(|f| (0.0..=1.0).contains(f))
-            .fold(f64::NAN, f64::min);
-        Some(Crossing {
-            fraction: if fraction.is_nan() { 1.0 } else { fraction },
-            level: after,
-        })
+        let fraction =
+            edges.iter().map(|&e| (e - from_rad) / span).filter(|f| (0.0..=1.0).contains(f)).fold(f64::NAN, f64::min);
+        Some(Crossing { fraction: if fraction.is_nan() { 1.0 } else { fraction }, level: after })
     }
 }
 
@@ -61,10 +55,7 @@ impl PhotoInterrupter {
 mod tests {
     use super::*;
 
-    const PLATE: PhotoInterrupter = PhotoInterrupter {
-        plate_start_rad: 1.0,
-        plate_width_rad: 0.2,
-    };
+    const PLATE: PhotoInterrupter = PhotoInterrupter { plate_start_rad: 1.0, plate_width_rad: 0.2 };
 
     #[test]
     fn level_follows_the_plate_every_turn() {

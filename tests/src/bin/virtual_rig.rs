@@ -12,6 +12,7 @@
 //! `--ideal-gyro`, the simulated gyro carries the imperfection printed on stderr, for the host
 //! to find.
 
+use e2e::{VIRTUAL_GYRO_KS as DUT_KS, VIRTUAL_GYRO_OFFSET_DPS as DUT_OFFSET_DPS};
 use firmware::plant::l3g4200d_model::L3g4200dModel;
 use firmware::plant::{Plant, Pose};
 use firmware::virtual_rig::{VirtualRig, Wire};
@@ -25,15 +26,6 @@ const CHUNK_NS: u64 = 2_000_000;
 /// like a CDC endpoint nobody polls.
 const PTY_BACKLOG: usize = 64 * 1024;
 
-/// The virtual device under test: sensitivities 0.97, 1.02, 1.05; axes tilted by ≈ 1-2° from
-/// the package axes; offsets of a few °/s. Row i is k_i s_iᵀ (EXCITER.md eq. 6).
-const DUT_KS: [[f64; 3]; 3] = [
-    [0.969_8, 0.017_0, -0.005_1],
-    [-0.012_2, 1.019_7, 0.026_7],
-    [0.018_3, -0.009_2, 1.049_8],
-];
-const DUT_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
-
 struct Args {
     speedup: f64,
     ideal: bool,
@@ -41,11 +33,7 @@ struct Args {
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut args = Args {
-        speedup: 1.0,
-        ideal: false,
-        duration_s: None,
-    };
+    let mut args = Args { speedup: 1.0, ideal: false, duration_s: None };
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut value = |name: &str| {

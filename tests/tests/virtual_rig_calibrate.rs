@@ -1,0 +1,114 @@
+//! The whole live path: the firmware's virtual rig on a pty, recorded and calibrated by the host
+//! code `host calibrate --port <pty> --yes` runs (`host::link`, `host::session`,
+//! `host::capture::decode`, `host::calib::calibrate`; see host/src/main.rs), and the result held
+//! against the imperfect gyro the virtual rig simulates.
+
+use e2e::{VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS, Z_1D, Z_2D};
+use host::calib::{self, derived::mahalanobis2, CalOptions};
+use host::capture;
+use host::geometry::Pose;
+use host::link::{self, Link};
+use host::session;
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::AtomicBool;
+
+/// Simulated seconds per wall second. The host heartbeats every 250 ms of wall time
+/// (`host::link::HEARTBEAT_INTERVAL`) and the rig stops a run after 2 s of its own time without
+/// one, so the speedup must stay below 8; 4 leaves 2× margin.
+const SPEEDUP: f64 = 4.0;
+
+/// Seconds recorded at speed per pose: two turns of the table at 0.5 Hz.
+const DURATION_S: f64 = 4.0;
+
+/// `host calibrate`'s default rate: 180 °/s.
+const RATES_DPS: [f64; 1] = [180.0];
+
+/// ±500 °/s full scale (the rig's default): 17.5 m°/s per count (L3G4200D datasheet Table 4).
+const DPS_PER_COUNT: f64 = 17.5e-3;
+
+struct VirtualRig(Child);
+
+impl Drop for VirtualRig {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_virtual_rig"))
+        .args(["--speedup", &SPEEDUP.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn virtual_rig");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("pty path");
+    let _rig = VirtualRig(child);
+    let port = line.trim().to_string();
+    assert!(port.starts_with("/dev/"), "unexpected first line {port:?}");
+
+    // `host calibrate --port <pty> --yes --duration 4 --out-dir <dir>`, step by step.
+    let out_dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("virtual-rig-calibrate");
+    let _ = std::fs::remove_dir_all(&out_dir); // captures are never overwritten
+    let mut link = Link::new(link::open_port(&port, link::DEFAULT_BAUD).expect("open pty"), port.as_str());
+    let plan = session::plan(&Pose::ALL, &RATES_DPS, DURATION_S);
+    let files =
+        session::record_session(&mut link, &plan, &out_dir, true, &AtomicBool::new(false)).expect("live session");
+
+    let mut runs = Vec::new();
+    for (file, run) in files.iter().zip(&plan) {
+        let cap = capture::decode(&std::fs::read(file).expect("capture"));
+        let loss = &cap.loss;
+        // Samples streamed between the Identify and the Start belong to no run ("orphans"):
+        // expected live, and not a loss.
+        assert!(
+            loss.errors.is_empty() && loss.seq_gaps.is_empty(),
+            "{}: {} frames missing, {} bytes corrupt: {loss:?}",
+            file.display(),
+            loss.frames_missing(),
+            loss.bytes_skipped(),
+        );
+        eprintln!(
+            "{}: {} bytes, {} frames, 0 lost, 0 corrupt, {} samples before the run",
+            file.display(),
+            loss.bytes,
+            loss.frames_ok,
+            loss.orphan_samples
+        );
+        assert_eq!(cap.runs.len(), 1, "{}", file.display());
+        let r = &cap.runs[0];
+        assert_eq!((r.pose, r.rate_mdps), (run.pose, 180_000), "{}", file.display());
+        assert!(r.stopped, "{}: RunStopped recorded", file.display());
+        runs.extend(cap.runs);
+    }
+    let report = calib::calibrate(&runs, &CalOptions::default()).expect("calibration");
+
+    // The truth in the host's units: M = K S in counts per °/s, offsets in counts.
+    let summary = report.summary();
+    for (i, a) in report.axes.iter().enumerate() {
+        let m: [f64; 3] = VIRTUAL_GYRO_KS[i].map(|v| v / DPS_PER_COUNT);
+        let k = m.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let s = m.map(|v| v / k);
+        let offset = VIRTUAL_GYRO_OFFSET_DPS[i] / DPS_PER_COUNT;
+        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
+        let tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
+        let d = [a.tilt_components_deg[0] - tilt[0], a.tilt_components_deg[1] - tilt[1]];
+        let k_z = (a.k_counts_per_dps - k) / a.k_sigma;
+        let offset_z = (a.offset_counts - offset) / a.offset_sigma_counts;
+        let direction_md = mahalanobis2(d, a.tilt_components_cov_deg2);
+        eprintln!(
+            "axis {i}: k {:.3} vs {k:.3} ({k_z:+.2} σ), direction {direction_md:.2} σ, \
+             offset {:.2} vs {offset:.2} counts ({offset_z:+.2} σ)",
+            a.k_counts_per_dps, a.offset_counts
+        );
+        assert!(
+            k_z.abs() <= Z_1D && direction_md <= Z_2D && offset_z.abs() <= Z_1D,
+            "axis {i} off the virtual gyro: k {k_z:.2} σ, direction {direction_md:.2} σ, \
+             offset {offset_z:.2} σ\n{summary}"
+        );
+    }
+}
