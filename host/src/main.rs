@@ -235,12 +235,7 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
             session::record_run(&mut link, &run, out, &progress, &interrupted)?;
         }
         None => {
-            let file = fs::File::options()
-                .write(true)
-                .create_new(true)
-                .open(out)
-                .with_context(|| format!("cannot create capture {}", out.display()))?;
-            link.record_to(Some(Box::new(file)))?;
+            link.record_to(Some(Box::new(session::create_capture(out)?)))?;
             session::identify(&mut link)?;
             let start = std::time::Instant::now();
             while start.elapsed().as_secs_f64() < duration_s && !interrupted.load(Ordering::SeqCst) {

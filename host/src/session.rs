@@ -103,6 +103,15 @@ pub fn mounting_instructions(pose: Pose) -> &'static str {
     }
 }
 
+/// Creates a capture file; an existing file is an error, so no recording is ever overwritten.
+pub fn create_capture(path: &Path) -> Result<File> {
+    File::options()
+        .write(true)
+        .create_new(true)
+        .open(path)
+        .with_context(|| format!("cannot create capture {}", path.display()))
+}
+
 /// Records one run into `path` (created; an existing file is never overwritten). Every byte the
 /// rig sends from the Identify on is written and flushed before it is decoded.
 pub fn record_run<P: Read + Write>(
@@ -112,12 +121,7 @@ pub fn record_run<P: Read + Write>(
     progress: &ProgressBar,
     interrupted: &AtomicBool,
 ) -> Result<()> {
-    let file = File::options()
-        .write(true)
-        .create_new(true)
-        .open(path)
-        .with_context(|| format!("cannot create capture {}", path.display()))?;
-    link.record_to(Some(Box::new(file)))?;
+    link.record_to(Some(Box::new(create_capture(path)?)))?;
     let outcome = stream_run(link, run, path, progress, interrupted);
     if outcome.is_err() {
         // Best effort: the motor must not keep spinning because the host gave up.

@@ -151,11 +151,10 @@ fn the_readme_quotes_every_vector() {
     }
 }
 
-/// The largest value of every field must still fit in [`MAX_FRAME_LEN`].
-#[test]
-fn worst_case_frames_fit() {
+/// Every message with every field at its longest encoding.
+fn worst_case() -> [RigMsg; 7] {
     let m = u32::MAX;
-    let worst = [
+    [
         RigMsg::Hello(Hello {
             protocol_version: u16::MAX,
             firmware: Version { major: 255, minor: 255, patch: 255 },
@@ -165,6 +164,8 @@ fn worst_case_frames_fit() {
             timestamp_hz: m,
         }),
         RigMsg::Sample(Sample { t_us: m, encoder: m, rate_counts: [i16::MIN; 3], status: 255 }),
+        RigMsg::Index(IndexEdge { t_us: m, encoder: m, edge: Edge::Falling }),
+        RigMsg::Temperature(Temperature { t_us: m, raw: -128 }),
         RigMsg::Motor(MotorStatus {
             t_us: m,
             speed_cps: i32::MIN,
@@ -189,8 +190,13 @@ fn worst_case_frames_fit() {
             direction: Direction::Cw,
             gyro: GyroConfig::DEFAULT,
         }),
-    ];
-    for msg in worst {
+    ]
+}
+
+/// The largest value of every field must still fit in [`MAX_FRAME_LEN`].
+#[test]
+fn worst_case_frames_fit() {
+    for msg in worst_case() {
         let n = encode(u16::MAX, &msg).len();
         assert!(n <= MAX_FRAME_LEN, "{msg:?}: {n} > {MAX_FRAME_LEN}");
     }
@@ -200,28 +206,8 @@ fn worst_case_frames_fit() {
 /// The link budget of protocol/README.md: worst-case bytes per second at ODR 800 Hz.
 #[test]
 fn link_budget_at_800_hz() {
-    let m = u32::MAX;
-    let len = |msg: RigMsg| encode(u16::MAX, &msg).len() as u32;
-    let sample = len(RigMsg::Sample(Sample { t_us: m, encoder: m, rate_counts: [i16::MIN; 3], status: 1 }));
-    let index = len(RigMsg::Index(IndexEdge { t_us: m, encoder: m, edge: Edge::Falling }));
-    let temp = len(RigMsg::Temperature(Temperature { t_us: m, raw: -128 }));
-    let motor = len(RigMsg::Motor(MotorStatus {
-        t_us: m,
-        speed_cps: i32::MIN,
-        setpoint_cps: i32::MIN,
-        duty_permille: i16::MIN,
-        faults: 255,
-        run_tag: 255,
-    }));
-    let counters = len(RigMsg::Counters(Counters {
-        t_us: m,
-        frames_sent: m,
-        queue_drops: m,
-        samples_read: m,
-        gyro_overruns: m,
-        spi_errors: m,
-        rx_errors: m,
-    }));
+    let len: Vec<u32> = worst_case().iter().map(|msg| encode(u16::MAX, msg).len() as u32).collect();
+    let (sample, index, temp, motor, counters) = (len[1], len[2], len[3], len[4], len[5]);
     assert_eq!((sample, index, temp, motor, counters), (30, 21, 16, 30, 45));
     // Per second: 800 samples, 2 index edges per sensor-table turn at up to 1 Hz drive (4),
     // 1 temperature, 10 motor status, 1 counters.
