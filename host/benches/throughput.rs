@@ -80,11 +80,7 @@ fn main() {
     let mut peaks = Vec::new();
     let mut samples = 0usize;
     for _ in 0..REPEATS {
-        let out = Command::new(&exe)
-            .env("THROUGHPUT_CHILD", &path)
-            .arg("--bench")
-            .output()
-            .expect("child runs");
+        let out = Command::new(&exe).env("THROUGHPUT_CHILD", &path).arg("--bench").output().expect("child runs");
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         let line = String::from_utf8_lossy(&out.stdout);
         let f: Vec<f64> = line.split_whitespace().map(|x| x.parse().expect("number")).collect();
@@ -105,6 +101,9 @@ fn main() {
     println!("on-CPU time (not inflated by other processes on the machine):");
     println!("read + decode:             {cd:.3} s  ({:.2} M samples/s)", samples as f64 / cd / 1e6);
     println!("read + decode + calibrate: {ct:.3} s  ({:.2} M samples/s; bar ≥ 5)", samples as f64 / ct / 1e6);
-    println!("  cpu, all runs (s): {:?}", cpu_total_s.iter().map(|x| (x * 1000.0).round() / 1000.0).collect::<Vec<_>>());
+    println!(
+        "  cpu, all runs (s): {:?}",
+        cpu_total_s.iter().map(|x| (x * 1000.0).round() / 1000.0).collect::<Vec<_>>()
+    );
     println!("peak resident memory: {:.0} MiB (median of {REPEATS})", median(peaks));
 }

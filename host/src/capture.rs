@@ -3,8 +3,8 @@
 
 use crate::geometry::Pose;
 use protocol::{
-    Counters, Direction, Event, FaultReport, FrameError, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg,
-    RunStarted, SeqTracker, StreamDecoder,
+    Counters, Direction, Event, FaultReport, FrameError, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg, RunStarted,
+    SeqTracker, StreamDecoder,
 };
 use serde::Serialize;
 
@@ -255,10 +255,7 @@ impl CaptureDecoder {
                 self.capture.loss.frames_ok += 1;
                 let missing = self.seq.observe(seq);
                 if missing > 0 {
-                    self.capture.loss.seq_gaps.push(SeqGap {
-                        offset,
-                        missing: u64::from(missing),
-                    });
+                    self.capture.loss.seq_gaps.push(SeqGap { offset, missing: u64::from(missing) });
                 }
                 self.on_msg(offset, msg);
             }
@@ -294,11 +291,7 @@ impl CaptureDecoder {
                 }
             }
             RigMsg::Index(IndexEdge { t_us, encoder, edge }) => {
-                let e = RunIndexEdge {
-                    t_us: self.clock.unwrap(t_us),
-                    encoder: self.encoder(encoder),
-                    edge,
-                };
+                let e = RunIndexEdge { t_us: self.clock.unwrap(t_us), encoder: self.encoder(encoder), edge };
                 if let Some(run) = self.open.as_mut() {
                     run.index.push(e);
                 }

@@ -62,10 +62,15 @@ enum Cmd {
         /// Live: seconds of data per run once at speed.
         #[arg(long, default_value_t = 120.0)]
         duration: f64,
-        /// Live: base-table rates to run in each pose, °/s, negative for clockwise
-        /// (e.g. 180,90,-180: two speeds and both directions).
-        #[arg(long, value_delimiter = ',', default_value = "180", allow_negative_numbers = true)]
+        /// Live: base-table rates to run in each pose, °/s, negative for clockwise. Two speeds
+        /// (the default) tell a gyro delay from an index offset; add a negative rate (e.g.
+        /// 180,90,-180) to separate the offsets from the constant θ2' term as well.
+        #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true)]
         rates_dps: Vec<f64>,
+        /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
+        /// `x.cap`, if present).
+        #[arg(long, requires = "replay")]
+        truth: Option<PathBuf>,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -161,8 +166,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
-        Cmd::Record { port, out, pose, rate_dps, duration, baud } => record(&port, &out, pose, rate_dps, duration, baud),
-        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, yes, baud } => {
+        Cmd::Record { port, out, pose, rate_dps, duration, baud } => {
+            record(&port, &out, pose, rate_dps, duration, baud)
+        }
+        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, yes, baud } => {
             let files = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
@@ -172,16 +179,23 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 None => replay,
             };
-            calibrate(&files, &out_dir)
+            calibrate(&files, &out_dir, truth.as_deref())
         }
         Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
             let cfg = match config {
                 Some(path) => {
                     let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
-                    serde_json::from_str(&text).with_context(|| format!("{} is not a simulation config", path.display()))?
+                    serde_json::from_str(&text)
+                        .with_context(|| format!("{} is not a simulation config", path.display()))?
                 }
                 None => {
-                    let mut cfg = sim::SimConfig::with_runs(seed, session::plan(&poses, &rates_dps, duration).iter().map(|r| sim::RunSpec { pose: r.pose, rate_dps: r.rate_dps, duration_s: r.duration_s }).collect());
+                    let mut cfg = sim::SimConfig::with_runs(
+                        seed,
+                        session::plan(&poses, &rates_dps, duration)
+                            .iter()
+                            .map(|r| sim::RunSpec { pose: r.pose, rate_dps: r.rate_dps, duration_s: r.duration_s })
+                            .collect(),
+                    );
                     cfg.gyro.full_scale = match full_scale {
                         250 => protocol::FullScale::Dps250,
                         2000 => protocol::FullScale::Dps2000,
@@ -251,8 +265,10 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
     Ok(ExitCode::SUCCESS)
 }
 
-/// Decodes the captures, reports their losses, calibrates, writes `calibration.json`.
-fn calibrate(files: &[PathBuf], out_dir: &Path) -> Result<ExitCode> {
+/// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
+/// effect models), writes `calibration.json`, `loop.json` and `report.html`; the exit status
+/// carries the verdict.
+fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Result<ExitCode> {
     let mut runs = Vec::new();
     for f in files {
         let cap = read_capture(f)?;
@@ -265,21 +281,49 @@ fn calibrate(files: &[PathBuf], out_dir: &Path) -> Result<ExitCode> {
             l.frames_missing(),
             l.bytes_skipped()
         );
-        if cap.hello.is_some_and(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
-            bail!("{} was recorded with protocol v{}, this host reads v{}", f.display(), cap.hello.unwrap().protocol_version, protocol::PROTOCOL_VERSION);
+        if let Some(h) = cap.hello.filter(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
+            bail!(
+                "{} was recorded with protocol v{}, this host reads v{}",
+                f.display(),
+                h.protocol_version,
+                protocol::PROTOCOL_VERSION
+            );
         }
         if cap.runs.is_empty() {
             bail!("{} holds no run (no RunStarted frame and no motor status naming one)", f.display());
         }
         runs.extend(cap.runs);
     }
-    let report = calib::calibrate(&runs, &calib::CalOptions::default()).context("calibration failed")?;
-    print!("{}", report.summary());
+    let truth = load_truth(files, truth_path)?;
+    let lr = calib::close_loop(&runs, &calib::LoopOptions::default(), truth.as_ref()).context("calibration failed")?;
+    print!("{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let json = out_dir.join("calibration.json");
-    fs::write(&json, serde_json::to_string_pretty(&report)?).with_context(|| format!("cannot write {}", json.display()))?;
-    eprintln!("wrote {}", json.display());
-    Ok(ExitCode::SUCCESS)
+    fs::write(&json, serde_json::to_string_pretty(lr.final_report())?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    let loop_json = out_dir.join("loop.json");
+    fs::write(&loop_json, serde_json::to_string(&lr)?)
+        .with_context(|| format!("cannot write {}", loop_json.display()))?;
+    let html = calib::write_report(out_dir, &lr)
+        .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
+    eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
+    Ok(match lr.verdict() {
+        calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
+        calib::Verdict::UnexplainedStructure => ExitCode::from(3),
+    })
+}
+
+/// The truth of a simulated capture: `--truth`, or `x.truth.json` beside a single `x.cap`.
+fn load_truth(files: &[PathBuf], explicit: Option<&Path>) -> Result<Option<sim::Truth>> {
+    let path = match (explicit, files) {
+        (Some(p), _) => p.to_path_buf(),
+        (None, [one]) if truth_path(one).exists() => truth_path(one),
+        _ => return Ok(None),
+    };
+    let text = fs::read_to_string(&path).with_context(|| format!("cannot read truth {}", path.display()))?;
+    let truth = serde_json::from_str(&text).with_context(|| format!("{} is not a simulation truth", path.display()))?;
+    eprintln!("comparing with the simulated truth in {}", path.display());
+    Ok(Some(truth))
 }
 
 /// Loads a calibration from `calibrate`'s JSON (the full report) or a bare calibration.
@@ -329,7 +373,8 @@ fn truth_path(capture: &Path) -> PathBuf {
 fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {
     cfg.validate().map_err(|e| anyhow::anyhow!("invalid simulation: {e}"))?;
     let file = fs::File::create(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file)).with_context(|| format!("writing {}", out.display()))?;
+    let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file))
+        .with_context(|| format!("writing {}", out.display()))?;
     let tp = truth_path(out);
     fs::write(&tp, serde_json::to_string_pretty(&truth)?).with_context(|| format!("cannot write {}", tp.display()))?;
     eprintln!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display());

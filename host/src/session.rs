@@ -98,7 +98,9 @@ pub fn prompt(message: &str, assume_yes: bool) -> Result<()> {
 /// How the operator mounts a pose (EXCITER.md, eq. 8-10).
 pub fn mounting_instructions(pose: Pose) -> &'static str {
     match pose {
-        Pose::One => "Mount the gyro in POSE 1: on the 54.74° wedge (α = φ), package turned 45° about its z axis (γ = 45°).",
+        Pose::One => {
+            "Mount the gyro in POSE 1: on the 54.74° wedge (α = φ), package turned 45° about its z axis (γ = 45°)."
+        }
         Pose::Two => "Mount the gyro in POSE 2: pose 1 turned −90° about the sensor table's y axis (R2 = Ry(−90°)·R1).",
     }
 }

@@ -27,10 +27,7 @@ fn a_missing_port_is_one_line_naming_it() {
 fn a_missing_capture_is_one_line_naming_it() {
     let o = host(&["inspect", "/nonexistent/run.cap"]);
     assert_eq!(o.status.code(), Some(1));
-    assert_eq!(
-        stderr(&o),
-        "error: cannot read capture /nonexistent/run.cap: No such file or directory (os error 2)\n"
-    );
+    assert_eq!(stderr(&o), "error: cannot read capture /nonexistent/run.cap: No such file or directory (os error 2)\n");
 }
 
 #[test]
@@ -55,7 +52,8 @@ fn simulate_inspect_calibrate_apply() {
     let cap = dir.join("s.cap");
     let o = host(&["simulate", "--out", cap.to_str().unwrap(), "--seed", "5", "--duration", "6"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    let truth: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("s.truth.json")).unwrap()).unwrap();
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("s.truth.json")).unwrap()).unwrap();
     assert_eq!(truth["seed"], 5);
 
     let o = host(&["inspect", cap.to_str().unwrap()]);
@@ -118,5 +116,9 @@ fn an_unknown_effect_is_refused_with_the_list() {
     let dir = scratch("effect");
     let o = host(&["simulate", "--out", dir.join("x.cap").to_str().unwrap(), "--effect", "wobble"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).starts_with("error: unknown effect \"wobble\"; known: filter_delay, delay_ms, "), "{}", stderr(&o));
+    assert!(
+        stderr(&o).starts_with("error: unknown effect \"wobble\"; known: filter_delay, delay_ms, "),
+        "{}",
+        stderr(&o)
+    );
 }

@@ -92,7 +92,18 @@ fn record_one_pose_over_a_serial_port() {
     let dir = scratch("record");
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("p2.cap");
-    let o = host(&["record", "--port", &rig.path, "--out", out.to_str().unwrap(), "--pose", "2", "--rate-dps=-90", "--duration", "3"]);
+    let o = host(&[
+        "record",
+        "--port",
+        &rig.path,
+        "--out",
+        out.to_str().unwrap(),
+        "--pose",
+        "2",
+        "--rate-dps=-90",
+        "--duration",
+        "3",
+    ]);
     rig.stop();
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let cap = decode(&out);

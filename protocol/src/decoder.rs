@@ -49,14 +49,7 @@ impl Default for StreamDecoder {
 impl StreamDecoder {
     /// A decoder at stream offset 0.
     pub const fn new() -> Self {
-        Self {
-            buf: [0; MAX_FRAME_LEN],
-            scratch: [0; MAX_FRAME_LEN],
-            len: 0,
-            overflow: 0,
-            start: 0,
-            pos: 0,
-        }
+        Self { buf: [0; MAX_FRAME_LEN], scratch: [0; MAX_FRAME_LEN], len: 0, overflow: 0, start: 0, pos: 0 }
     }
 
     /// Stream offset of the next byte to be pushed (the count of bytes seen).
@@ -100,11 +93,7 @@ impl StreamDecoder {
         self.len = 0;
         self.overflow = 0;
         self.start = self.pos;
-        (len > 0).then_some(Event::Error {
-            offset,
-            len,
-            error: FrameError::Truncated,
-        })
+        (len > 0).then_some(Event::Error { offset, len, error: FrameError::Truncated })
     }
 
     fn append(&mut self, bytes: &[u8]) {

@@ -74,9 +74,7 @@ impl std::error::Error for FrameError {}
 /// Encodes `(seq, msg)` as one complete frame, delimiter included, into `out`; returns its length.
 pub fn encode_frame<M: Serialize>(seq: u16, msg: &M, out: &mut [u8]) -> Result<usize, FrameError> {
     let mut raw = [0u8; MAX_PAYLOAD_LEN + 4];
-    let n = postcard::to_slice(&(seq, msg), &mut raw[..MAX_PAYLOAD_LEN])
-        .map_err(|_| FrameError::BufferTooSmall)?
-        .len();
+    let n = postcard::to_slice(&(seq, msg), &mut raw[..MAX_PAYLOAD_LEN]).map_err(|_| FrameError::BufferTooSmall)?.len();
     let crc = CRC32C.checksum(&raw[..n]);
     raw[n..n + 4].copy_from_slice(&crc.to_le_bytes());
     let len = cobs::try_encode(&raw[..n + 4], out).map_err(|_| FrameError::BufferTooSmall)?;
@@ -86,7 +84,10 @@ pub fn encode_frame<M: Serialize>(seq: u16, msg: &M, out: &mut [u8]) -> Result<u
 
 /// Decodes one frame's COBS bytes (delimiter removed) into `(seq, msg)`, using `scratch` for
 /// the decoded bytes.
-pub fn decode_frame<M: DeserializeOwned>(cobs_bytes: &[u8], scratch: &mut [u8; MAX_FRAME_LEN]) -> Result<(u16, M), FrameError> {
+pub fn decode_frame<M: DeserializeOwned>(
+    cobs_bytes: &[u8],
+    scratch: &mut [u8; MAX_FRAME_LEN],
+) -> Result<(u16, M), FrameError> {
     let n = cobs_decode(cobs_bytes, scratch)?;
     // seq (≥ 1 byte) + variant (≥ 1 byte) + CRC (4 bytes)
     if n < 6 {
@@ -144,7 +145,8 @@ mod tests {
         for len in 0..(MAX_PAYLOAD_LEN + 4) {
             for _ in 0..200 {
                 // Zero-rich payloads exercise short blocks.
-                let raw: heapless_vec::Bytes = (0..len).map(|_| if next() % 4 == 0 { 0 } else { next() as u8 }).collect();
+                let raw: heapless_vec::Bytes =
+                    (0..len).map(|_| if next() % 4 == 0 { 0 } else { next() as u8 }).collect();
                 let mut enc = [0u8; MAX_FRAME_LEN];
                 let m = cobs::encode(raw.as_slice(), &mut enc);
                 let mut out = [0u8; MAX_FRAME_LEN];

@@ -140,11 +140,8 @@ pub struct GyroConfig {
 
 impl GyroConfig {
     /// The rig's default: ±500 °/s, 800 Hz, BW = 11 (110 Hz cut-off).
-    pub const DEFAULT: GyroConfig = GyroConfig {
-        full_scale: FullScale::Dps500,
-        odr: Odr::Hz800,
-        bandwidth: Bandwidth::Bw3,
-    };
+    pub const DEFAULT: GyroConfig =
+        GyroConfig { full_scale: FullScale::Dps500, odr: Odr::Hz800, bandwidth: Bandwidth::Bw3 };
 }
 
 impl Default for GyroConfig {

@@ -28,7 +28,12 @@ fn vectors() -> Vec<(u16, RigMsg, &'static str)> {
         (0, hello(), "01 01 02 01 02 01 10 01 03 03 a0 e3 13 01 01 c0 84 3d c0 3c db 0f 00"),
         (
             1,
-            RigMsg::Sample(Sample { t_us: 1_000_000, encoder: 4_294_967_000, rate_counts: [1000, -1000, 0], status: 0 }),
+            RigMsg::Sample(Sample {
+                t_us: 1_000_000,
+                encoder: 4_294_967_000,
+                rate_counts: [1000, -1000, 0],
+                status: 0,
+            }),
             "0f 01 01 c0 84 3d d8 fd ff ff 0f d0 0f cf 0f 01 05 ac 83 68 ab 00",
         ),
         (
@@ -104,7 +109,11 @@ fn command_vectors() -> Vec<(u16, Command, &'static str)> {
         (2, Command::Stop, "07 02 02 cb 37 1f 37 00"),
         (
             3,
-            Command::ConfigureGyro(GyroConfig { full_scale: FullScale::Dps2000, odr: Odr::Hz400, bandwidth: Bandwidth::Bw1 }),
+            Command::ConfigureGyro(GyroConfig {
+                full_scale: FullScale::Dps2000,
+                odr: Odr::Hz400,
+                bandwidth: Bandwidth::Bw1,
+            }),
             "0a 03 03 02 02 01 18 ae 22 f5 00",
         ),
         (4, Command::Heartbeat, "07 04 04 11 81 71 78 00"),

@@ -92,7 +92,10 @@ fn a_truncated_capture_reports_its_tail_and_calibrates_from_the_rest() {
     let cut = f[k].0 + 4;
     let cap = decode(&clean[..cut]);
     assert_eq!(cap.loss.errors.len(), 1);
-    assert_eq!(cap.loss.errors[0], host::capture::StreamError { offset: f[k].0 as u64, len: 4, error: FrameError::Truncated });
+    assert_eq!(
+        cap.loss.errors[0],
+        host::capture::StreamError { offset: f[k].0 as u64, len: 4, error: FrameError::Truncated }
+    );
     assert_eq!(cap.runs.len(), 2);
     assert!(cap.runs[0].stopped && !cap.runs[1].stopped, "pose 2 ends with the data, not with RunStopped");
     calibrates_to_truth(&clean[..cut], "truncated");

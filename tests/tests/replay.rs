@@ -28,11 +28,10 @@ fn the_committed_demo_capture_decodes_cleanly_and_calibrates_to_its_truth() {
 
 #[test]
 fn timestamps_and_encoder_wrapping_mid_run_change_nothing() {
-    let runs = vec![RunSpec { pose: Pose::One, rate_dps: 180.0, duration_s: 8.0 }, RunSpec {
-        pose: Pose::Two,
-        rate_dps: 180.0,
-        duration_s: 8.0,
-    }];
+    let runs = vec![
+        RunSpec { pose: Pose::One, rate_dps: 180.0, duration_s: 8.0 },
+        RunSpec { pose: Pose::Two, rate_dps: 180.0, duration_s: 8.0 },
+    ];
     let mut plain = SimConfig::with_runs(21, runs);
     plain.start_t_us = 0;
     let mut wrapped = plain.clone();
@@ -61,10 +60,8 @@ fn timestamps_and_encoder_wrapping_mid_run_change_nothing() {
 
 #[test]
 fn a_capture_with_one_pose_is_refused_with_the_missing_pose_named() {
-    let out = sim::simulate(&SimConfig::with_runs(
-        3,
-        vec![RunSpec { pose: Pose::Two, rate_dps: 180.0, duration_s: 4.0 }],
-    ));
+    let out =
+        sim::simulate(&SimConfig::with_runs(3, vec![RunSpec { pose: Pose::Two, rate_dps: 180.0, duration_s: 4.0 }]));
     let cap = decode(&out.bytes);
     let err = calib::calibrate(&cap.runs, &CalOptions::default()).unwrap_err();
     assert_eq!(err.to_string(), "only pose 2 was captured: pose 1 is needed too (axis directions need both poses)");

@@ -26,12 +26,8 @@ fn run_seed(seed: u64) -> SeedResult {
     let out = simulate(&SimConfig::standard(seed, DURATION_S));
     let capture = decode(&out.bytes);
     assert!(capture.loss.is_clean(), "seed {seed}: {:?}", capture.loss);
-    let report = calibrate(&capture.runs, &CalOptions::default())
-        .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
-    SeedResult {
-        truth: out.truth,
-        report,
-    }
+    let report = calibrate(&capture.runs, &CalOptions::default()).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+    SeedResult { truth: out.truth, report }
 }
 
 fn all_seeds() -> Vec<SeedResult> {
@@ -70,27 +66,14 @@ fn simulated_captures_meet_the_acceptance_bars() {
         for (i, a) in rep.axes.iter().enumerate() {
             // Sensitivity within 3σ.
             let zk = (a.k_counts_per_dps - r.truth.k_counts_per_dps[i]) / a.k_sigma;
-            assert!(
-                zk.abs() <= Z_1D,
-                "seed {seed} axis {}: k z = {zk:.2}\n{}",
-                a.axis,
-                rep.summary()
-            );
+            assert!(zk.abs() <= Z_1D, "seed {seed} axis {}: k z = {zk:.2}\n{}", a.axis, rep.summary());
             // Direction within the 2-D 3σ ellipse of its tilt components.
             let s = r.truth.s[i];
             let (j, l) = ((i + 1) % 3, (i + 2) % 3);
             let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
-            let d = [
-                a.tilt_components_deg[0] - truth_tilt[0],
-                a.tilt_components_deg[1] - truth_tilt[1],
-            ];
+            let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
             let md = mahalanobis2(d, a.tilt_components_cov_deg2);
-            assert!(
-                md <= Z_2D,
-                "seed {seed} axis {}: direction {md:.2} σ off\n{}",
-                a.axis,
-                rep.summary()
-            );
+            assert!(md <= Z_2D, "seed {seed} axis {}: direction {md:.2} σ off\n{}", a.axis, rep.summary());
         }
         zs.extend(parameter_z(r));
         let paper = rep.paper.as_ref().expect("paper cross-check");
@@ -132,9 +115,7 @@ fn decode_and_calibrate_throughput() {
         std::hint::black_box(calibrate(&capture.runs, &opts).unwrap());
         best_cal = best_cal.min(t.elapsed().as_secs_f64());
     }
-    let summary = calibrate(&decode(&out.bytes).runs, &opts)
-        .unwrap()
-        .summary();
+    let summary = calibrate(&decode(&out.bytes).runs, &opts).unwrap().summary();
     eprintln!("{summary}");
     eprintln!(
         "decode {:.1} M/s, calibrate {:.1} M/s, both {:.1} M samples/s",

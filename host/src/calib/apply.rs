@@ -68,13 +68,7 @@ impl Calibration {
     ) -> Result<Self, CalibrationFileError> {
         let m = Matrix3::from_fn(|i, j| m_counts_per_dps[i][j]);
         let m_inv = m.try_inverse().ok_or(CalibrationFileError::Singular)?;
-        Ok(Self {
-            model,
-            full_scale,
-            m_counts_per_dps,
-            offset_counts,
-            m_inv,
-        })
+        Ok(Self { model, full_scale, m_counts_per_dps, offset_counts, m_inv })
     }
 
     /// Rate vector in the package frame, °/s, from one raw reading.
@@ -105,13 +99,7 @@ mod tests {
     fn apply_recovers_a_known_rate_vector() {
         let m = [[57.3, 0.9, -0.4], [-0.6, 56.8, 1.1], [0.3, -0.7, 58.0]];
         let off = [12.0, -30.5, 4.25];
-        let cal = Calibration::new(
-            "linear: v = K S ω + v_off".into(),
-            FullScale::Dps500,
-            m,
-            off,
-        )
-        .unwrap();
+        let cal = Calibration::new("linear: v = K S ω + v_off".into(), FullScale::Dps500, m, off).unwrap();
         let w = Vector3::new(120.0, -45.5, 200.25);
         let v = Matrix3::from_fn(|i, j| m[i][j]) * w + Vector3::from(off);
         let raw = [v.x.round() as i16, v.y.round() as i16, v.z.round() as i16];

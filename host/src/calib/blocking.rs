@@ -52,9 +52,7 @@ pub struct Blocking<const L: usize> {
 
 impl<const L: usize> Default for Blocking<L> {
     fn default() -> Self {
-        Self {
-            levels: [Level::default(); LEVELS],
-        }
+        Self { levels: [Level::default(); LEVELS] }
     }
 }
 
@@ -142,14 +140,8 @@ impl<const L: usize> Blocking<L> {
                 let mean = l.sum[lane] / n;
                 let var = (l.sumsq[lane] / n - mean * mean).max(0.0);
                 let lag_n = l.lag_n as f64;
-                let gamma = (l.lag[lane] - 2.0 * mean * l.sum[lane] * (lag_n / n)
-                    + lag_n * mean * mean)
-                    / n;
-                let r2 = if var > 0.0 {
-                    (gamma / var).powi(2)
-                } else {
-                    0.0
-                };
+                let gamma = (l.lag[lane] - 2.0 * mean * l.sum[lane] * (lag_n / n) + lag_n * mean * mean) / n;
+                let r2 = if var > 0.0 { (gamma / var).powi(2) } else { 0.0 };
                 (n, var, r2)
             })
             .collect();
@@ -162,16 +154,10 @@ impl<const L: usize> Blocking<L> {
         for k in (0..d).rev() {
             tail[k] = tail[k + 1] + stats[k].0 * stats[k].2;
         }
-        let level = (0..d)
-            .find(|&j| tail[j] < chi2_99((d - j) as f64))
-            .unwrap_or(d - 1);
+        let level = (0..d).find(|&j| tail[j] < chi2_99((d - j) as f64)).unwrap_or(d - 1);
         let (n0, var0, _) = stats[0];
         let (nj, varj, _) = stats[level];
-        Some(LongRun {
-            variance: var0,
-            long_run_variance: n0 * varj / nj,
-            level,
-        })
+        Some(LongRun { variance: var0, long_run_variance: n0 * varj / nj, level })
     }
 }
 
@@ -184,9 +170,7 @@ mod tests {
 
     fn white(n: usize, seed: u64) -> Vec<f64> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        (0..n)
-            .map(|_| rng.sample::<f64, _>(StandardNormal))
-            .collect()
+        (0..n).map(|_| rng.sample::<f64, _>(StandardNormal)).collect()
     }
 
     #[test]
@@ -215,10 +199,7 @@ mod tests {
         let lr = b.estimate(0).unwrap();
         let theory = (1.0 + a) / (1.0 - a);
         // At the chosen level (≥ 2^6 blocks of 2^level) the relative error is √(2/n_j) ≲ 0.1.
-        assert!(
-            (lr.inflation() / theory - 1.0).abs() < 0.2,
-            "{lr:?} vs {theory}"
-        );
+        assert!((lr.inflation() / theory - 1.0).abs() < 0.2, "{lr:?} vs {theory}");
     }
 
     #[test]

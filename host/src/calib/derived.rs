@@ -12,11 +12,7 @@ use serde::{Deserialize, Serialize};
 const STEP_SIGMAS: f64 = 1e-3;
 
 /// First-order propagation of `cov` through `f` at `x`: returns f(x) and J·cov·Jᵀ.
-pub fn delta_method(
-    f: impl Fn(&[f64]) -> Vec<f64>,
-    x: &[f64],
-    cov: &DMatrix<f64>,
-) -> (Vec<f64>, DMatrix<f64>) {
+pub fn delta_method(f: impl Fn(&[f64]) -> Vec<f64>, x: &[f64], cov: &DMatrix<f64>) -> (Vec<f64>, DMatrix<f64>) {
     let y = f(x);
     let mut jac = DMatrix::zeros(y.len(), x.len());
     let mut xp = x.to_vec();
@@ -91,9 +87,7 @@ const PAIRS: [(usize, usize); 3] = [(0, 1), (1, 2), (0, 2)];
 /// row of M): per axis k, s (3), offset, tilt, two tilt components (8); then 3 inter-axis angles.
 fn derived_vector(p: &[f64]) -> Vec<f64> {
     let mut out = Vec::with_capacity(27);
-    let rows: Vec<Vector3<f64>> = (0..3)
-        .map(|i| Vector3::new(p[4 * i], p[4 * i + 1], p[4 * i + 2]))
-        .collect();
+    let rows: Vec<Vector3<f64>> = (0..3).map(|i| Vector3::new(p[4 * i], p[4 * i + 1], p[4 * i + 2])).collect();
     for (i, m) in rows.iter().enumerate() {
         let k = m.norm();
         let s = m / k;
@@ -135,10 +129,7 @@ pub fn derive(
             tilt_sigma_deg: sd(o + 5),
             tilt_component_axes: [AXES[(i + 1) % 3], AXES[(i + 2) % 3]],
             tilt_components_deg: [y[o + 6], y[o + 7]],
-            tilt_components_cov_deg2: [
-                [c[(o + 6, o + 6)], c[(o + 6, o + 7)]],
-                [c[(o + 7, o + 6)], c[(o + 7, o + 7)]],
-            ],
+            tilt_components_cov_deg2: [[c[(o + 6, o + 6)], c[(o + 6, o + 7)]], [c[(o + 7, o + 6)], c[(o + 7, o + 7)]]],
         }
     });
     let angles = std::array::from_fn(|n| {
@@ -203,9 +194,6 @@ mod tests {
         assert!((axes[0].k_sigma - 1e-3).abs() < 1e-9);
         // σ of a tilt component: σ/k rad.
         assert!((axes[1].tilt_components_deg[0] - 0.0).abs() < 1e-12);
-        assert!(
-            (axes[1].tilt_components_cov_deg2[0][0].sqrt() - (1e-3 / 57.0f64).to_degrees()).abs()
-                < 1e-9
-        );
+        assert!((axes[1].tilt_components_cov_deg2[0][0].sqrt() - (1e-3 / 57.0f64).to_degrees()).abs() < 1e-9);
     }
 }

@@ -10,9 +10,7 @@ pub enum CalError {
     #[error("no runs to calibrate: the capture holds no run")]
     NoRuns,
     /// The axis directions need both poses (EXCITER.md, eq. 4-5; the linear fit is singular too).
-    #[error(
-        "only {present} was captured: {missing} is needed too (axis directions need both poses)"
-    )]
+    #[error("only {present} was captured: {missing} is needed too (axis directions need both poses)")]
     MissingPose {
         /// The pose that is there.
         present: Pose,
@@ -62,5 +60,11 @@ pub enum CalError {
         axis: char,
         /// Reciprocal condition number of the scaled normal matrix.
         rcond: f64,
+    },
+    /// An extended model whose parameters the runs cannot tell apart.
+    #[error("the runs do not separate the parameters of the model with {effects}")]
+    Unidentifiable {
+        /// The effects in the model.
+        effects: String,
     },
 }

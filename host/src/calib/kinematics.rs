@@ -49,10 +49,7 @@ pub struct KinOptions {
 
 impl Default for KinOptions {
     fn default() -> Self {
-        Self {
-            rate_window_s: 0.020,
-            steady_tolerance: 0.02,
-        }
+        Self { rate_window_s: 0.020, steady_tolerance: 0.02 }
     }
 }
 
@@ -215,31 +212,21 @@ impl IndexLine {
         let first = pulses[0].centre_counts;
         let all: Vec<(f64, f64)> = pulses
             .iter()
-            .map(|p| {
-                (
-                    ((p.centre_counts - first) / nominal_period_counts).round(),
-                    p.centre_counts,
-                )
-            })
+            .map(|p| (((p.centre_counts - first) / nominal_period_counts).round(), p.centre_counts))
             .collect();
         let mut widths: Vec<f64> = pulses.iter().map(|p| p.width_counts).collect();
         let width_counts = median(&mut widths);
         let (a, p) = line_fit(&all, nominal_period_counts);
         let mut dev: Vec<f64> = all.iter().map(|&(k, c)| (c - a - p * k).abs()).collect();
-        let threshold = (INDEX_OUTLIER_SIGMAS * MAD_TO_SIGMA * median(&mut dev.clone()))
-            .max(INDEX_OUTLIER_FLOOR_COUNTS);
+        let threshold =
+            (INDEX_OUTLIER_SIGMAS * MAD_TO_SIGMA * median(&mut dev.clone())).max(INDEX_OUTLIER_FLOOR_COUNTS);
         let mut points = Vec::with_capacity(all.len());
         for (pt, d) in all.iter().zip(dev.iter_mut()) {
             if *d <= threshold {
                 points.push(*pt);
             }
         }
-        Self {
-            rejected: all.len() - points.len(),
-            pulses: all.len(),
-            points,
-            width_counts,
-        }
+        Self { rejected: all.len() - points.len(), pulses: all.len(), points, width_counts }
     }
 
     /// Least-squares (intercept, slope, σ of centres, σ intercept, σ slope); σ floored at the
@@ -247,24 +234,12 @@ impl IndexLine {
     fn fit(&self, nominal_period_counts: f64) -> (f64, f64, f64, f64, f64) {
         let (a, p) = line_fit(&self.points, nominal_period_counts);
         let n = self.points.len() as f64;
-        let rss: f64 = self
-            .points
-            .iter()
-            .map(|&(k, c)| (c - a - p * k).powi(2))
-            .sum();
+        let rss: f64 = self.points.iter().map(|&(k, c)| (c - a - p * k).powi(2)).sum();
         let quant = UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt();
-        let sigma = if n > 2.0 {
-            (rss / (n - 2.0)).sqrt().max(quant)
-        } else {
-            quant
-        };
+        let sigma = if n > 2.0 { (rss / (n - 2.0)).sqrt().max(quant) } else { quant };
         let kbar = self.points.iter().map(|pt| pt.0).sum::<f64>() / n;
         let skk: f64 = self.points.iter().map(|pt| (pt.0 - kbar).powi(2)).sum();
-        let sp = if skk > 0.0 {
-            sigma / skk.sqrt()
-        } else {
-            f64::INFINITY
-        };
+        let sp = if skk > 0.0 { sigma / skk.sqrt() } else { f64::INFINITY };
         let sa = sigma * (1.0 / n + kbar * kbar / skk.max(f64::MIN_POSITIVE)).sqrt();
         (a, p, (rss / n).sqrt(), sa, sp)
     }
@@ -272,12 +247,7 @@ impl IndexLine {
     /// Intercept with the slope held at `period`, and its σ.
     fn intercept(&self, period_counts: f64, sigma_centre: f64) -> (f64, f64) {
         let n = self.points.len() as f64;
-        let a = self
-            .points
-            .iter()
-            .map(|&(k, c)| c - period_counts * k)
-            .sum::<f64>()
-            / n;
+        let a = self.points.iter().map(|&(k, c)| c - period_counts * k).sum::<f64>() / n;
         (a, sigma_centre / n.sqrt())
     }
 }
@@ -366,11 +336,7 @@ fn temperature_at(run: &Run, t_us: i64, cursor: &mut usize) -> f32 {
     }
     let (a, b) = (&temps[*cursor], &temps[*cursor + 1]);
     let span = (b.t_us - a.t_us) as f64;
-    let w = if span > 0.0 {
-        ((t_us - a.t_us) as f64 / span).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let w = if span > 0.0 { ((t_us - a.t_us) as f64 / span).clamp(0.0, 1.0) } else { 0.0 };
     (f64::from(a.raw) + w * f64::from(b.raw - a.raw)) as f32
 }
 
@@ -393,20 +359,11 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
     for (i, run) in runs.iter().enumerate() {
         let p = pulses(run);
         if p.is_empty() {
-            return Err(CalError::NoIndex {
-                run: i + 1,
-                label: run.label(),
-                edges: run.index.len(),
-            });
+            return Err(CalError::NoIndex { run: i + 1, label: run.label(), edges: run.index.len() });
         }
         let line = IndexLine::new(&p, nominal_period);
         let fit = line.fit(nominal_period);
-        preps.push(RunPrep {
-            run,
-            number: i + 1,
-            line,
-            fit,
-        });
+        preps.push(RunPrep { run, number: i + 1, line, fit });
     }
 
     // Pool the per-run periods, weighted by 1/σ²; runs with a single pulse carry no period.
@@ -418,11 +375,8 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
             psum += p.fit.1 / (sp * sp);
         }
     }
-    let (period, period_sigma) = if wsum > 0.0 {
-        (psum / wsum, (1.0 / wsum).sqrt())
-    } else {
-        (nominal_period, f64::NAN)
-    };
+    let (period, period_sigma) =
+        if wsum > 0.0 { (psum / wsum, (1.0 / wsum).sqrt()) } else { (nominal_period, f64::NAN) };
     let ratio = cpr / period;
     let gear = GearEstimate {
         nominal,
@@ -431,10 +385,7 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
         deviation_ppm: (ratio - nominal) / nominal * 1e6,
     };
 
-    let out = preps
-        .into_iter()
-        .map(|p| run_kinematics(p, cpr, period, ratio, opts))
-        .collect::<Result<_, _>>()?;
+    let out = preps.into_iter().map(|p| run_kinematics(p, cpr, period, ratio, opts)).collect::<Result<_, _>>()?;
     Ok(Kinematics { runs: out, gear })
 }
 
@@ -451,10 +402,7 @@ fn run_kinematics(
     } else {
         UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt()
     };
-    let (ref_counts, ref_sigma) = p.line.intercept(
-        period,
-        centre_sigma.max(UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt()),
-    );
+    let (ref_counts, ref_sigma) = p.line.intercept(period, centre_sigma.max(UNIFORM_QUANTISATION_SIGMA / 2f64.sqrt()));
     let index = IndexStats {
         pulses: p.line.pulses,
         rejected: p.line.rejected,
@@ -463,19 +411,13 @@ fn run_kinematics(
         ref_sigma_deg: ref_sigma / period * 360.0,
         centre_rms_counts: p.fit.2,
         plate_width_counts: p.line.width_counts,
-        period_counts: if p.fit.4.is_finite() {
-            p.fit.1
-        } else {
-            f64::NAN
-        },
+        period_counts: if p.fit.4.is_finite() { p.fit.1 } else { f64::NAN },
         period_sigma_counts: p.fit.4,
     };
 
     let s = &run.samples;
     let total = s.len();
-    let dt_s = strided_median(total.saturating_sub(1), |i| {
-        (s[i + 1].t_us - s[i].t_us) as f64
-    }) * 1e-6;
+    let dt_s = strided_median(total.saturating_sub(1), |i| (s[i + 1].t_us - s[i].t_us) as f64) * 1e-6;
     let sample_rate_hz = 1.0 / dt_s;
     let h = ((opts.rate_window_s * sample_rate_hz / 2.0).round() as usize).max(1);
     let deg_per_count = 360.0 / cpr;
@@ -495,11 +437,7 @@ fn run_kinematics(
         .map(rate_at)
         .filter(|r| (r - commanded).abs() <= near_band)
         .collect();
-    let steady_rate_dps = if near.is_empty() {
-        strided_median(windows, rate_at)
-    } else {
-        median(&mut near)
-    };
+    let steady_rate_dps = if near.is_empty() { strided_median(windows, rate_at) } else { median(&mut near) };
     let tol = opts.steady_tolerance * steady_rate_dps.abs();
 
     let mut samples = Vec::with_capacity(windows);

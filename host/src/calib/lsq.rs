@@ -128,9 +128,7 @@ impl<const P: usize> NormalEq<P> {
         if a == b {
             return self.xtx_axis(a);
         }
-        SMatrix::from_fn(|i, j| {
-            self.xtx[i][j] - self.xtx_clipped[a][i][j] - self.xtx_clipped[b][i][j]
-        })
+        SMatrix::from_fn(|i, j| self.xtx[i][j] - self.xtx_clipped[a][i][j] - self.xtx_clipped[b][i][j])
     }
 
     /// Xᵀy of one axis.
@@ -145,10 +143,7 @@ impl<const P: usize> NormalEq<P> {
 }
 
 /// Accumulates one run's sums.
-pub fn accumulate_run<const P: usize, M: Columns<P>>(
-    model: &M,
-    run: &RunKinematics,
-) -> NormalEq<P> {
+pub fn accumulate_run<const P: usize, M: Columns<P>>(model: &M, run: &RunKinematics) -> NormalEq<P> {
     let mut total = NormalEq::default();
     for chunk in run.samples.chunks(CHUNK) {
         let mut local = NormalEq::default();
@@ -182,10 +177,7 @@ impl<const P: usize> AxisSolution<P> {
 }
 
 /// Solves one axis; `Singular` if the scaled normal matrix is (nearly) rank-deficient.
-pub fn solve_axis<const P: usize>(
-    eq: &NormalEq<P>,
-    axis: usize,
-) -> Result<AxisSolution<P>, CalError> {
+pub fn solve_axis<const P: usize>(eq: &NormalEq<P>, axis: usize) -> Result<AxisSolution<P>, CalError> {
     let a = eq.xtx_axis(axis);
     let b = eq.xty_axis(axis);
     let d = SMatrix::<f64, P, 1>::from_fn(|i, _| {
@@ -200,10 +192,7 @@ pub fn solve_axis<const P: usize>(
     let eig = nalgebra::DMatrix::from_fn(P, P, |i, j| scaled[(i, j)]).symmetric_eigenvalues();
     let (lo, hi) = (eig.min(), eig.max());
     let rcond: f64 = if hi > 0.0 { lo / hi } else { 0.0 };
-    let singular = || CalError::Singular {
-        axis: AXES[axis],
-        rcond: rcond.max(0.0),
-    };
+    let singular = || CalError::Singular { axis: AXES[axis], rcond: rcond.max(0.0) };
     let regular = rcond > MIN_RCOND;
     if !regular || d.iter().any(|&v| v == 0.0) {
         return Err(singular());
@@ -214,12 +203,7 @@ pub fn solve_axis<const P: usize>(
     let beta = xtx_inv * b;
     // yᵀy − 2βᵀXᵀy + βᵀXᵀXβ: the residual's own size sets the error, ~1e-11 relative here.
     let rss = (eq.yty[axis] - 2.0 * beta.dot(&b) + (beta.transpose() * a * beta)[(0, 0)]).max(0.0);
-    Ok(AxisSolution {
-        beta,
-        xtx_inv,
-        rss,
-        n: eq.n_axis(axis),
-    })
+    Ok(AxisSolution { beta, xtx_inv, rss, n: eq.n_axis(axis) })
 }
 
 /// A model fitted to all runs.
@@ -258,16 +242,8 @@ pub fn fit<const P: usize, M: Columns<P>>(model: &M, kin: &Kinematics) -> Result
     for r in &per_run {
         total.merge(r);
     }
-    let axes = [
-        solve_axis(&total, 0)?,
-        solve_axis(&total, 1)?,
-        solve_axis(&total, 2)?,
-    ];
-    Ok(Fit {
-        per_run,
-        total,
-        axes,
-    })
+    let axes = [solve_axis(&total, 0)?, solve_axis(&total, 1)?, solve_axis(&total, 2)?];
+    Ok(Fit { per_run, total, axes })
 }
 
 /// Residuals of one run, per sample and axis, counts (NaN where the axis clipped): for

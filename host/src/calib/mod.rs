@@ -8,24 +8,39 @@
 
 pub mod apply;
 pub mod blocking;
+pub mod catalogue;
+pub mod closure;
 pub mod derived;
+pub mod diagnostics;
 pub mod error;
+pub mod extended;
+pub mod html_report;
 pub mod kinematics;
+mod loop_summary;
 pub mod lsq;
 pub mod model;
 pub mod paper;
 pub mod report;
 pub mod residuals;
+pub mod selection;
+pub mod spectrum;
+pub mod stats;
+pub mod truth_check;
 
 #[cfg(test)]
 mod acceptance_tests;
+#[cfg(test)]
+mod loop_tests;
 #[cfg(test)]
 mod testgen;
 #[cfg(test)]
 mod tests;
 
 pub use apply::{Calibration, CalibrationFileError};
+pub use catalogue::Effect;
+pub use closure::{close_loop, LoopOptions, LoopReport, Verdict};
 pub use error::CalError;
+pub use html_report::write_report;
 pub use kinematics::KinOptions;
 pub use report::CalReport;
 
@@ -51,10 +66,7 @@ pub struct CalOptions {
 
 impl Default for CalOptions {
     fn default() -> Self {
-        Self {
-            kinematics: KinOptions::default(),
-            noise_window_s: 0.1,
-        }
+        Self { kinematics: KinOptions::default(), noise_window_s: 0.1 }
     }
 }
 
@@ -79,10 +91,7 @@ fn check_runs(runs: &[Run]) -> Result<(), CalError> {
     }
     for (pose, other) in [(Pose::One, Pose::Two), (Pose::Two, Pose::One)] {
         if !runs.iter().any(|r| r.pose == pose) {
-            return Err(CalError::MissingPose {
-                present: other,
-                missing: pose,
-            });
+            return Err(CalError::MissingPose { present: other, missing: pose });
         }
     }
     Ok(())
@@ -191,9 +200,7 @@ pub fn calibrate(runs: &[Run], opts: &CalOptions) -> Result<CalReport, CalError>
         m_counts_per_dps: std::array::from_fn(|i| std::array::from_fn(|j| params[4 * i + j])),
         offset_counts: std::array::from_fn(|i| params[4 * i + 3]),
         param_names,
-        cov: (0..12)
-            .map(|i| (0..12).map(|j| cov[(i, j)]).collect())
-            .collect(),
+        cov: (0..12).map(|i| (0..12).map(|j| cov[(i, j)]).collect()).collect(),
         axes,
         inter_axis,
         residuals: std::array::from_fn(|a| axis_residual(&res.pooled, a)),

@@ -84,13 +84,7 @@ struct SinFit {
 }
 
 /// Fits one axis in one pose from the joint fit's sums over that pose's runs.
-fn fit_pose(
-    eq: &NormalEq<4>,
-    r: Matrix3<f64>,
-    axis: usize,
-    inflation: f64,
-    pose: Pose,
-) -> Option<SinFit> {
+fn fit_pose(eq: &NormalEq<4>, r: Matrix3<f64>, axis: usize, inflation: f64, pose: Pose) -> Option<SinFit> {
     let a = eq.xtx_axis(axis);
     let b = eq.xty_axis(axis);
     let n = eq.n_axis(axis);
@@ -140,10 +134,7 @@ fn construct(p: &[f64], r: [&Matrix3<f64>; 2], theta2_mean: [f64; 2], axis: usiz
     }
     let k = num / den;
     // Baseline at θ̄2' = offset + k (R_q s)_z θ̄2': remove the constant θ2' term, average poses.
-    let offset = (0..2)
-        .map(|q| p[4 * q + 3] - k * (r[q] * s).z * theta2_mean[q])
-        .sum::<f64>()
-        / 2.0;
+    let offset = (0..2).map(|q| p[4 * q + 3] - k * (r[q] * s).z * theta2_mean[q]).sum::<f64>() / 2.0;
     vec![s.x, s.y, s.z, k, offset]
 }
 
@@ -151,12 +142,7 @@ fn construct(p: &[f64], r: [&Matrix3<f64>; 2], theta2_mean: [f64; 2], axis: usiz
 /// (`joint[i]` = [s (3), k, offset] of axis i). `inflation[i]` scales each sinusoid's
 /// covariance for residual autocorrelation, as measured on the joint fit's residuals (the
 /// same noise). None if a pose has no samples or a 4×4 system is singular.
-pub fn paper_check(
-    fit: &Fit<4>,
-    kin: &Kinematics,
-    inflation: [f64; 3],
-    joint: [[f64; 5]; 3],
-) -> Option<PaperCheck> {
+pub fn paper_check(fit: &Fit<4>, kin: &Kinematics, inflation: [f64; 3], joint: [[f64; 5]; 3]) -> Option<PaperCheck> {
     let mut eqs = [NormalEq::<4>::default(), NormalEq::<4>::default()];
     for (run, eq) in kin.runs.iter().zip(&fit.per_run) {
         let q = usize::from(run.pose.number()) - 1;
@@ -174,21 +160,13 @@ pub fn paper_check(
         let mut cov = DMatrix::zeros(8, 8);
         cov.view_mut((0, 0), (4, 4)).copy_from(&f1.cov);
         cov.view_mut((4, 4), (4, 4)).copy_from(&f2.cov);
-        let means = [
-            f1.sinusoid.mean_theta2_rate_dps,
-            f2.sinusoid.mean_theta2_rate_dps,
-        ];
+        let means = [f1.sinusoid.mean_theta2_rate_dps, f2.sinusoid.mean_theta2_rate_dps];
         let (y, c) = delta_method(|v| construct(v, [&f1.r, &f2.r], means, axis), &p, &cov);
         let sd: Vec<f64> = (0..5).map(|i| c[(i, i)].max(0.0).sqrt()).collect();
         let z: Vec<f64> = (0..5).map(|i| (joint[axis][i] - y[i]) / sd[i]).collect();
         // The on-axis component of s is cos(tilt): its first-order σ vanishes with the tilt,
         // so it is reported but not pooled.
-        zs.extend(
-            z.iter()
-                .enumerate()
-                .filter(|&(i, _)| i != axis)
-                .map(|(_, v)| *v),
-        );
+        zs.extend(z.iter().enumerate().filter(|&(i, _)| i != axis).map(|(_, v)| *v));
         axes.push(PaperAxis {
             axis: AXES[axis],
             s: [y[0], y[1], y[2]],

@@ -134,13 +134,8 @@ pub struct CalReport {
 impl CalReport {
     /// The part needed to turn raw counts into rates.
     pub fn calibration(&self) -> Calibration {
-        Calibration::new(
-            self.model.clone(),
-            self.gyro.full_scale,
-            self.m_counts_per_dps,
-            self.offset_counts,
-        )
-        .expect("M passed the fit's conditioning check, so it is invertible")
+        Calibration::new(self.model.clone(), self.gyro.full_scale, self.m_counts_per_dps, self.offset_counts)
+            .expect("M passed the fit's conditioning check, so it is invertible")
     }
 
     /// A readable multi-line summary, units everywhere, 1-σ beside each value.
@@ -205,57 +200,29 @@ impl CalReport {
                 p.axes[0], p.axes[1], p.angle_deg, p.sigma_deg, p.non_orthogonality_deg
             );
         }
-        let _ = writeln!(
-            o,
-            "\nResiduals (RMS vs noise floor measured from the data):"
-        );
+        let _ = writeln!(o, "\nResiduals (RMS vs noise floor measured from the data):");
         for r in &self.residuals {
             let _ = writeln!(
                 o,
                 "  {}: {:.2} counts = {:.4} °/s; floor {:.2} counts = {:.4} °/s; ratio {:.3}",
-                r.axis,
-                r.rms_counts,
-                r.rms_dps,
-                r.noise_floor_counts,
-                r.noise_floor_dps,
-                r.rms_over_floor
+                r.axis, r.rms_counts, r.rms_dps, r.noise_floor_counts, r.noise_floor_dps, r.rms_over_floor
             );
         }
         for rr in &self.run_residuals {
             let ratios: Vec<String> = rr
                 .axes
                 .iter()
-                .map(|a| {
-                    format!(
-                        "{} {:.2}/{:.2} counts",
-                        a.axis, a.rms_counts, a.noise_floor_counts
-                    )
-                })
+                .map(|a| format!("{} {:.2}/{:.2} counts", a.axis, a.rms_counts, a.noise_floor_counts))
                 .collect();
-            let _ = writeln!(
-                o,
-                "  run {} ({}, {:+.1} °/s): {}",
-                rr.run,
-                rr.pose,
-                rr.commanded_rate_dps,
-                ratios.join(", ")
-            );
+            let _ =
+                writeln!(o, "  run {} ({}, {:+.1} °/s): {}", rr.run, rr.pose, rr.commanded_rate_dps, ratios.join(", "));
         }
         let ac: Vec<String> = self
             .autocorrelation
             .iter()
-            .map(|a| {
-                format!(
-                    "{} ×{:.2} (blocks of {})",
-                    a.axis, a.inflation, a.block_samples
-                )
-            })
+            .map(|a| format!("{} ×{:.2} (blocks of {})", a.axis, a.inflation, a.block_samples))
             .collect();
-        let _ = writeln!(
-            o,
-            "  covariance inflation for autocorrelation: {}",
-            ac.join(", ")
-        );
+        let _ = writeln!(o, "  covariance inflation for autocorrelation: {}", ac.join(", "));
         let gr = &self.gear;
         let _ = writeln!(
             o,
@@ -290,10 +257,7 @@ impl CalReport {
         }
         match &self.paper {
             Some(p) => {
-                let _ = writeln!(
-                    o,
-                    "\nPaper method (eq. 4-5) cross-check, z = (joint − paper)/σ_paper:"
-                );
+                let _ = writeln!(o, "\nPaper method (eq. 4-5) cross-check, z = (joint − paper)/σ_paper:");
                 for a in &p.axes {
                     let _ = writeln!(
                         o,
@@ -313,11 +277,7 @@ impl CalReport {
                         a.z_s[2]
                     );
                 }
-                let _ = writeln!(
-                    o,
-                    "  agreement: max |z| {:.2}, rms z {:.2}",
-                    p.max_abs_z, p.rms_z
-                );
+                let _ = writeln!(o, "  agreement: max |z| {:.2}, rms z {:.2}", p.max_abs_z, p.rms_z);
             }
             None => {
                 let _ = writeln!(o, "\nPaper method cross-check: not available (a per-pose sinusoid fit was singular)");

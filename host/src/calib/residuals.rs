@@ -93,8 +93,7 @@ pub fn residual_pass<const P: usize, M: Columns<P>>(
     let mut cross = [[0.0f64; 3]; 3];
     let mut buf = Vec::new();
     let mut per_run = Vec::with_capacity(kin.runs.len());
-    let (mut pooled_n, mut pooled_ss, mut pooled_hp, mut pooled_hw) =
-        ([0u64; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+    let (mut pooled_n, mut pooled_ss, mut pooled_hp, mut pooled_hw) = ([0u64; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
     for run in &kin.runs {
         run_residuals(model, fit, run, &mut buf);
         let mut n = [0u64; 3];
@@ -124,13 +123,7 @@ pub fn residual_pass<const P: usize, M: Columns<P>>(
         let rr = RunResidual {
             n,
             rms_counts: std::array::from_fn(|a| (ss[a] / n[a].max(1) as f64).sqrt()),
-            noise_floor_counts: std::array::from_fn(|a| {
-                if hw > 0.0 {
-                    (hp[a] / hw).sqrt()
-                } else {
-                    f64::NAN
-                }
-            }),
+            noise_floor_counts: std::array::from_fn(|a| if hw > 0.0 { (hp[a] / hw).sqrt() } else { f64::NAN }),
         };
         for a in 0..3 {
             pooled_n[a] += n[a];
@@ -146,12 +139,7 @@ pub fn residual_pass<const P: usize, M: Columns<P>>(
         noise_floor_counts: std::array::from_fn(|a| (pooled_hp[a] / pooled_hw[a]).sqrt()),
     };
     // Fewer than two unclipped residuals leave an axis as undetermined as a singular system.
-    let estimate = |a: usize| {
-        blocking.estimate(a).ok_or(CalError::Singular {
-            axis: AXES[a],
-            rcond: 0.0,
-        })
-    };
+    let estimate = |a: usize| blocking.estimate(a).ok_or(CalError::Singular { axis: AXES[a], rcond: 0.0 });
     let long_run = [estimate(0)?, estimate(1)?, estimate(2)?];
     let correlation = std::array::from_fn(|i| {
         std::array::from_fn(|j| {
@@ -166,10 +154,5 @@ pub fn residual_pass<const P: usize, M: Columns<P>>(
             }
         })
     });
-    Ok(ResidualPass {
-        per_run,
-        pooled,
-        long_run,
-        correlation,
-    })
+    Ok(ResidualPass { per_run, pooled, long_run, correlation })
 }

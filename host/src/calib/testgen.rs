@@ -82,11 +82,7 @@ impl GenRun {
         let odr = f64::from(gyro.odr.hz());
         let hello = Hello {
             protocol_version: 1,
-            firmware: Version {
-                major: 0,
-                minor: 1,
-                patch: 0,
-            },
+            firmware: Version { major: 0, minor: 1, patch: 0 },
             gyro,
             encoder_counts_per_rev: COUNTS_PER_REV,
             gear_ratio: GearRatio { num: 1, den: 1 },
@@ -149,21 +145,13 @@ impl GenRun {
                 prev = b;
             }
         }
-        let temperatures = (0..self.duration_s as i64)
-            .map(|s| RunTemperature {
-                t_us: s * 1_000_000,
-                raw: 20,
-            })
-            .collect();
+        let temperatures =
+            (0..self.duration_s as i64).map(|s| RunTemperature { t_us: s * 1_000_000, raw: 20 }).collect();
         Run {
             hello,
             pose: self.pose,
             rate_mdps: (self.rate_dps.abs() * 1000.0).round() as u32,
-            direction: if self.rate_dps < 0.0 {
-                Direction::Cw
-            } else {
-                Direction::Ccw
-            },
+            direction: if self.rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
             gyro,
             origin: RunOrigin::Started,
             offset: 0,
@@ -180,8 +168,5 @@ impl GenRun {
 
 /// One run per pose at 0.5 Hz (180 °/s).
 pub fn two_pose_runs(seed: u64) -> Vec<Run> {
-    vec![
-        GenRun::new(Pose::One, 180.0, seed).generate(),
-        GenRun::new(Pose::Two, 180.0, seed + 1000).generate(),
-    ]
+    vec![GenRun::new(Pose::One, 180.0, seed).generate(), GenRun::new(Pose::Two, 180.0, seed + 1000).generate()]
 }

@@ -13,60 +13,34 @@ fn kinematics_reference_theta2_in_both_directions() {
         let mut g = GenRun::new(Pose::One, rate, 3);
         g.gear_ratio = 1.0 + 200e-6;
         let run = g.generate();
-        let kin =
-            kinematics::reconstruct(std::slice::from_ref(&run), &KinOptions::default()).unwrap();
+        let kin = kinematics::reconstruct(std::slice::from_ref(&run), &KinOptions::default()).unwrap();
         let k = &kin.runs[0];
         // Gear ratio: ~19 pulses, centres to ±0.3 count over 19 × 324 000 counts: σ ~ 1e-8.
-        assert!(
-            (kin.gear.estimated - g.gear_ratio).abs() < 1e-6,
-            "{:?}",
-            kin.gear
-        );
-        assert!(
-            (kin.gear.deviation_ppm - 200.0).abs() < 1.0,
-            "{:?}",
-            kin.gear
-        );
+        assert!((kin.gear.estimated - g.gear_ratio).abs() < 1e-6, "{:?}", kin.gear);
+        assert!((kin.gear.deviation_ppm - 200.0).abs() < 1.0, "{:?}", kin.gear);
         // θ2 is known to the encoder quantum (360°/324 000 = 0.0011°) and the reference's σ.
         let tol_rad = (2.0 * 360.0 / f64::from(COUNTS_PER_REV)).to_radians();
         let (mut max_err, mut max_rate_err) = (0.0f64, 0.0f64);
         for s in &k.samples {
             let t = s.t_s;
             let truth = g.theta2_0_rad + g.gear_ratio * g.theta1(t).0.to_radians();
-            let d = (s.theta2_rad - truth + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
+            let d =
+                (s.theta2_rad - truth + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
             max_err = max_err.max(d.abs());
             // A window straddling the end of the ramp (a step in acceleration) is not a line.
             if (t - g.ramp_s).abs() > 0.011 {
                 max_rate_err = max_rate_err.max((s.theta1_rate_dps - g.theta1(t).1).abs());
             }
         }
-        assert!(
-            max_err < tol_rad,
-            "θ2 error {max_err} rad, {:?} {:?}",
-            kin.gear,
-            k.index
-        );
+        assert!(max_err < tol_rad, "θ2 error {max_err} rad, {:?} {:?}", kin.gear, k.index);
         // Rate quantisation is 0.013 °/s rms (KinOptions); 5σ.
-        assert!(
-            max_rate_err < 5.0 * k.rate_quantisation_dps,
-            "{max_rate_err} vs {}",
-            k.rate_quantisation_dps
-        );
-        assert!(
-            (k.rate_quantisation_dps - 0.0127).abs() < 0.001,
-            "{}",
-            k.rate_quantisation_dps
-        );
+        assert!(max_rate_err < 5.0 * k.rate_quantisation_dps, "{max_rate_err} vs {}", k.rate_quantisation_dps);
+        assert!((k.rate_quantisation_dps - 0.0127).abs() < 0.001, "{}", k.rate_quantisation_dps);
         // The 1 s ramp to within 2 % of speed lasts 0.98 s: 784 samples at 800 Hz, less the 8
         // at the start that lack a full window.
         assert_eq!(k.rate_window_samples, 17);
         assert_eq!(k.excluded_window_edge, 16);
-        assert!(
-            (k.excluded_unsteady as i64 - 776).abs() <= 2,
-            "{}",
-            k.excluded_unsteady
-        );
+        assert!((k.excluded_unsteady as i64 - 776).abs() <= 2, "{}", k.excluded_unsteady);
         assert_eq!(k.index.rejected, 0);
     }
 }
@@ -92,11 +66,7 @@ fn joint_fit_recovers_the_generated_sensor() {
         assert!((r.rms_counts / expect - 1.0).abs() < 0.02, "{r:?}");
         assert!((r.noise_floor_counts / expect - 1.0).abs() < 0.03, "{r:?}");
         // White noise: no inflation beyond the estimate's ~5 % scatter.
-        assert!(
-            (rep.autocorrelation[i].inflation - 1.0).abs() < 0.15,
-            "{:?}",
-            rep.autocorrelation[i]
-        );
+        assert!((rep.autocorrelation[i].inflation - 1.0).abs() < 0.15, "{:?}", rep.autocorrelation[i]);
     }
     let paper = rep.paper.as_ref().unwrap();
     assert!(paper.max_abs_z < 3.0, "{}", rep.summary());
@@ -118,12 +88,8 @@ fn spurious_index_pulse_is_rejected() {
         encoder: e.encoder + quarter + d,
         edge,
     };
-    bad[0]
-        .index
-        .insert(at + 1, glint(0, protocol::Edge::Rising));
-    bad[0]
-        .index
-        .insert(at + 2, glint(10, protocol::Edge::Falling));
+    bad[0].index.insert(at + 1, glint(0, protocol::Edge::Rising));
+    bad[0].index.insert(at + 2, glint(10, protocol::Edge::Falling));
     bad[0].index.sort_by_key(|x| x.t_us);
     let kin = kinematics::reconstruct(&bad, &KinOptions::default()).unwrap();
     let (a, b) = (&kin.runs[0].index, &clean.runs[0].index);
@@ -137,14 +103,7 @@ fn clipped_samples_are_excluded_per_axis_and_counted() {
     let reference = calibrate(&runs, &CalOptions::default()).unwrap();
     let steady_from = 2000;
     let mut clipped = [0u64; 3];
-    for (k, s) in runs[0]
-        .samples
-        .iter_mut()
-        .enumerate()
-        .skip(steady_from)
-        .step_by(97)
-        .take(50)
-    {
+    for (k, s) in runs[0].samples.iter_mut().enumerate().skip(steady_from).step_by(97).take(50) {
         let axis = k % 3;
         s.rate_counts[axis] = if k % 2 == 0 { i16::MAX } else { i16::MIN };
         clipped[axis] += 1;
@@ -156,32 +115,20 @@ fn clipped_samples_are_excluded_per_axis_and_counted() {
         // A rail value kept in the fit would pull the offset by ~32 000/n ≈ 0.8 counts per
         // sample: far more than σ. Excluded, the fit barely moves.
         let sd = rep.axes[a].offset_sigma_counts;
-        assert!(
-            (rep.offset_counts[a] - reference.offset_counts[a]).abs() < 0.5 * sd,
-            "axis {a}"
-        );
+        assert!((rep.offset_counts[a] - reference.offset_counts[a]).abs() < 0.5 * sd, "axis {a}");
     }
 }
 
 #[test]
 fn error_messages_say_what_and_where() {
     let opts = CalOptions::default();
-    assert_eq!(
-        calibrate(&[], &opts).unwrap_err().to_string(),
-        "no runs to calibrate: the capture holds no run"
-    );
+    assert_eq!(calibrate(&[], &opts).unwrap_err().to_string(), "no runs to calibrate: the capture holds no run");
 
     let runs = two_pose_runs(4);
     let err = calibrate(&runs[..1], &opts).unwrap_err();
-    assert_eq!(
-        err.to_string(),
-        "only pose 1 was captured: pose 2 is needed too (axis directions need both poses)"
-    );
+    assert_eq!(err.to_string(), "only pose 1 was captured: pose 2 is needed too (axis directions need both poses)");
     let err = calibrate(&runs[1..], &opts).unwrap_err();
-    assert_eq!(
-        err.to_string(),
-        "only pose 2 was captured: pose 1 is needed too (axis directions need both poses)"
-    );
+    assert_eq!(err.to_string(), "only pose 2 was captured: pose 1 is needed too (axis directions need both poses)");
 
     let mut bad = runs.clone();
     bad[1].index.clear();
@@ -200,10 +147,7 @@ fn error_messages_say_what_and_where() {
     );
 
     let mut bad = runs.clone();
-    bad[1].gyro = GyroConfig {
-        bandwidth: Bandwidth::Bw0,
-        ..GyroConfig::DEFAULT
-    };
+    bad[1].gyro = GyroConfig { bandwidth: Bandwidth::Bw0, ..GyroConfig::DEFAULT };
     assert_eq!(
         calibrate(&bad, &opts).unwrap_err().to_string(),
         "run 2 (pose 2, +180.0 °/s): gyro config GyroConfig { full_scale: Dps500, odr: Hz800, bandwidth: Bw0 } differs from run 1's GyroConfig { full_scale: Dps500, odr: Hz800, bandwidth: Bw3 }"
@@ -240,21 +184,12 @@ fn report_and_calibration_round_trip_through_json() {
     let cal = rep.calibration();
     assert_eq!(Calibration::from_json(&cal.to_json()).unwrap(), cal);
     let text = rep.summary();
-    for needle in [
-        "counts/(°/s)",
-        "Angles between axes",
-        "Gear ratio",
-        "Paper method",
-        "noise floor measured",
-    ] {
+    for needle in ["counts/(°/s)", "Angles between axes", "Gear ratio", "Paper method", "noise floor measured"] {
         assert!(text.contains(needle), "summary lacks {needle:?}:\n{text}");
     }
     // The generator's plate spans 4° of θ2 = 3600 counts at 1:1; its 50 µs edge grid is 8 counts.
     let width = rep.runs[0].index.plate_width_counts;
-    assert!(
-        (width - 4.0 / 360.0 * f64::from(COUNTS_PER_REV)).abs() <= 16.0,
-        "{width}"
-    );
+    assert!((width - 4.0 / 360.0 * f64::from(COUNTS_PER_REV)).abs() <= 16.0, "{width}");
 }
 
 /// Kinematics + fit + residual pass + paper check must leave room for decoding within the

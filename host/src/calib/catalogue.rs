@@ -1,0 +1,108 @@
+//! The effects the closed loop may add to the linear model `v = M R_qᵀ ω2 + v_off`, each with
+//! what it means physically and what in the runs makes it identifiable. The maths of each lives
+//! in [`super::extended`]; the decision to add one in [`super::selection`].
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Harmonics of the sensor-table rate in the catalogue: 2× to 8×. 1× is the linear model itself
+/// (and the phase effects); 8× at 0.5 Hz is 4 Hz, well inside every L3G4200D bandwidth (≥ 12.5
+/// Hz) and well resolved by 20 ms of encoder slope.
+pub const HARMONIC_ORDERS: std::ops::RangeInclusive<u32> = 2..=8;
+
+/// One catalogued effect.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// The gyro output lags the encoder by τ: v(t) = f(kinematics at t − τ). Shifts θ2 by −θ2'·τ,
+    /// so it differs from an index offset only between runs at different θ2'.
+    Delay,
+    /// The index plate is δ off θ2 = 0: θ2_true = θ2_index + δ, the same shift at every speed.
+    IndexOffset,
+    /// A delay and an index offset together when the runs share one θ2' and cannot tell them
+    /// apart: one phase δ − θ2'·τ.
+    Phase,
+    /// Offsets settling exponentially after power-up (warm-up): b + c·exp(−t/T), T fitted.
+    DriftWarmUp,
+    /// Offsets drifting as a quadratic in time.
+    DriftPolynomial,
+    /// Offsets following the die temperature (OUT_TEMP, smoothed), linearly.
+    DriftTemperature,
+    /// Scale depending on the rate along the axis: |r| (asymmetry between the signs) and r·|r|
+    /// (odd quadratic non-linearity).
+    RateScale,
+    /// A ripple of the sensor table's speed at n× its rate that the base encoder cannot see
+    /// (the magnetic gears are compliant), seen by every axis through M R_qᵀ.
+    TableHarmonic(u32),
+}
+
+impl Effect {
+    /// Short name as printed.
+    pub fn name(self) -> String {
+        match self {
+            Effect::Delay => "delay between gyro and encoder".into(),
+            Effect::IndexOffset => "index offset".into(),
+            Effect::Phase => "phase (delay and index offset combined)".into(),
+            Effect::DriftWarmUp => "offset drift: exponential warm-up in time".into(),
+            Effect::DriftPolynomial => "offset drift: quadratic in time".into(),
+            Effect::DriftTemperature => "offset drift: linear in temperature".into(),
+            Effect::RateScale => "rate-dependent scale (non-linearity, asymmetry)".into(),
+            Effect::TableHarmonic(n) => format!("table-speed ripple at {n}× the sensor-table rate"),
+        }
+    }
+
+    /// A short machine-friendly key (JSON, tests).
+    pub fn key(self) -> String {
+        match self {
+            Effect::Delay => "delay".into(),
+            Effect::IndexOffset => "index_offset".into(),
+            Effect::Phase => "phase".into(),
+            Effect::DriftWarmUp => "drift_warm_up".into(),
+            Effect::DriftPolynomial => "drift_polynomial".into(),
+            Effect::DriftTemperature => "drift_temperature".into(),
+            Effect::RateScale => "rate_scale".into(),
+            Effect::TableHarmonic(n) => format!("table_harmonic_{n}"),
+        }
+    }
+
+    /// Whether it is one of the mutually exclusive offset-drift models.
+    pub fn is_drift(self) -> bool {
+        matches!(self, Effect::DriftWarmUp | Effect::DriftPolynomial | Effect::DriftTemperature)
+    }
+
+    /// What it means physically, as the report says it.
+    pub fn meaning(self) -> &'static str {
+        match self {
+            Effect::Delay => {
+                "the gyro's low-pass filter delays its output (≈√2/(2π·f_c): 2 ms at 110 Hz, 7.5 ms at 30 Hz)"
+            }
+            Effect::IndexOffset => "the index shield plate is mounted off the θ2 the poses are defined for",
+            Effect::Phase => "a delay, an index offset, or both",
+            Effect::DriftWarmUp => "the zero-rate level follows the die as it warms up after power-up",
+            Effect::DriftPolynomial => "the zero-rate level wanders slowly",
+            Effect::DriftTemperature => "the zero-rate level follows the die temperature",
+            Effect::RateScale => "the sense chain is not linear, or its gain differs with the sign of the rate",
+            Effect::TableHarmonic(_) => "the sensor table's speed ripples relative to the base (gear compliance)",
+        }
+    }
+
+    /// What separates it from the rest of the model.
+    pub fn identified_by(self) -> &'static str {
+        match self {
+            Effect::Delay | Effect::IndexOffset => {
+                "runs at two speeds or in both directions (the delay's phase scales with θ2', the index offset's does not)"
+            }
+            Effect::Phase => "nothing more: a second speed or direction is needed to split it",
+            Effect::DriftWarmUp | Effect::DriftPolynomial | Effect::DriftTemperature => {
+                "its slow change within and between runs; runs in both directions separate the offset from the constant θ2' term without relying on it"
+            }
+            Effect::RateScale => "the harmonics it makes in proportion to each axis's own rate",
+            Effect::TableHarmonic(_) => "the same ripple in every axis and both poses, in proportion to M R_qᵀ",
+        }
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name())
+    }
+}

@@ -1,0 +1,485 @@
+//! The closed loop: fit the linear model, diagnose its residual, add the catalogued effect the
+//! data supports most, refit, and repeat until no candidate passes; then say whether the
+//! residual is at the noise floor or holds structure nothing in the catalogue explains. Every
+//! step is reported with the residual against the floor, how far the base parameters moved in
+//! their σ, a held-out prediction and, on simulated data, the error against the truth.
+
+use super::catalogue::Effect;
+use super::derived::{derive, AxisEstimate, InterAxisAngle};
+use super::diagnostics::{diagnose, Diagnostics};
+use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
+use super::lsq::AXES;
+use super::report::{Autocorrelation, AxisResidual, RunResidualReport};
+use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score};
+use super::truth_check::TruthErrors;
+use super::{calibrate, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
+use crate::capture::Run;
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+/// Settings of the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LoopOptions {
+    /// Kinematics and noise-floor settings shared with the base calibration.
+    pub cal: CalOptions,
+    /// Family-wise false-alarm probability of each selection step and of the final diagnostics:
+    /// 1e-3 adds a spurious effect to (or condemns) one clean capture in a thousand.
+    pub alpha: f64,
+    /// Effects added at most (the catalogue has 3 phase, 3 drift, 1 scale and 7 harmonic entries;
+    /// a capture needing more than 8 is better described as not understood).
+    pub max_effects: usize,
+}
+
+impl Default for LoopOptions {
+    fn default() -> Self {
+        Self { cal: CalOptions::default(), alpha: 1e-3, max_effects: 8 }
+    }
+}
+
+/// What the loop concluded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Verdict {
+    /// Calibrated; the residual is at the noise floor.
+    AtNoiseFloor,
+    /// Calibrated, but structure remains that no catalogued effect explains: not to be trusted.
+    UnexplainedStructure,
+}
+
+/// How far a base parameter moved in one step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamMove {
+    /// Parameter name (as in `CalReport::param_names`).
+    pub name: String,
+    /// Before the step.
+    pub before: f64,
+    /// After.
+    pub after: f64,
+    /// 1-σ after.
+    pub sigma: f64,
+    /// (after − before)/σ.
+    pub moved_sigma: f64,
+}
+
+/// A parameter of an added effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EffectParam {
+    /// What.
+    pub name: String,
+    /// Value.
+    pub value: f64,
+    /// 1-σ.
+    pub sigma: f64,
+    /// Unit.
+    pub unit: String,
+}
+
+/// A held-out run's prediction error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutRun {
+    /// Run number.
+    pub run: usize,
+    /// Run label.
+    pub label: String,
+    /// RMS prediction error per axis, °/s (noise included).
+    pub rms_dps: [f64; 3],
+    /// Part above the run's noise floor, √(rms² − floor²), °/s.
+    pub excess_dps: [f64; 3],
+}
+
+/// One model of the sequence (step 0 is the linear model).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepReport {
+    /// Step number (0 = linear model).
+    pub number: usize,
+    /// Effect added at this step.
+    pub effect: Option<Effect>,
+    /// Effects in the model after it.
+    pub effects: Vec<Effect>,
+    /// The accepted candidate's score.
+    pub score: Option<Score>,
+    /// The best-scoring candidates of the step (at most 6), for the record.
+    pub alternatives: Vec<Score>,
+    /// When a drift model was added: the alternatives fitted and their BIC (lowest chosen).
+    pub drift_choice: Vec<DriftChoice>,
+    /// RMS residual per axis, °/s.
+    pub rms_dps: [f64; 3],
+    /// Noise floor per axis, °/s.
+    pub floor_dps: [f64; 3],
+    /// Base parameters' moves (empty at step 0).
+    pub moves: Vec<ParamMove>,
+    /// Parameters of the effects in the model.
+    pub effect_params: Vec<EffectParam>,
+    /// Held-out predictions (fit on the other runs).
+    pub held_out: Vec<HeldOutRun>,
+    /// RMS over runs and axes of the held-out excess, °/s.
+    pub held_out_excess_dps: Option<f64>,
+    /// Against the simulated truth.
+    pub truth: Option<TruthErrors>,
+    /// Findings in the residual of this model.
+    pub findings: Vec<String>,
+    /// Gauss-Newton passes of the fit.
+    pub passes: usize,
+}
+
+/// The loop's result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoopReport {
+    /// The sequence of models.
+    pub steps: Vec<StepReport>,
+    /// Verdict.
+    pub verdict: Verdict,
+    /// Verdict in words.
+    pub verdict_text: String,
+    /// Runs the data cannot do without, asked for in words.
+    pub asks: Vec<String>,
+    /// Informative sentences (clipping, speed ripple, identifiability).
+    pub notes: Vec<String>,
+    /// Diagnostics of the linear model (with its plot data).
+    pub initial: Diagnostics,
+    /// Diagnostics of the final model (with its plot data).
+    pub final_diagnostics: Diagnostics,
+    /// The final model's calibration report (linear part: M, offsets, with σ).
+    pub final_report: CalReport,
+}
+
+impl LoopReport {
+    /// The verdict.
+    pub fn verdict(&self) -> Verdict {
+        self.verdict
+    }
+
+    /// The calibration report of the final model (`calibration()` gives what `apply` needs).
+    pub fn final_report(&self) -> &CalReport {
+        &self.final_report
+    }
+
+    /// Effects added, in order.
+    pub fn effects(&self) -> Vec<Effect> {
+        self.steps.last().map(|s| s.effects.clone()).unwrap_or_default()
+    }
+
+    /// The readable account: findings, the before/after table, the final calibration, verdict.
+    pub fn summary(&self) -> String {
+        super::loop_summary::summary(self)
+    }
+}
+
+/// Indices of the 12 base parameters in a fit's covariance, `CalReport` order.
+fn base_indices(f: &Fitted) -> [usize; 12] {
+    std::array::from_fn(|p| {
+        let (a, j) = (p / 4, p % 4);
+        let c = if j < 3 { LinCol::Omega(j) } else { LinCol::One };
+        f.lin_index(a, c).expect("the base columns are in every model")
+    })
+}
+
+/// The 12 base parameters, their covariance, and what derives from them.
+struct BaseEstimate {
+    params: [f64; 12],
+    cov: DMatrix<f64>,
+    axes: [AxisEstimate; 3],
+    inter: [InterAxisAngle; 3],
+}
+
+fn base_estimate(f: &Fitted, nominal: f64) -> BaseEstimate {
+    let idx = base_indices(f);
+    let params: [f64; 12] = std::array::from_fn(|p| {
+        let (a, j) = (p / 4, p % 4);
+        let c = if j < 3 { LinCol::Omega(j) } else { LinCol::One };
+        f.model.beta_of(a, c).unwrap_or(0.0)
+    });
+    let cov = DMatrix::from_fn(12, 12, |i, j| f.solution.cov[(idx[i], idx[j])]);
+    let (axes, inter) = derive(&params, &cov, nominal);
+    BaseEstimate { params, cov, axes, inter }
+}
+
+/// Re-solves the converged fit's sums with the weights of its own diagnostics, so that its
+/// covariance uses the noise level its residual shows.
+fn reweight(f: &mut Fitted, weights: [f64; 3]) {
+    if let Some(total) = Gram::sum(&f.per_run) {
+        if let Some(sol) = solve_joint(&total, &full_selection(&f.model), weights) {
+            f.solution = sol;
+        }
+    }
+}
+
+fn param_names() -> Vec<String> {
+    (0..12)
+        .map(|p| {
+            let a = AXES[p / 4];
+            match p % 4 {
+                3 => format!("offset_{a}_counts"),
+                j => format!("m_{a}.omega_{}_dps", AXES[j]),
+            }
+        })
+        .collect()
+}
+
+/// The parameters of the effects in a fit, in natural units.
+fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectParam> {
+    let mut out = Vec::new();
+    for &p in &f.model.shared {
+        let i = f.shared_index(p).expect("own parameter");
+        let (v, s) = (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i));
+        let (name, scale, unit) = match p {
+            SharedPar::Delay => ("delay τ".to_string(), 1e3, "ms"),
+            SharedPar::IndexOffset => ("index offset δ".to_string(), 180.0 / std::f64::consts::PI, "°"),
+            SharedPar::Phase => ("phase δ − θ2'·τ".to_string(), 180.0 / std::f64::consts::PI, "°"),
+            SharedPar::DriftTau => ("warm-up time constant T".to_string(), 1.0, "s"),
+            SharedPar::Harmonic { order, quadrature } => {
+                (format!("table-speed ripple {order}× {}", if quadrature { "sin" } else { "cos" }), 1e6, "ppm of θ2'")
+            }
+        };
+        out.push(EffectParam { name, value: v * scale, sigma: s * scale, unit: unit.into() });
+    }
+    for &c in &f.model.lin {
+        let (label, scale, unit): (&str, f64, &str) = match c {
+            LinCol::DriftExp => ("warm-up drift at the first sample", 1.0, "°/s"),
+            LinCol::DriftT1 => ("drift, linear term (over the half-span)", 1.0, "°/s"),
+            LinCol::DriftT2 => ("drift, quadratic term", 1.0, "°/s"),
+            LinCol::DriftTemp => ("offset vs temperature", 1.0, "°/s per °C"),
+            LinCol::RateAbs => ("scale asymmetry (|r| term)", 1e6, "ppm of |r|"),
+            LinCol::RateSq => ("odd quadratic (r·|r|) at full scale", 100.0 * full_scale_dps, "% of full scale"),
+            _ => continue,
+        };
+        for (a, &ka) in k.iter().enumerate() {
+            let i = f.lin_index(a, c).expect("own column");
+            out.push(EffectParam {
+                name: format!("{label}, {}", AXES[a]),
+                value: f.model.beta[a][i - a * f.model.lin.len()] / ka * scale,
+                sigma: f.sigma(i) / ka * scale,
+                unit: unit.into(),
+            });
+        }
+    }
+    out
+}
+
+/// Sensitivities |row of M|, counts per °/s.
+fn sensitivities(m: &Model) -> [f64; 3] {
+    let mm = m.m();
+    std::array::from_fn(|a| mm.row(a).norm())
+}
+
+/// Everything recorded about one model of the sequence.
+struct State {
+    fitted: Fitted,
+    diag: Diagnostics,
+    estimate: BaseEstimate,
+}
+
+struct Context<'a> {
+    data: &'a LoopData,
+    opts: &'a LoopOptions,
+    cutoff_hz: f64,
+    nominal: f64,
+    full_scale_dps: f64,
+    truth: Option<&'a crate::sim::Truth>,
+    labels: Vec<String>,
+    run_numbers: Vec<usize>,
+    run_poses: Vec<crate::geometry::Pose>,
+}
+
+impl Context<'_> {
+    fn state(&self, mut fitted: Fitted) -> State {
+        let diag = diagnose(self.data, &fitted.model, self.cutoff_hz, self.opts.alpha, self.opts.cal.noise_window_s);
+        reweight(&mut fitted, diag.weights());
+        let estimate = base_estimate(&fitted, self.nominal);
+        State { fitted, diag, estimate }
+    }
+
+    fn held_out(&self, s: &State) -> Vec<HeldOutRun> {
+        let k = sensitivities(&s.fitted.model);
+        held_out(&s.fitted, s.diag.weights(), &self.run_numbers, &self.run_poses)
+            .into_iter()
+            .map(|h| {
+                let ri = self.run_numbers.iter().position(|&n| n == h.run).unwrap_or(0);
+                let floor = s.diag.runs[ri].axes.iter().map(|a| a.floor_dps).collect::<Vec<_>>();
+                let rms: [f64; 3] = std::array::from_fn(|a| h.rms_counts[a] / k[a]);
+                HeldOutRun {
+                    run: h.run,
+                    label: self.labels[ri].clone(),
+                    rms_dps: rms,
+                    excess_dps: std::array::from_fn(|a| (rms[a].powi(2) - floor[a].powi(2)).max(0.0).sqrt()),
+                }
+            })
+            .collect()
+    }
+
+    fn report(
+        &self,
+        number: usize,
+        s: &State,
+        prev: Option<&State>,
+        score: Option<Score>,
+        alts: Vec<Score>,
+        drift_choice: Vec<DriftChoice>,
+    ) -> StepReport {
+        let k = sensitivities(&s.fitted.model);
+        let names = param_names();
+        let moves = prev
+            .map(|p| {
+                (0..12)
+                    .map(|i| {
+                        let sigma = s.estimate.cov[(i, i)].max(0.0).sqrt();
+                        ParamMove {
+                            name: names[i].clone(),
+                            before: p.estimate.params[i],
+                            after: s.estimate.params[i],
+                            sigma,
+                            moved_sigma: (s.estimate.params[i] - p.estimate.params[i]) / sigma,
+                        }
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let held_out = self.held_out(s);
+        let excess: Vec<f64> = held_out.iter().flat_map(|h| h.excess_dps).collect();
+        StepReport {
+            number,
+            effect: score.as_ref().map(|sc| sc.effect),
+            effects: s.fitted.model.effects.clone(),
+            score,
+            alternatives: alts.into_iter().take(6).collect(),
+            drift_choice,
+            rms_dps: s.diag.rms_dps,
+            floor_dps: s.diag.floor_dps,
+            moves,
+            effect_params: effect_params(&s.fitted, k, self.full_scale_dps),
+            held_out_excess_dps: (!excess.is_empty())
+                .then(|| (excess.iter().map(|e| e * e).sum::<f64>() / excess.len() as f64).sqrt()),
+            held_out,
+            truth: self.truth.map(|t| TruthErrors::of(&s.estimate.axes, t)),
+            findings: s.diag.findings.iter().map(|f| f.text.clone()).collect(),
+            passes: s.fitted.passes,
+        }
+    }
+}
+
+/// The final model as a `CalReport`: the base report's bookkeeping with the final M, offsets,
+/// covariance and residuals. The paper cross-check stays that of the linear model.
+fn final_cal_report(base: &CalReport, s: &State, data: &LoopData) -> CalReport {
+    let mut r = base.clone();
+    let est = &s.estimate;
+    r.model = std::iter::once("linear: v = K S ω + v_off".to_string())
+        .chain(s.fitted.model.effects.iter().map(|e| e.name()))
+        .collect::<Vec<_>>()
+        .join(" + ");
+    r.m_counts_per_dps = std::array::from_fn(|i| std::array::from_fn(|j| est.params[4 * i + j]));
+    r.offset_counts = std::array::from_fn(|i| est.params[4 * i + 3]);
+    r.param_names = param_names();
+    r.cov = (0..12).map(|i| (0..12).map(|j| est.cov[(i, j)]).collect()).collect();
+    r.axes = est.axes;
+    r.inter_axis = est.inter;
+    let d = &s.diag;
+    let k = sensitivities(&s.fitted.model);
+    let axis_residual = |a: usize, n: u64, rms_dps: f64, floor_dps: f64| AxisResidual {
+        axis: AXES[a],
+        n,
+        rms_counts: rms_dps * k[a],
+        rms_dps,
+        noise_floor_counts: floor_dps * k[a],
+        noise_floor_dps: floor_dps,
+        rms_over_floor: rms_dps / floor_dps,
+    };
+    let n_axis: [u64; 3] = std::array::from_fn(|a| d.runs.iter().map(|r| r.axes[a].n as u64).sum());
+    r.residuals = std::array::from_fn(|a| axis_residual(a, n_axis[a], d.rms_dps[a], d.floor_dps[a]));
+    r.run_residuals = d
+        .runs
+        .iter()
+        .map(|rd| RunResidualReport {
+            run: rd.run,
+            pose: rd.pose,
+            commanded_rate_dps: rd.commanded_rate_dps,
+            axes: std::array::from_fn(|a| {
+                let ad = &rd.axes[a];
+                axis_residual(a, ad.n as u64, ad.rms_dps, ad.floor_dps)
+            }),
+        })
+        .collect();
+    r.autocorrelation = std::array::from_fn(|a| Autocorrelation {
+        axis: AXES[a],
+        inflation: d.inflation[a],
+        block_samples: d.block_samples[a],
+        effective_samples: n_axis[a] as f64 / d.inflation[a],
+    });
+    r.residual_correlation = d.correlation;
+    r.samples_used = data.runs.iter().map(|x| x.n_valid).sum();
+    r.clipped = std::array::from_fn(|a| d.runs.iter().map(|x| x.axes[a].clipped).sum());
+    r
+}
+
+/// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
+pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::Truth>) -> Result<LoopReport, CalError> {
+    check_runs(runs)?;
+    let base_report = calibrate(runs, &opts.cal)?;
+    let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
+    let data = LoopData::new(kin);
+    let gyro = runs[0].gyro;
+    let ctx = Context {
+        data: &data,
+        opts,
+        cutoff_hz: f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0,
+        nominal: nominal_counts_per_dps(gyro.full_scale),
+        full_scale_dps: f64::from(gyro.full_scale.range_dps()),
+        truth,
+        labels: data.kin.runs.iter().map(|r| r.label.clone()).collect(),
+        run_numbers: data.kin.runs.iter().map(|r| r.run).collect(),
+        run_poses: data.kin.runs.iter().map(|r| r.pose).collect(),
+    };
+    let first = fit(&data, Model::base(), [1.0; 3])?;
+    let mut state = ctx.state(first);
+    let initial = state.diag.clone();
+    let mut steps = vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())];
+    let mut asks = Vec::new();
+    while state.fitted.model.effects.len() < opts.max_effects {
+        let outcome = step(&data, &state.fitted, &state.diag, opts.alpha)?;
+        let Some((bi, fitted)) = outcome.accepted else {
+            break;
+        };
+        let score = outcome.scores[bi].clone();
+        let next = ctx.state(fitted);
+        steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), outcome.scores, outcome.drift_choice));
+        state = next;
+    }
+    let effects = &state.fitted.model.effects;
+    let mut notes = state.diag.notes.clone();
+    if effects.contains(&Effect::Phase) {
+        let rate = data.kin.runs[0].steady_rate_dps;
+        asks.push(format!(
+            "A delay and an index offset cannot be told apart: every run turns at θ1' = {rate:+.1} °/s, so only their combined phase δ − θ2'·τ was fitted. It corrects these runs, but not a run at another speed. Run again at a second speed, e.g. --rates-dps 180,90, or in both directions, --rates-dps 180,-180."
+        ));
+    } else if separates_delay_and_index(&data) {
+        notes.push(
+            "Delay and index offset are separable here: the runs turn at more than one θ2' (speed or direction)."
+                .into(),
+        );
+    }
+    if effects.iter().any(|e| e.is_drift()) && !both_directions(&data) {
+        asks.push(
+            "The offset drifts, and all runs turn one way: the offset and the constant θ2'·M R_qᵀ e_z2 term are separated only through the drift model and the speeds. Runs in both directions (--rates-dps 180,-180) separate them directly.".into(),
+        );
+    }
+    let verdict = if state.diag.has_structure() { Verdict::UnexplainedStructure } else { Verdict::AtNoiseFloor };
+    let verdict_text = match verdict {
+        Verdict::AtNoiseFloor => {
+            let ratio: Vec<String> =
+                (0..3).map(|a| format!("{:.3}", state.diag.rms_dps[a] / state.diag.floor_dps[a])).collect();
+            format!(
+                "Calibrated, residual at the noise floor: RMS/floor x, y, z = {}; no structure left at the {} family-wise level ({} tests).",
+                ratio.join(", "),
+                opts.alpha,
+                state.diag.tests
+            )
+        }
+        Verdict::UnexplainedStructure => {
+            let what: Vec<String> = state.diag.findings.iter().map(|f| f.text.clone()).collect();
+            format!(
+                "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
+                what.join(" ")
+            )
+        }
+    };
+    let final_report = final_cal_report(&base_report, &state, &data);
+    Ok(LoopReport { steps, verdict, verdict_text, asks, notes, initial, final_diagnostics: state.diag, final_report })
+}

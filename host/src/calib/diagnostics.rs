@@ -1,0 +1,868 @@
+//! Residual diagnostics after a fit, per run and axis: size against the noise floor measured from
+//! the data, whiteness, harmonics of the table rate, drift in time, dependence on temperature,
+//! on the rate along the axis and on the motor's speed ripple, clipped samples; every test at a
+//! Bonferroni-corrected level, every significant one turned into a sentence that says what, where,
+//! how strong and what it suggests. Also the binned residual and spectrum the report plots.
+
+use super::blocking::Blocking;
+use super::extended::{Evaluator, LoopData, Model};
+use super::lsq::{is_clipped, AXES};
+use super::spectrum::{AmplitudeSpectrum, Periodogram};
+use super::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::geometry::Pose;
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+
+/// Highest harmonic of the table rate examined (the catalogue's, see `catalogue::HARMONIC_ORDERS`).
+pub const MAX_ORDER: usize = 8;
+
+/// θ2 bins of the plotted residual: 1° each.
+pub const THETA2_BINS: usize = 360;
+
+/// Block length of the whiteness test, s: 40 ms is 3× the correlation time of the noise behind
+/// the slowest L3G4200D low-pass (12.5 Hz at 100 Hz ODR: 1/(2π·12.5 Hz) = 13 ms), so white sensor
+/// noise gives white block means, and 1/6 of the period of the 8th harmonic at 0.5 Hz, so
+/// structure survives the averaging.
+const WHITENESS_BLOCK_S: f64 = 0.04;
+
+/// Lags of the Ljung–Box statistic: 20 blocks = 0.8 s, one table period at 1.25 Hz or more.
+const LJUNG_BOX_LAGS: usize = 20;
+
+/// Width of the time bins of the drift test, s: 10 s, 5 table periods at 0.5 Hz, so that
+/// table-synchronous structure averages out, and ≥ 10 bins in a 2-minute run.
+const TIME_BIN_S: f64 = 10.0;
+
+/// Bins of the rate-magnitude test.
+const RATE_BINS: usize = 8;
+
+/// RMS/floor above which the residual is called in excess of the floor. The floor's estimate is
+/// biased low by < 3 % by noise correlated within its window (`CalOptions::noise_window_s`);
+/// 5 % leaves that margin. The harmonic and drift tests are far more sensitive; this one catches
+/// broadband structure.
+const RMS_EXCESS_RATIO: f64 = 1.05;
+
+/// Noise band for the long-run noise level: from this many table harmonics up (above the
+/// catalogue's 8th), to half the gyro's low-pass cut-off (where the filter still passes > 94 %
+/// of the power, Butterworth 2nd order), and at least this low limit, Hz.
+const NOISE_BAND_FIRST_HARMONIC: f64 = 9.5;
+const NOISE_BAND_MIN_HZ: f64 = 1.0;
+
+/// Highest frequency in the plotted spectrum, in table harmonics.
+const SPECTRUM_PLOT_HARMONICS: f64 = 10.5;
+/// Points in a plotted spectrum.
+const SPECTRUM_PLOT_POINTS: usize = 1500;
+
+/// Tests per run and axis (9 orders, whiteness, time, temperature, rate, speed ripple, RMS).
+const TESTS_PER_RUN_AXIS: usize = MAX_ORDER + 1 + 6;
+
+/// One harmonic of the residual against θ2 in one run and axis.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OrderTerm {
+    /// Harmonic number n (0 = the run's mean).
+    pub order: u32,
+    /// Amplitude, °/s.
+    pub amplitude_dps: f64,
+    /// Phase of a·sin + b·cos as atan2(b, a), degrees.
+    pub phase_deg: f64,
+    /// 1-σ of each coefficient, °/s.
+    pub sigma_dps: f64,
+    /// χ² of the coefficients against 0 (1 dof for n = 0, else 2).
+    pub chi2: f64,
+    /// Above the Bonferroni-corrected threshold.
+    pub significant: bool,
+}
+
+/// A scalar test statistic.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Test {
+    /// χ² (or z² for a slope).
+    pub chi2: f64,
+    /// Degrees of freedom.
+    pub dof: usize,
+    /// Equivalent normal deviate.
+    pub sigma: f64,
+    /// Above the Bonferroni-corrected threshold.
+    pub significant: bool,
+}
+
+/// Diagnostics of one axis in one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxisRunDiag {
+    /// Axis name.
+    pub axis: char,
+    /// Unclipped samples.
+    pub n: usize,
+    /// RMS residual, °/s.
+    pub rms_dps: f64,
+    /// White-noise floor from the residual's high-frequency part, °/s.
+    pub floor_dps: f64,
+    /// Long-run noise level from the spectrum between the table harmonics, °/s.
+    pub noise_dps: f64,
+    /// rms / floor.
+    pub rms_over_floor: f64,
+    /// Harmonics 0..=8 of the residual against θ2.
+    pub orders: Vec<OrderTerm>,
+    /// Ljung–Box on block means.
+    pub whiteness: Test,
+    /// Spread of the 10-s bin means about the run mean.
+    pub time_drift: Test,
+    /// Range of the 10-s bin means, °/s.
+    pub time_drift_range_dps: f64,
+    /// Slope against the smoothed temperature, °/s per °C.
+    pub temperature_slope_dps_per_c: f64,
+    /// Its test.
+    pub temperature: Test,
+    /// Spread of the bin means against |rate along the axis|.
+    pub rate: Test,
+    /// Largest rate-bin mean, °/s.
+    pub rate_max_dps: f64,
+    /// Slope against the fractional speed deviation θ1'/steady − 1, °/s per %.
+    pub ripple_slope_dps_per_percent: f64,
+    /// Its test.
+    pub ripple: Test,
+    /// RMS of the speed deviation, %.
+    pub speed_deviation_rms_percent: f64,
+    /// Samples clipped at the rails (left out).
+    pub clipped: u64,
+}
+
+/// Residual and fit against θ2 for a plot, per 1° bin.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Theta2Curve {
+    /// Bin centres, degrees.
+    pub theta2_deg: Vec<f64>,
+    /// Mean residual, °/s (NaN for an empty bin).
+    pub residual_dps: Vec<f64>,
+    /// Standard error of the mean residual, °/s.
+    pub residual_se_dps: Vec<f64>,
+    /// Mean fitted output (offset included), °/s.
+    pub fit_dps: Vec<f64>,
+    /// Samples per bin.
+    pub counts: Vec<u64>,
+}
+
+/// Plot data of one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunPlots {
+    /// Per axis, against θ2.
+    pub theta2: Vec<Theta2Curve>,
+    /// Per axis, residual amplitude spectrum.
+    pub spectrum: Vec<AmplitudeSpectrum>,
+    /// Sensor-table rate, Hz (markers at its multiples).
+    pub table_hz: f64,
+    /// Base-table rate, Hz.
+    pub base_hz: f64,
+}
+
+/// Diagnostics of one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunDiag {
+    /// Run number, from 1.
+    pub run: usize,
+    /// Pose.
+    pub pose: Pose,
+    /// Commanded base-table rate, °/s.
+    pub commanded_rate_dps: f64,
+    /// Per axis.
+    pub axes: Vec<AxisRunDiag>,
+    /// Plot data.
+    pub plots: RunPlots,
+}
+
+/// What a finding is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum FindingKind {
+    /// Run mean (order 0) differs between runs.
+    RunOffset,
+    /// A harmonic of the table rate (order ≥ 1).
+    Harmonic(u32),
+    /// Failed whiteness.
+    NotWhite,
+    /// Drift within runs.
+    TimeDrift,
+    /// Follows the temperature.
+    Temperature,
+    /// Depends on the rate magnitude.
+    RateDependence,
+    /// Follows the speed ripple.
+    SpeedRipple,
+    /// RMS above the floor.
+    RmsExcess,
+}
+
+/// One significant structure, as a sentence and in numbers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Finding {
+    /// What.
+    pub kind: FindingKind,
+    /// (run, axis index) where it is significant.
+    pub places: Vec<(usize, usize)>,
+    /// Largest size, °/s.
+    pub max_dps: f64,
+    /// Largest significance, σ.
+    pub max_sigma: f64,
+    /// The sentence.
+    pub text: String,
+}
+
+/// Diagnostics of a fit over all runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Diagnostics {
+    /// Per run.
+    pub runs: Vec<RunDiag>,
+    /// Long-run noise variance per axis, counts² (the χ² weights are its inverse).
+    pub noise_variance_counts2: [f64; 3],
+    /// RMS residual per axis over all runs, °/s.
+    pub rms_dps: [f64; 3],
+    /// Noise floor per axis over all runs, °/s.
+    pub floor_dps: [f64; 3],
+    /// Blocking inflation of the residual per axis (1 for white).
+    pub inflation: [f64; 3],
+    /// Block length blocking settled on, samples.
+    pub block_samples: [u64; 3],
+    /// Contemporaneous correlation of the residuals between axes.
+    pub correlation: [[f64; 3]; 3],
+    /// Significant structures.
+    pub findings: Vec<Finding>,
+    /// Informative sentences that are not structure (clipping, speed ripple checked).
+    pub notes: Vec<String>,
+    /// Tests made (the Bonferroni divisor).
+    pub tests: usize,
+    /// Per-test significance level.
+    pub alpha_per_test: f64,
+}
+
+impl Diagnostics {
+    /// χ² weights: inverse long-run noise variance per axis.
+    pub fn weights(&self) -> [f64; 3] {
+        self.noise_variance_counts2.map(|v| 1.0 / v)
+    }
+
+    /// Whether any structure was found.
+    pub fn has_structure(&self) -> bool {
+        !self.findings.is_empty()
+    }
+}
+
+/// Sums for a least-squares fit of a·sin + b·cos (or a mean, n = 0).
+#[derive(Debug, Clone, Copy, Default)]
+struct OrderSums {
+    ss: f64,
+    cc: f64,
+    sc: f64,
+    es: f64,
+    ec: f64,
+}
+
+/// Running sums for a slope of e against x.
+#[derive(Debug, Clone, Copy, Default)]
+struct SlopeSums {
+    n: f64,
+    x: f64,
+    xx: f64,
+    e: f64,
+    xe: f64,
+}
+
+impl SlopeSums {
+    fn add(&mut self, x: f64, e: f64) {
+        self.n += 1.0;
+        self.x += x;
+        self.xx += x * x;
+        self.e += e;
+        self.xe += x * e;
+    }
+
+    /// (slope, σ of slope) for residual variance `var`.
+    fn slope(&self, var: f64) -> (f64, f64) {
+        let sxx = self.xx - self.x * self.x / self.n;
+        if sxx <= 0.0 || self.n < 3.0 {
+            return (0.0, f64::INFINITY);
+        }
+        ((self.xe - self.x * self.e / self.n) / sxx, (var / sxx).sqrt())
+    }
+}
+
+/// Binned means.
+#[derive(Debug, Clone)]
+struct Bins {
+    sum: Vec<f64>,
+    sumsq: Vec<f64>,
+    count: Vec<f64>,
+    extra: Vec<f64>,
+}
+
+impl Bins {
+    fn new(n: usize) -> Self {
+        Self { sum: vec![0.0; n], sumsq: vec![0.0; n], count: vec![0.0; n], extra: vec![0.0; n] }
+    }
+
+    fn add(&mut self, k: usize, e: f64, extra: f64) {
+        self.sum[k] += e;
+        self.sumsq[k] += e * e;
+        self.count[k] += 1.0;
+        self.extra[k] += extra;
+    }
+
+    /// χ² of the bin means about their weighted mean for variance `var`, dof, and the largest
+    /// |bin mean − mean|, and the range of the means.
+    fn spread(&self, var: f64) -> (f64, usize, f64, f64) {
+        let total: f64 = self.count.iter().sum();
+        let mean = self.sum.iter().sum::<f64>() / total.max(1.0);
+        let (mut chi2, mut used, mut max_dev) = (0.0, 0usize, 0.0f64);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (s, &c) in self.sum.iter().zip(&self.count) {
+            if c < 2.0 {
+                continue;
+            }
+            let m = s / c;
+            chi2 += c * (m - mean).powi(2) / var;
+            max_dev = max_dev.max((m - mean).abs());
+            lo = lo.min(m);
+            hi = hi.max(m);
+            used += 1;
+        }
+        (chi2, used.saturating_sub(1), max_dev, if used > 0 { hi - lo } else { 0.0 })
+    }
+}
+
+impl OrderSums {
+    /// Least-squares (a, b) of a·sin + b·cos (for n = 0, (mean, 0) with cos = 1).
+    fn solve(&self) -> (f64, f64) {
+        if self.ss == 0.0 {
+            return if self.cc > 0.0 { (0.0, self.ec / self.cc) } else { (0.0, 0.0) };
+        }
+        let det = self.ss * self.cc - self.sc * self.sc;
+        if det > 0.0 {
+            ((self.es * self.cc - self.ec * self.sc) / det, (self.ec * self.ss - self.es * self.sc) / det)
+        } else {
+            (0.0, 0.0)
+        }
+    }
+}
+
+/// (a, b) of every order.
+fn harmonic_coefficients(o: &[OrderSums; MAX_ORDER + 1]) -> [(f64, f64); MAX_ORDER + 1] {
+    std::array::from_fn(|n| o[n].solve())
+}
+
+/// Σ over orders `0..=max` of a·sin nθ + b·cos nθ.
+fn harmonic_fit(coefs: &[(f64, f64)], theta: f64, max: usize) -> f64 {
+    let (s1, c1) = theta.sin_cos();
+    let (mut sn, mut cn) = (0.0, 1.0);
+    let mut sum = 0.0;
+    for (n, &(a, b)) in coefs.iter().enumerate().take(max + 1) {
+        if n > 0 {
+            (sn, cn) = (sn * c1 + cn * s1, cn * c1 - sn * s1);
+        }
+        sum += a * sn + b * cn;
+    }
+    sum
+}
+
+/// The tests that would otherwise repeat the harmonic ones: the rate-magnitude bins of the
+/// residual without its 0× and 1× parts (offset and phase misfits, reported as such), and the
+/// slope against the speed deviation with every harmonic 0…8× removed from both (ripple at
+/// harmonics of the table is indistinguishable from them; what is left is the ripple at other
+/// frequencies, which only a wrong rate reconstruction would echo).
+fn partial_tests(
+    e: &[f64],
+    thetas: &[f64],
+    devs: &[f64],
+    abs_rates: &[f64],
+    coefs: &[(f64, f64); MAX_ORDER + 1],
+    rate_max: f64,
+) -> (Bins, SlopeSums) {
+    let mut dev_orders = [OrderSums::default(); MAX_ORDER + 1];
+    for ((&v, &th), &d) in e.iter().zip(thetas).zip(devs) {
+        if v.is_nan() {
+            continue;
+        }
+        let (s1, c1) = th.sin_cos();
+        let (mut sn, mut cn) = (0.0, 1.0);
+        for (n, o) in dev_orders.iter_mut().enumerate() {
+            if n > 0 {
+                (sn, cn) = (sn * c1 + cn * s1, cn * c1 - sn * s1);
+            }
+            o.ss += sn * sn;
+            o.cc += cn * cn;
+            o.sc += sn * cn;
+            o.es += d * sn;
+            o.ec += d * cn;
+        }
+    }
+    let dev_coefs = harmonic_coefficients(&dev_orders);
+    let mut bins = Bins::new(RATE_BINS);
+    let mut ripple = SlopeSums::default();
+    for (((&v, &th), &d), &r) in e.iter().zip(thetas).zip(devs).zip(abs_rates) {
+        if v.is_nan() {
+            continue;
+        }
+        let rb = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
+        bins.add(rb, v - harmonic_fit(coefs, th, 1), 0.0);
+        ripple.add(d - harmonic_fit(&dev_coefs, th, MAX_ORDER), v - harmonic_fit(coefs, th, MAX_ORDER));
+    }
+    (bins, ripple)
+}
+
+/// White-noise variance from the remainder of a centred moving average of half-width `w`
+/// (see `residuals::high_pass_power`); windows holding a clipped (NaN) value are skipped.
+fn high_pass_variance(e: &[f64], w: usize) -> f64 {
+    let n = e.len();
+    let width = 2 * w + 1;
+    if n < width {
+        return f64::NAN;
+    }
+    let mut prefix = Vec::with_capacity(n + 1);
+    let mut nan_prefix = Vec::with_capacity(n + 1);
+    prefix.push(0.0);
+    nan_prefix.push(0u32);
+    for &v in e {
+        prefix.push(prefix.last().copied().unwrap_or(0.0) + if v.is_nan() { 0.0 } else { v });
+        nan_prefix.push(nan_prefix.last().copied().unwrap_or(0) + u32::from(v.is_nan()));
+    }
+    let inv = 1.0 / width as f64;
+    let (mut power, mut used) = (0.0, 0usize);
+    for i in w..n - w {
+        if nan_prefix[i + w + 1] != nan_prefix[i - w] {
+            continue;
+        }
+        let mean = (prefix[i + w + 1] - prefix[i - w]) * inv;
+        power += (e[i] - mean).powi(2);
+        used += 1;
+    }
+    power / (used as f64 * (1.0 - inv))
+}
+
+/// Ljung–Box statistic of the block means of `e` (blocks with a NaN dropped).
+fn ljung_box(e: &[f64], block: usize, lags: usize) -> (f64, usize) {
+    let means: Vec<f64> = e
+        .chunks_exact(block.max(1))
+        .filter(|c| c.iter().all(|v| !v.is_nan()))
+        .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+        .collect();
+    let n = means.len();
+    if n <= lags + 2 {
+        return (0.0, lags);
+    }
+    let mean = means.iter().sum::<f64>() / n as f64;
+    let c0: f64 = means.iter().map(|m| (m - mean).powi(2)).sum();
+    let q: f64 = (1..=lags)
+        .map(|k| {
+            let ck: f64 = (k..n).map(|i| (means[i] - mean) * (means[i - k] - mean)).sum();
+            (ck / c0).powi(2) / (n - k) as f64
+        })
+        .sum::<f64>()
+        * (n * (n + 2)) as f64;
+    (q, lags)
+}
+
+/// Runs the diagnostics of `model` on all runs. `cutoff_hz` is the gyro's low-pass cut-off,
+/// `alpha` the family-wise false-alarm probability, `noise_window_s` the floor's window.
+pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, noise_window_s: f64) -> Diagnostics {
+    let ev = Evaluator::new(data, model);
+    let m = model.m();
+    let k: [f64; 3] = std::array::from_fn(|a| (m[(a, 0)].powi(2) + m[(a, 1)].powi(2) + m[(a, 2)].powi(2)).sqrt());
+    let n_runs = data.kin.runs.len();
+    let tests = TESTS_PER_RUN_AXIS * 3 * n_runs;
+    let alpha_per_test = alpha / tests as f64;
+    let thr = |dof: usize| chi2_upper_quantile(dof, alpha_per_test);
+    let mut blocking = Blocking::<3>::default();
+    let mut cross = [[0.0f64; 3]; 3];
+    let mut pooled = [(0.0f64, 0.0f64, 0.0f64, 0usize); 3]; // Σe², floor var·n, noise var·n, n
+    let mut runs = Vec::with_capacity(n_runs);
+    for (r, rk) in data.kin.runs.iter().enumerate() {
+        let rd = &data.runs[r];
+        let fs = rk.sample_rate_hz;
+        let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
+        let base_hz = rk.steady_rate_dps.abs() / 360.0;
+        let mut e: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
+        let mut orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
+        let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
+        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s) - rk.samples.first().map_or(0.0, |s| s.t_s))
+            / TIME_BIN_S)
+            .ceil()
+            .max(1.0) as usize;
+        let mut time_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(n_time));
+        let mut temp = [SlopeSums::default(); 3];
+        // Per used sample: θ2, speed deviation, |rate along each axis|, for the partial tests.
+        let mut thetas: Vec<f64> = Vec::with_capacity(rd.n_valid);
+        let mut devs: Vec<f64> = Vec::with_capacity(rd.n_valid);
+        let mut abs_rates: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
+        let mut clipped = [0u64; 3];
+        let mut dev_sq = 0.0;
+        let t_first = rk.samples.first().map_or(0.0, |s| s.t_s);
+        // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
+        let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
+        for (i, s) in rk.samples.iter().enumerate() {
+            if !rd.valid[i] {
+                continue;
+            }
+            let p = ev.point(r, i);
+            let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
+            let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);
+            let tb = (((s.t_s - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
+            let dev = s.theta1_rate_dps / rk.steady_rate_dps - 1.0;
+            dev_sq += dev * dev;
+            thetas.push(p.theta2_rad);
+            devs.push(dev * 100.0);
+            let mut row = [f64::NAN; 3];
+            for a in 0..3 {
+                abs_rates[a].push(ev.axis_rate(&p, a).abs());
+                if is_clipped(s.rate_counts[a]) {
+                    clipped[a] += 1;
+                    e[a].push(f64::NAN);
+                    continue;
+                }
+                let pred = ev.predict(&p, a);
+                let ea = f64::from(s.rate_counts[a]) - pred;
+                row[a] = ea;
+                e[a].push(ea);
+                for (nn, o) in orders[a].iter_mut().enumerate() {
+                    let (sn, cn) = p.harmonics[nn];
+                    o.ss += sn * sn;
+                    o.cc += cn * cn;
+                    o.sc += sn * cn;
+                    o.es += ea * sn;
+                    o.ec += ea * cn;
+                }
+                theta_bins[a].add(bin, ea, pred);
+                time_bins[a].add(tb, ea, 0.0);
+                temp[a].add(p.temp_c, ea);
+            }
+            if row.iter().all(|v| !v.is_nan()) {
+                blocking.push(row);
+                for i in 0..3 {
+                    for j in i + 1..3 {
+                        cross[i][j] += row[i] * row[j];
+                    }
+                }
+            }
+        }
+        blocking.end_segment();
+        let n_used = e[0].len().max(1);
+        let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
+        let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);
+        let band_lo = (NOISE_BAND_FIRST_HARMONIC * table_hz).max(NOISE_BAND_MIN_HZ);
+        let band_hi = (0.5 * cutoff_hz).min(fs / 8.0).max(band_lo * 2.0).min(0.45 * fs);
+        let block = ((WHITENESS_BLOCK_S * fs).round() as usize).max(1);
+        let mut axes = Vec::with_capacity(3);
+        let mut theta2 = Vec::with_capacity(3);
+        let mut spectrum = Vec::with_capacity(3);
+        for a in 0..3 {
+            let ea = &e[a];
+            let good: Vec<f64> = ea.iter().copied().filter(|v| !v.is_nan()).collect();
+            let n = good.len();
+            let ss: f64 = good.iter().map(|v| v * v).sum();
+            let floor_var = high_pass_variance(ea, w);
+            let filled: Vec<f64> = ea.iter().map(|v| if v.is_nan() { 0.0 } else { *v }).collect();
+            let pg = Periodogram::new(&filled, fs);
+            let noise_var = pg
+                .noise_variance(band_lo, band_hi, table_hz)
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .unwrap_or(floor_var);
+            pooled[a].0 += ss;
+            pooled[a].1 += floor_var * n as f64;
+            pooled[a].2 += noise_var * n as f64;
+            pooled[a].3 += n;
+            let ka = k[a];
+            let nf = n.max(1) as f64;
+            let order_terms: Vec<OrderTerm> = orders[a]
+                .iter()
+                .enumerate()
+                .map(|(nn, o)| {
+                    if nn == 0 {
+                        let mean = o.ec / nf;
+                        let sd = (noise_var / nf).sqrt();
+                        let chi2 = (mean / sd).powi(2);
+                        OrderTerm {
+                            order: 0,
+                            amplitude_dps: mean / ka,
+                            phase_deg: 0.0,
+                            sigma_dps: sd / ka,
+                            chi2,
+                            significant: chi2 > thr(1),
+                        }
+                    } else {
+                        let (sa, cb) = o.solve();
+                        let sd = (2.0 * noise_var / nf).sqrt();
+                        let chi2 = (sa * sa + cb * cb) / (sd * sd);
+                        OrderTerm {
+                            order: nn as u32,
+                            amplitude_dps: (sa * sa + cb * cb).sqrt() / ka,
+                            phase_deg: cb.atan2(sa).to_degrees(),
+                            sigma_dps: sd / ka,
+                            chi2,
+                            significant: chi2 > thr(2),
+                        }
+                    }
+                })
+                .collect();
+            let coefs = harmonic_coefficients(&orders[a]);
+            let (rate_bins, ripple) = partial_tests(ea, &thetas, &devs, &abs_rates[a], &coefs, rate_max);
+            let (q, lags) = ljung_box(ea, block, LJUNG_BOX_LAGS);
+            let test = |chi2: f64, dof: usize| Test {
+                chi2,
+                dof,
+                sigma: chi2_to_sigma(dof, chi2),
+                significant: dof > 0 && chi2 > thr(dof),
+            };
+            let (tchi, tdof, _, trange) = time_bins[a].spread(noise_var);
+            let (rchi, rdof, rmax, _) = rate_bins.spread(noise_var);
+            let (ts, tsd) = temp[a].slope(noise_var);
+            let (rs, rsd) = ripple.slope(noise_var);
+            let z2 = |s: f64, sd: f64| if sd.is_finite() && sd > 0.0 { (s / sd).powi(2) } else { 0.0 };
+            let rms = (ss / nf).sqrt();
+            let floor = floor_var.sqrt();
+            axes.push(AxisRunDiag {
+                axis: AXES[a],
+                n,
+                rms_dps: rms / ka,
+                floor_dps: floor / ka,
+                noise_dps: noise_var.sqrt() / ka,
+                rms_over_floor: rms / floor,
+                orders: order_terms,
+                whiteness: test(q, lags),
+                time_drift: test(tchi, tdof),
+                time_drift_range_dps: trange / ka,
+                temperature_slope_dps_per_c: ts / ka,
+                temperature: test(z2(ts, tsd), 1),
+                rate: test(rchi, rdof),
+                rate_max_dps: rmax / ka,
+                ripple_slope_dps_per_percent: rs / ka,
+                ripple: test(z2(rs, rsd), 1),
+                speed_deviation_rms_percent,
+                clipped: clipped[a],
+            });
+            let tb = &theta_bins[a];
+            theta2.push(Theta2Curve {
+                theta2_deg: (0..THETA2_BINS).map(|b| (b as f64 + 0.5) * 360.0 / THETA2_BINS as f64).collect(),
+                residual_dps: (0..THETA2_BINS)
+                    .map(|b| if tb.count[b] > 0.0 { tb.sum[b] / tb.count[b] / ka } else { f64::NAN })
+                    .collect(),
+                residual_se_dps: (0..THETA2_BINS)
+                    .map(|b| {
+                        let c = tb.count[b];
+                        if c > 1.0 {
+                            let mean = tb.sum[b] / c;
+                            ((tb.sumsq[b] / c - mean * mean).max(0.0) / (c - 1.0)).sqrt() / ka
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect(),
+                fit_dps: (0..THETA2_BINS)
+                    .map(|b| if tb.count[b] > 0.0 { tb.extra[b] / tb.count[b] / ka } else { f64::NAN })
+                    .collect(),
+                counts: tb.count.iter().map(|&c| c as u64).collect(),
+            });
+            spectrum.push(AmplitudeSpectrum::from_periodogram(
+                &pg,
+                ka,
+                (SPECTRUM_PLOT_HARMONICS * table_hz).min(0.5 * fs),
+                SPECTRUM_PLOT_POINTS,
+            ));
+        }
+        runs.push(RunDiag {
+            run: rk.run,
+            pose: rk.pose,
+            commanded_rate_dps: rk.commanded_rate_dps,
+            axes,
+            plots: RunPlots { theta2, spectrum, table_hz, base_hz },
+        });
+    }
+    let noise_variance_counts2 = std::array::from_fn(|a| pooled[a].2 / pooled[a].3.max(1) as f64);
+    let rms_dps = std::array::from_fn(|a| (pooled[a].0 / pooled[a].3.max(1) as f64).sqrt() / k[a]);
+    let floor_dps = std::array::from_fn(|a| (pooled[a].1 / pooled[a].3.max(1) as f64).sqrt() / k[a]);
+    let (inflation, block_samples) = {
+        let est: [Option<_>; 3] = std::array::from_fn(|a| blocking.estimate(a));
+        (
+            std::array::from_fn(|a| est[a].map_or(1.0, |l| l.inflation())),
+            std::array::from_fn(|a| est[a].map_or(1, |l| 1u64 << l.level)),
+        )
+    };
+    let correlation = std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            let (a, b) = (i.min(j), i.max(j));
+            if a == b {
+                1.0
+            } else {
+                cross[a][b] / (pooled[a].0 * pooled[b].0).sqrt()
+            }
+        })
+    });
+    let mut d = Diagnostics {
+        runs,
+        noise_variance_counts2,
+        rms_dps,
+        floor_dps,
+        inflation,
+        block_samples,
+        correlation,
+        findings: Vec::new(),
+        notes: Vec::new(),
+        tests,
+        alpha_per_test,
+    };
+    d.findings = findings(&d);
+    d.notes = notes(&d);
+    d
+}
+
+fn run_label(d: &RunDiag) -> String {
+    format!("run {} ({}, {:+.0} °/s)", d.run, d.pose, d.commanded_rate_dps)
+}
+
+/// What a kind of structure suggests.
+fn suggestion(kind: FindingKind) -> &'static str {
+    match kind {
+        FindingKind::RunOffset => {
+            "the offset differs between runs: offset drift (warm-up or temperature), or the constant θ2'·M R_qᵀ e_z2 term is mis-modelled"
+        }
+        FindingKind::Harmonic(1) => {
+            "the axes look turned about z2 differently in different runs: a delay between gyro and encoder (phase grows with θ2') or an index offset (same phase at every speed)"
+        }
+        FindingKind::Harmonic(_) => {
+            "a harmonic of the sensor-table rate: rate-dependent scale if it follows each axis's own rate, table-speed ripple if every axis shows it in proportion to M R_qᵀ e_z2, otherwise something outside the catalogue"
+        }
+        FindingKind::NotWhite => "the residual is correlated in time beyond the sensor noise: unmodelled structure",
+        FindingKind::TimeDrift => "the offset changes within the run: drift with time (warm-up) or with temperature",
+        FindingKind::Temperature => "the offset follows the die temperature",
+        FindingKind::RateDependence => "the output depends on the rate along the axis beyond the linear scale: non-linearity, asymmetry, or clipping",
+        FindingKind::SpeedRipple => "the residual follows the motor's speed ripple: the encoder-derived rate does not track the table",
+        FindingKind::RmsExcess => "the residual is larger than the noise floor measured from the data",
+    }
+}
+
+fn describe(kind: FindingKind) -> String {
+    match kind {
+        FindingKind::RunOffset => "Run-to-run offset (mean residual)".into(),
+        FindingKind::Harmonic(n) => format!("Residual at {n}× the sensor-table rate"),
+        FindingKind::NotWhite => "Residual not white (Ljung–Box on 40-ms block means)".into(),
+        FindingKind::TimeDrift => "Residual drifting in time (10-s means)".into(),
+        FindingKind::Temperature => "Residual following the temperature".into(),
+        FindingKind::RateDependence => "Residual depending on |rate along the axis|".into(),
+        FindingKind::SpeedRipple => "Residual following the speed ripple".into(),
+        FindingKind::RmsExcess => "Residual RMS above the noise floor".into(),
+    }
+}
+
+/// Groups the significant tests into sentences.
+fn findings(d: &Diagnostics) -> Vec<Finding> {
+    let mut kinds: Vec<FindingKind> = vec![FindingKind::RunOffset];
+    kinds.extend((1..=MAX_ORDER as u32).map(FindingKind::Harmonic));
+    kinds.extend([
+        FindingKind::TimeDrift,
+        FindingKind::Temperature,
+        FindingKind::RateDependence,
+        FindingKind::NotWhite,
+        FindingKind::RmsExcess,
+    ]);
+    let mut out = Vec::new();
+    for kind in kinds {
+        // (run index, axis, size °/s, σ)
+        let mut hits: Vec<(usize, usize, f64, f64)> = Vec::new();
+        for (ri, rd) in d.runs.iter().enumerate() {
+            for (a, ad) in rd.axes.iter().enumerate() {
+                let hit = match kind {
+                    FindingKind::RunOffset => {
+                        let o = &ad.orders[0];
+                        o.significant.then(|| (o.amplitude_dps.abs(), o.chi2.sqrt()))
+                    }
+                    FindingKind::Harmonic(n) => {
+                        let o = &ad.orders[n as usize];
+                        o.significant.then(|| (o.amplitude_dps, o.amplitude_dps / o.sigma_dps))
+                    }
+                    FindingKind::NotWhite => ad.whiteness.significant.then_some((ad.rms_dps, ad.whiteness.sigma)),
+                    FindingKind::TimeDrift => {
+                        ad.time_drift.significant.then_some((ad.time_drift_range_dps, ad.time_drift.sigma))
+                    }
+                    FindingKind::Temperature => ad
+                        .temperature
+                        .significant
+                        .then_some((ad.temperature_slope_dps_per_c.abs(), ad.temperature.sigma)),
+                    FindingKind::RateDependence => ad.rate.significant.then_some((ad.rate_max_dps, ad.rate.sigma)),
+                    FindingKind::SpeedRipple => {
+                        ad.ripple.significant.then_some((ad.ripple_slope_dps_per_percent.abs(), ad.ripple.sigma))
+                    }
+                    FindingKind::RmsExcess => (ad.rms_over_floor > RMS_EXCESS_RATIO).then(|| {
+                        let excess = (ad.rms_dps.powi(2) - ad.floor_dps.powi(2)).max(0.0).sqrt();
+                        (excess, f64::NAN)
+                    }),
+                };
+                if let Some((size, sigma)) = hit {
+                    hits.push((ri, a, size, sigma));
+                }
+            }
+        }
+        if hits.is_empty() {
+            continue;
+        }
+        let worst = hits.iter().copied().max_by(|x, y| x.2.total_cmp(&y.2)).expect("non-empty");
+        let max_sigma = hits.iter().map(|h| h.3).filter(|s| s.is_finite()).fold(0.0f64, f64::max);
+        let mut text = describe(kind);
+        text.push_str(": ");
+        let per_axis: Vec<String> = (0..3)
+            .filter_map(|a| {
+                let runs: Vec<String> = hits.iter().filter(|h| h.1 == a).map(|h| d.runs[h.0].run.to_string()).collect();
+                (!runs.is_empty()).then(|| format!("{} in run {}", AXES[a], runs.join(", ")))
+            })
+            .collect();
+        text.push_str(&per_axis.join("; "));
+        let unit = match kind {
+            FindingKind::Temperature => "°/s per °C",
+            FindingKind::SpeedRipple => "°/s per % of speed",
+            _ => "°/s",
+        };
+        let _ =
+            write!(text, ". Largest: {:.4} {unit} on {} in {}", worst.2, AXES[worst.1], run_label(&d.runs[worst.0]));
+        if worst.3.is_finite() {
+            let _ = write!(text, " ({:.0}σ)", worst.3);
+        } else {
+            let rd = &d.runs[worst.0].axes[worst.1];
+            let _ = write!(text, " (RMS {:.4} vs floor {:.4} °/s)", rd.rms_dps, rd.floor_dps);
+        }
+        let _ = write!(text, ". Suggests: {}.", suggestion(kind));
+        out.push(Finding {
+            kind,
+            places: hits.iter().map(|h| (d.runs[h.0].run, h.1)).collect(),
+            max_dps: worst.2,
+            max_sigma,
+            text,
+        });
+    }
+    out
+}
+
+/// Sentences about clipping and the speed-ripple check.
+fn notes(d: &Diagnostics) -> Vec<String> {
+    let mut out = Vec::new();
+    let clipped: [u64; 3] = std::array::from_fn(|a| d.runs.iter().map(|r| r.axes[a].clipped).sum());
+    if clipped.iter().any(|&c| c > 0) {
+        out.push(format!(
+            "Clipping: {} / {} / {} samples on x / y / z sat at the output rails and were left out of that axis; a larger full scale avoids it.",
+            clipped[0], clipped[1], clipped[2]
+        ));
+    }
+    let dev = d.runs.iter().flat_map(|r| r.axes.first()).map(|a| a.speed_deviation_rms_percent).fold(0.0f64, f64::max);
+    let (mut worst, mut at) = (0.0f64, String::new());
+    for r in &d.runs {
+        for a in &r.axes {
+            if a.ripple.sigma.is_finite() && a.ripple.sigma > worst {
+                worst = a.ripple.sigma;
+                at = format!("{} in {}", a.axis, run_label(r));
+            }
+        }
+    }
+    let rippling = d.runs.iter().any(|r| r.axes.iter().any(|a| a.ripple.significant));
+    if rippling {
+        out.push(format!(
+            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most, and the residual (table harmonics removed) follows it at {worst:.1}σ on {at}: the kinematics may not track the table, or the rate estimate's own encoder noise echoes in the residual."
+        ));
+    } else {
+        out.push(format!(
+            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most; the residual does not follow it (largest slope {worst:.1}σ), so the kinematics track it."
+        ));
+    }
+    out
+}

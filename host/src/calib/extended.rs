@@ -1,0 +1,867 @@
+//! The linear model extended by catalogue effects, fitted jointly over the three axes.
+//!
+//! Each effect adds per-axis linear columns (drift, rate-dependent scale) and/or parameters shared
+//! by all axes that move the kinematics (delay, index offset, table-speed ripple, the warm-up time
+//! constant). The shared ones make the model non-linear; it is fitted by Gauss-Newton on all
+//! parameters at once, each iteration one pass over the cached kinematics that accumulates, per
+//! run and axis, the Gram matrix of [linear columns | Jacobian columns of the shared parameters]
+//! against the current residual. The covariance of the converged fit is the inverse of the joint
+//! normal matrix, so the uncertainty of a delay or an index offset flows into that of M.
+//!
+//! The same accumulation over the union of the model's columns and every candidate's gives the
+//! linearised fit of any candidate model from one pass (see [`super::selection`]).
+
+use super::catalogue::{Effect, HARMONIC_ORDERS};
+use super::error::CalError;
+use super::kinematics::{KinSample, Kinematics};
+use super::lsq::is_clipped;
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+/// Longest delay (either sign) the model represents, s: 50 ms is 6× the slowest L3G4200D filter
+/// delay (7.5 ms at 30 Hz cut-off, `sim::FilterDelay`). Samples within it of a run's ends or of a
+/// gap are left out of every fit, so that all models see the same samples.
+pub const MAX_DELAY_S: f64 = 0.05;
+
+/// Span of the moving average that smooths OUT_TEMP, s. The register counts whole °C; during
+/// warm-up it steps every few seconds, so 20 s turns the steps into a ramp, and it is 10× the
+/// table period at 0.5 Hz, so it cannot follow table-synchronous structure.
+pub const TEMPERATURE_SMOOTHING_S: f64 = 20.0;
+
+/// Smallest reciprocal condition number of the diagonally scaled joint normal matrix accepted:
+/// 1e-13 leaves ~3 significant digits of f64's 16 in the worst-determined combination.
+const MIN_RCOND: f64 = 1e-13;
+
+/// Samples per local accumulator (see `lsq::CHUNK`: rounding stays O(√n) ulp).
+const CHUNK: usize = 1024;
+
+/// Gauss-Newton iterations at most; a converging fit needs 2–4 (the effects are small angles).
+const MAX_ITERATIONS: usize = 12;
+
+/// A Gauss-Newton step smaller than this many σ in every parameter ends the iteration: the
+/// remaining error is then 1 % of the statistical one.
+const CONVERGED_SIGMAS: f64 = 0.01;
+
+/// Bounds of the warm-up time constant, s: 1 s is shorter than any board's thermal time constant,
+/// 1e5 s (a day) is a constant offset over any capture.
+const DRIFT_TAU_RANGE_S: (f64, f64) = (1.0, 1e5);
+
+/// A per-axis linear column (every axis has the same kinds, each its own coefficient).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LinCol {
+    /// Component k of ω_s = R_qᵀ ω2, °/s.
+    Omega(usize),
+    /// 1 (offset).
+    One,
+    /// exp(−t/T) with the model's T (warm-up), t from the first sample.
+    DriftExp,
+    /// exp(−t/T) with a fixed T, s (candidate warm-up time constants).
+    DriftExpFixed(f64),
+    /// Time scaled to [−1, 1] over the capture.
+    DriftT1,
+    /// Its second Legendre polynomial, (3t̃² − 1)/2.
+    DriftT2,
+    /// Smoothed die temperature from the capture mean, °C.
+    DriftTemp,
+    /// |r|, r the rate along the axis, °/s.
+    RateAbs,
+    /// r·|r|, (°/s)².
+    RateSq,
+}
+
+/// A parameter shared by all axes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SharedPar {
+    /// Index offset δ, rad.
+    IndexOffset,
+    /// Delay τ, s.
+    Delay,
+    /// Combined phase, rad (same maths as the index offset).
+    Phase,
+    /// Warm-up time constant T, s.
+    DriftTau,
+    /// Relative table-speed ripple at `order`× θ2: θ2' → θ2'(1 + a·cos nθ2 + b·sin nθ2), with the
+    /// matching angle ripple; `quadrature` selects b.
+    Harmonic {
+        /// n.
+        order: u32,
+        /// false: a (cosine in speed), true: b (sine in speed).
+        quadrature: bool,
+    },
+}
+
+/// Any column of the accumulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Col {
+    /// Per-axis linear.
+    Lin(LinCol),
+    /// Jacobian of a shared parameter.
+    Shared(SharedPar),
+}
+
+/// The columns an effect adds.
+pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
+    match e {
+        Effect::Delay => (vec![], vec![SharedPar::Delay]),
+        Effect::IndexOffset => (vec![], vec![SharedPar::IndexOffset]),
+        Effect::Phase => (vec![], vec![SharedPar::Phase]),
+        Effect::DriftWarmUp => (vec![LinCol::DriftExp], vec![SharedPar::DriftTau]),
+        Effect::DriftPolynomial => (vec![LinCol::DriftT1, LinCol::DriftT2], vec![]),
+        Effect::DriftTemperature => (vec![LinCol::DriftTemp], vec![]),
+        Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
+        Effect::TableHarmonic(order) => (
+            vec![],
+            vec![SharedPar::Harmonic { order, quadrature: false }, SharedPar::Harmonic { order, quadrature: true }],
+        ),
+    }
+}
+
+/// Per-run data the loop adds to the kinematics.
+#[derive(Debug, Clone)]
+pub struct RunData {
+    /// Whether each kinematic sample is used (clear of the run's ends and gaps by
+    /// [`MAX_DELAY_S`]).
+    pub valid: Vec<bool>,
+    /// Smoothed die temperature from the capture mean, °C, per sample.
+    pub temp_c: Vec<f32>,
+    /// Samples used.
+    pub n_valid: usize,
+}
+
+/// The cached kinematics and what the loop derives from them once.
+#[derive(Debug, Clone)]
+pub struct LoopData {
+    /// Kinematics of every run.
+    pub kin: Kinematics,
+    /// Per run.
+    pub runs: Vec<RunData>,
+    /// Time of the first sample, s (origin of the warm-up exponential).
+    pub t0_s: f64,
+    /// Middle and half-span of the capture, s (for the polynomial drift).
+    pub t_mid_s: f64,
+    /// Half-span, s.
+    pub t_half_s: f64,
+}
+
+impl LoopData {
+    /// Marks usable samples and smooths the temperature.
+    pub fn new(kin: Kinematics) -> Self {
+        let mut runs = Vec::with_capacity(kin.runs.len());
+        let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut temp_sum, mut temp_n) = (0.0, 0usize);
+        for r in &kin.runs {
+            if let (Some(a), Some(b)) = (r.samples.first(), r.samples.last()) {
+                t_lo = t_lo.min(a.t_s);
+                t_hi = t_hi.max(b.t_s);
+            }
+            for s in &r.samples {
+                if s.temp_counts.is_finite() {
+                    temp_sum += f64::from(s.temp_counts);
+                    temp_n += 1;
+                }
+            }
+        }
+        let temp_mean = if temp_n > 0 { temp_sum / temp_n as f64 } else { 0.0 };
+        for r in &kin.runs {
+            let s = &r.samples;
+            let dt = 1.0 / r.sample_rate_hz;
+            let guard = (MAX_DELAY_S / dt).ceil() as usize + 1;
+            // A gap is any spacing beyond 1.5 nominal periods (a dropped or excluded sample).
+            let gap = 1.5 * dt;
+            let mut valid = vec![false; s.len()];
+            let mut last_gap: Option<usize> = None;
+            let mut gaps_after = vec![usize::MAX; s.len()];
+            let mut next_gap = usize::MAX;
+            for i in (0..s.len()).rev() {
+                if i + 1 < s.len() && s[i + 1].t_s - s[i].t_s > gap {
+                    next_gap = i;
+                }
+                gaps_after[i] = next_gap;
+            }
+            let mut n_valid = 0;
+            for i in 0..s.len() {
+                if i > 0 && s[i].t_s - s[i - 1].t_s > gap {
+                    last_gap = Some(i);
+                }
+                let clear_before = i >= guard && last_gap.is_none_or(|g| i >= g + guard);
+                let clear_after = i + guard < s.len() && gaps_after[i].saturating_sub(i) >= guard;
+                valid[i] = clear_before && clear_after;
+                n_valid += usize::from(valid[i]);
+            }
+            let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
+            let mut prefix = Vec::with_capacity(s.len() + 1);
+            prefix.push(0.0f64);
+            for x in s {
+                let v = if x.temp_counts.is_finite() { f64::from(x.temp_counts) } else { temp_mean };
+                prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
+            }
+            let temp_c = (0..s.len())
+                .map(|i| {
+                    let (a, b) = (i.saturating_sub(h), (i + h + 1).min(s.len()));
+                    // OUT_TEMP falls 1 count per °C (datasheet Table 5).
+                    (-((prefix[b] - prefix[a]) / (b - a) as f64 - temp_mean)) as f32
+                })
+                .collect();
+            runs.push(RunData { valid, temp_c, n_valid });
+        }
+        Self { kin, runs, t0_s: t_lo, t_mid_s: 0.5 * (t_lo + t_hi), t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9) }
+    }
+}
+
+/// A model: its effects, columns and current parameter values.
+#[derive(Debug, Clone)]
+pub struct Model {
+    /// Effects added, in order.
+    pub effects: Vec<Effect>,
+    /// Per-axis linear columns.
+    pub lin: Vec<LinCol>,
+    /// Shared parameters.
+    pub shared: Vec<SharedPar>,
+    /// Coefficients of `lin`, per axis.
+    pub beta: [Vec<f64>; 3],
+    /// Values of `shared`.
+    pub theta: Vec<f64>,
+    /// Unit axis directions (rows of M normalised) that define the rate along each axis for the
+    /// rate-dependent scale, updated every iteration.
+    pub s_hat: [Vector3<f64>; 3],
+}
+
+impl Model {
+    /// The linear model of EXCITER.md eq. 6 with all coefficients 0.
+    pub fn base() -> Self {
+        Self {
+            effects: Vec::new(),
+            lin: vec![LinCol::Omega(0), LinCol::Omega(1), LinCol::Omega(2), LinCol::One],
+            shared: Vec::new(),
+            beta: std::array::from_fn(|_| vec![0.0; 4]),
+            theta: Vec::new(),
+            s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
+        }
+    }
+
+    /// Columns of the model: linear then shared.
+    pub fn cols(&self) -> Vec<Col> {
+        self.lin.iter().map(|&c| Col::Lin(c)).chain(self.shared.iter().map(|&p| Col::Shared(p))).collect()
+    }
+
+    /// Value of a shared parameter, if in the model.
+    pub fn theta_of(&self, p: SharedPar) -> Option<f64> {
+        self.shared.iter().position(|&q| q == p).map(|i| self.theta[i])
+    }
+
+    /// Coefficient of a linear column on an axis, if in the model.
+    pub fn beta_of(&self, axis: usize, c: LinCol) -> Option<f64> {
+        self.lin.iter().position(|&q| q == c).map(|i| self.beta[axis][i])
+    }
+
+    /// M, counts per °/s.
+    pub fn m(&self) -> Matrix3<f64> {
+        Matrix3::from_fn(|a, k| self.beta_of(a, LinCol::Omega(k)).unwrap_or(0.0))
+    }
+
+    /// The model with `effect` added, its linear coefficients and shared parameters set from
+    /// `init_lin` (per axis, one per new linear column) and `init_shared`.
+    pub fn with(&self, effect: Effect, init_lin: [Vec<f64>; 3], init_shared: Vec<f64>) -> Self {
+        let (lin, shared) = effect_columns(effect);
+        let mut m = self.clone();
+        m.effects.push(effect);
+        m.lin.extend(lin);
+        for (b, init) in m.beta.iter_mut().zip(init_lin) {
+            b.extend(init);
+        }
+        m.shared.extend(shared);
+        m.theta.extend(init_shared);
+        m
+    }
+
+    fn update_directions(&mut self) {
+        let m = self.m();
+        for a in 0..3 {
+            let row = Vector3::new(m[(a, 0)], m[(a, 1)], m[(a, 2)]);
+            if row.norm() > 0.0 {
+                self.s_hat[a] = row.normalize();
+            }
+        }
+    }
+}
+
+/// Kinematics at one sample under a model's shared parameters.
+#[derive(Debug, Clone, Copy)]
+pub struct Point {
+    /// ω_s, °/s.
+    pub omega: [f64; 3],
+    /// ∂ω_s/∂θ2, °/s per rad.
+    pub d_theta2: [f64; 3],
+    /// ∂ω_s/∂θ2' = R_qᵀ e_z2.
+    pub d_rate2: [f64; 3],
+    /// θ2 before the table-speed ripple, rad (index offset, phase and delay applied).
+    pub theta2_rad: f64,
+    /// θ2' before ripple, °/s.
+    pub rate2_dps: f64,
+    /// θ2' with ripple, °/s.
+    pub rate2_eff_dps: f64,
+    /// ∂θ2_eff/∂θ2 through the ripple's angle term (1 without ripple).
+    pub dtheta_eff: f64,
+    /// ∂θ2'_eff/∂θ2 through the ripple's speed term, °/s per rad.
+    pub drate_eff_dps: f64,
+    /// Time from the capture's first sample, s.
+    pub t_rel_s: f64,
+    /// Time scaled to [−1, 1].
+    pub t_scaled: f64,
+    /// Smoothed temperature from the capture mean, °C.
+    pub temp_c: f64,
+    /// sin and cos of n·θ2 for n = 0..=8.
+    pub harmonics: [(f64, f64); 9],
+}
+
+/// Values derived from a model once per pass.
+#[derive(Debug, Clone)]
+struct Shifts {
+    delay_s: f64,
+    theta2_offset_rad: f64,
+    drift_tau_s: f64,
+    /// (n, a, b) of each ripple harmonic.
+    ripple: Vec<(u32, f64, f64)>,
+}
+
+impl Shifts {
+    fn of(m: &Model) -> Self {
+        let mut ripple: Vec<(u32, f64, f64)> = Vec::new();
+        for (&p, &v) in m.shared.iter().zip(&m.theta) {
+            if let SharedPar::Harmonic { order, quadrature } = p {
+                let i = match ripple.iter().position(|h| h.0 == order) {
+                    Some(i) => i,
+                    None => {
+                        ripple.push((order, 0.0, 0.0));
+                        ripple.len() - 1
+                    }
+                };
+                if quadrature {
+                    ripple[i].2 = v;
+                } else {
+                    ripple[i].1 = v;
+                }
+            }
+        }
+        Self {
+            delay_s: m.theta_of(SharedPar::Delay).unwrap_or(0.0),
+            theta2_offset_rad: m.theta_of(SharedPar::IndexOffset).unwrap_or(0.0)
+                + m.theta_of(SharedPar::Phase).unwrap_or(0.0),
+            drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
+            ripple,
+        }
+    }
+}
+
+/// θ2 and θ1' at `t_i − delay` by linear interpolation between the neighbouring samples (the
+/// sample is valid, so they exist within [`MAX_DELAY_S`]).
+fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
+    if delay_s == 0.0 {
+        return (s[i].theta2_rad, s[i].theta1_rate_dps);
+    }
+    let target = s[i].t_s - delay_s;
+    let mut j = i;
+    if delay_s > 0.0 {
+        while j > 0 && s[j].t_s > target {
+            j -= 1;
+        }
+    } else {
+        while j + 1 < s.len() && s[j + 1].t_s <= target {
+            j += 1;
+        }
+    }
+    let k = (j + 1).min(s.len() - 1);
+    let span = s[k].t_s - s[j].t_s;
+    let w = if span > 0.0 { ((target - s[j].t_s) / span).clamp(0.0, 1.0) } else { 0.0 };
+    (
+        s[j].theta2_rad + w * (s[k].theta2_rad - s[j].theta2_rad),
+        s[j].theta1_rate_dps + w * (s[k].theta1_rate_dps - s[j].theta1_rate_dps),
+    )
+}
+
+/// Evaluates columns and predictions at samples for one model.
+pub struct Evaluator<'a> {
+    data: &'a LoopData,
+    model: &'a Model,
+    shifts: Shifts,
+    /// R_qᵀ of each run, as plain arrays (the per-sample arithmetic stays free of generic
+    /// matrix code, which the test profile does not optimise).
+    rot_t: Vec<[[f64; 3]; 3]>,
+    /// Axis directions for the rate-scale columns.
+    s_hat: [[f64; 3]; 3],
+    /// ∂f/∂ω_s pieces per axis: the row of M, and the rate-scale coefficients.
+    m_rows: [[f64; 3]; 3],
+    c_abs: [f64; 3],
+    c_sq: [f64; 3],
+    c_exp: [f64; 3],
+}
+
+impl<'a> Evaluator<'a> {
+    /// An evaluator at the model's current values.
+    pub fn new(data: &'a LoopData, model: &'a Model) -> Self {
+        let m = model.m();
+        let coef = |c: LinCol| std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0));
+        Self {
+            data,
+            model,
+            shifts: Shifts::of(model),
+            rot_t: data
+                .kin
+                .runs
+                .iter()
+                .map(|r| std::array::from_fn(|i| std::array::from_fn(|j| r.rot_t[(i, j)])))
+                .collect(),
+            s_hat: model.s_hat.map(|v| [v[0], v[1], v[2]]),
+            m_rows: std::array::from_fn(|a| [m[(a, 0)], m[(a, 1)], m[(a, 2)]]),
+            c_abs: coef(LinCol::RateAbs),
+            c_sq: coef(LinCol::RateSq),
+            c_exp: coef(LinCol::DriftExp),
+        }
+    }
+
+    /// The kinematics at sample `i` of run `r`.
+    pub fn point(&self, r: usize, i: usize) -> Point {
+        let rk = &self.data.kin.runs[r];
+        let s = &rk.samples[i];
+        let sh = &self.shifts;
+        let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
+        let th = theta2 + sh.theta2_offset_rad;
+        let (s1, c1) = th.sin_cos();
+        let mut harmonics = [(0.0, 1.0); 9];
+        for n in 1..9 {
+            let (sp, cp) = harmonics[n - 1];
+            harmonics[n] = (sp * c1 + cp * s1, cp * c1 - sp * s1);
+        }
+        let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
+        for &(n, a, b) in &sh.ripple {
+            let (sn, cn) = harmonics[n as usize];
+            let nf = f64::from(n);
+            th_eff += (a * sn - b * cn) / nf;
+            ripple += a * cn + b * sn;
+            dripple += nf * (b * cn - a * sn);
+        }
+        let rate2 = rk.gear_ratio * rate1;
+        let rate2_eff = rate2 * ripple;
+        let rt = &self.rot_t[r];
+        // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame by R_qᵀ.
+        let (se, ce) = th_eff.sin_cos();
+        let w2 = [rate1 * se, rate1 * ce, rate2_eff];
+        let dw2 = [rate1 * ce, -rate1 * se];
+        let omega = std::array::from_fn(|i| rt[i][0] * w2[0] + rt[i][1] * w2[1] + rt[i][2] * w2[2]);
+        let d_theta2 = std::array::from_fn(|i| rt[i][0] * dw2[0] + rt[i][1] * dw2[1]);
+        let d_rate2 = std::array::from_fn(|i| rt[i][2]);
+        Point {
+            omega,
+            d_theta2,
+            d_rate2,
+            theta2_rad: th,
+            rate2_dps: rate2,
+            rate2_eff_dps: rate2_eff,
+            dtheta_eff: ripple,
+            drate_eff_dps: rate2 * dripple,
+            t_rel_s: s.t_s - self.data.t0_s,
+            t_scaled: (s.t_s - self.data.t_mid_s) / self.data.t_half_s,
+            temp_c: f64::from(self.data.runs[r].temp_c[i]),
+            harmonics,
+        }
+    }
+
+    /// Rate along axis `a`, °/s.
+    #[inline]
+    pub fn axis_rate(&self, p: &Point, a: usize) -> f64 {
+        dot(&self.s_hat[a], &p.omega)
+    }
+
+    /// A linear column's value on axis `a`.
+    #[inline]
+    pub fn lin_value(&self, c: LinCol, p: &Point, a: usize) -> f64 {
+        match c {
+            LinCol::Omega(k) => p.omega[k],
+            LinCol::One => 1.0,
+            LinCol::DriftExp => (-p.t_rel_s / self.shifts.drift_tau_s).exp(),
+            LinCol::DriftExpFixed(t) => (-p.t_rel_s / t).exp(),
+            LinCol::DriftT1 => p.t_scaled,
+            LinCol::DriftT2 => 0.5 * (3.0 * p.t_scaled * p.t_scaled - 1.0),
+            LinCol::DriftTemp => p.temp_c,
+            LinCol::RateAbs => self.axis_rate(p, a).abs(),
+            LinCol::RateSq => {
+                let r = self.axis_rate(p, a);
+                r * r.abs()
+            }
+        }
+    }
+
+    /// The model's output on axis `a`, counts.
+    #[inline]
+    pub fn predict(&self, p: &Point, a: usize) -> f64 {
+        self.model.lin.iter().zip(&self.model.beta[a]).map(|(&c, b)| b * self.lin_value(c, p, a)).sum()
+    }
+
+    /// ∂(output of axis a)/∂θ2 and ∂/∂θ2', counts per rad and counts per °/s.
+    #[inline]
+    fn sensitivities(&self, p: &Point, a: usize) -> (f64, f64) {
+        let r = self.axis_rate(p, a);
+        let g = self.c_abs[a] * r.signum() + 2.0 * self.c_sq[a] * r.abs();
+        let u: [f64; 3] = std::array::from_fn(|i| self.m_rows[a][i] + self.s_hat[a][i] * g);
+        (dot(&u, &p.d_theta2), dot(&u, &p.d_rate2))
+    }
+
+    /// Fills `out[a * cols.len() + j]` with column j on axis a.
+    pub fn fill(&self, p: &Point, cols: &[Col], out: &mut [f64]) {
+        let l = cols.len();
+        for a in 0..3 {
+            let (e2, ez) = self.sensitivities(p, a);
+            // Moving θ2 (before ripple) moves the rippled angle and speed too.
+            let d_shift = e2 * p.dtheta_eff + ez * p.drate_eff_dps;
+            for (j, &c) in cols.iter().enumerate() {
+                out[a * l + j] = match c {
+                    Col::Lin(lc) => self.lin_value(lc, p, a),
+                    Col::Shared(SharedPar::IndexOffset | SharedPar::Phase) => d_shift,
+                    Col::Shared(SharedPar::Delay) => -p.rate2_dps.to_radians() * d_shift,
+                    Col::Shared(SharedPar::DriftTau) => {
+                        let t = self.shifts.drift_tau_s;
+                        self.c_exp[a] * (-p.t_rel_s / t).exp() * p.t_rel_s / (t * t)
+                    }
+                    Col::Shared(SharedPar::Harmonic { order, quadrature }) => {
+                        let (sn, cn) = p.harmonics[order as usize];
+                        let n = f64::from(order);
+                        if quadrature {
+                            -e2 * cn / n + ez * p.rate2_dps * sn
+                        } else {
+                            e2 * sn / n + ez * p.rate2_dps * cn
+                        }
+                    }
+                };
+            }
+        }
+    }
+}
+
+#[inline]
+fn dot(x: &[f64; 3], y: &[f64; 3]) -> f64 {
+    x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+}
+
+/// Sums of one run (or several) for columns `l`: per axis the Gram matrix, Xᵀe, eᵀe and the
+/// count, against the residual e of the model the pass was made at.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gram {
+    /// Columns.
+    pub l: usize,
+    /// XᵀX per axis, l×l row-major (full after `symmetrise`).
+    pub xtx: [Vec<f64>; 3],
+    /// Xᵀe per axis.
+    pub xte: [Vec<f64>; 3],
+    /// eᵀe per axis, counts².
+    pub ete: [f64; 3],
+    /// Unclipped samples per axis.
+    pub n: [u64; 3],
+}
+
+impl Gram {
+    fn new(l: usize) -> Self {
+        Self {
+            l,
+            xtx: std::array::from_fn(|_| vec![0.0; l * l]),
+            xte: std::array::from_fn(|_| vec![0.0; l]),
+            ete: [0.0; 3],
+            n: [0; 3],
+        }
+    }
+
+    /// Adds another set of sums.
+    pub fn merge(&mut self, o: &Gram) {
+        for a in 0..3 {
+            self.xtx[a].iter_mut().zip(&o.xtx[a]).for_each(|(x, y)| *x += y);
+            self.xte[a].iter_mut().zip(&o.xte[a]).for_each(|(x, y)| *x += y);
+            self.ete[a] += o.ete[a];
+            self.n[a] += o.n[a];
+        }
+    }
+
+    fn symmetrise(&mut self) {
+        let l = self.l;
+        for m in &mut self.xtx {
+            for i in 0..l {
+                for j in 0..i {
+                    m[i * l + j] = m[j * l + i];
+                }
+            }
+        }
+    }
+
+    /// Sum of several.
+    pub fn sum<'g>(grams: impl IntoIterator<Item = &'g Gram>) -> Option<Gram> {
+        let mut it = grams.into_iter();
+        let mut total = it.next()?.clone();
+        for g in it {
+            total.merge(g);
+        }
+        Some(total)
+    }
+}
+
+/// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
+/// their axis).
+pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
+    let ev = Evaluator::new(data, model);
+    let l = cols.len();
+    let mut z = vec![0.0; 3 * l];
+    data.kin
+        .runs
+        .iter()
+        .enumerate()
+        .map(|(r, rk)| {
+            let mut total = Gram::new(l);
+            let valid = &data.runs[r].valid;
+            for start in (0..rk.samples.len()).step_by(CHUNK) {
+                let mut local = Gram::new(l);
+                let end = (start + CHUNK).min(rk.samples.len());
+                for (i, _) in valid[start..end].iter().enumerate().filter(|(_, v)| **v) {
+                    let i = start + i;
+                    let p = ev.point(r, i);
+                    ev.fill(&p, cols, &mut z);
+                    for (a, &count) in rk.samples[i].rate_counts.iter().enumerate() {
+                        if is_clipped(count) {
+                            continue;
+                        }
+                        let e = f64::from(count) - ev.predict(&p, a);
+                        let x = &z[a * l..(a + 1) * l];
+                        let g = &mut local.xtx[a];
+                        for (ii, &xi) in x.iter().enumerate() {
+                            local.xte[a][ii] += xi * e;
+                            let row = &mut g[ii * l..(ii + 1) * l];
+                            for (jj, &xj) in x.iter().enumerate().skip(ii) {
+                                row[jj] += xi * xj;
+                            }
+                        }
+                        local.ete[a] += e * e;
+                        local.n[a] += 1;
+                    }
+                }
+                total.merge(&local);
+            }
+            total.symmetrise();
+            total
+        })
+        .collect()
+}
+
+/// Which accumulated columns a joint solve uses: per-axis linear ones and shared ones, as
+/// indices into the accumulation's columns.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Selection {
+    /// Per-axis linear columns.
+    pub lin: Vec<usize>,
+    /// Shared parameters.
+    pub shared: Vec<usize>,
+}
+
+impl Selection {
+    /// Parameters: 3 × linear + shared.
+    pub fn len(&self) -> usize {
+        3 * self.lin.len() + self.shared.len()
+    }
+
+    /// Whether it selects nothing.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Columns axis `a` sees, with the index of their parameter.
+    fn axis_columns(&self, a: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let nl = self.lin.len();
+        self.lin
+            .iter()
+            .enumerate()
+            .map(move |(p, &c)| (a * nl + p, c))
+            .chain(self.shared.iter().enumerate().map(move |(q, &c)| (3 * nl + q, c)))
+    }
+}
+
+/// A solved joint (linearised) least-squares problem: the step from the model the sums were
+/// taken at.
+#[derive(Debug, Clone)]
+pub struct JointSolution {
+    /// Step of every parameter: axis-major linear ones, then shared.
+    pub delta: DVector<f64>,
+    /// Covariance of the parameters (the inverse weighted normal matrix).
+    pub cov: DMatrix<f64>,
+    /// Weighted residual sum of squares after the step.
+    pub chi2: f64,
+    /// Residual sum of squares per axis after the step, counts².
+    pub rss: [f64; 3],
+    /// Samples per axis.
+    pub n: [u64; 3],
+}
+
+/// Solves the weighted joint problem (`weights[a]` = 1/variance of axis a's noise).
+pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<JointSolution> {
+    let np = sel.len();
+    let l = g.l;
+    let mut a_mat = DMatrix::<f64>::zeros(np, np);
+    let mut b = DVector::<f64>::zeros(np);
+    for (a, &w) in weights.iter().enumerate() {
+        let cols: Vec<(usize, usize)> = sel.axis_columns(a).collect();
+        for &(pi, ci) in &cols {
+            b[pi] += w * g.xte[a][ci];
+            for &(pj, cj) in &cols {
+                a_mat[(pi, pj)] += w * g.xtx[a][ci * l + cj];
+            }
+        }
+    }
+    let d = DVector::from_fn(np, |i, _| {
+        let v = a_mat[(i, i)];
+        if v > 0.0 {
+            1.0 / v.sqrt()
+        } else {
+            0.0
+        }
+    });
+    if d.iter().any(|&v| v == 0.0) {
+        return None;
+    }
+    let scaled = DMatrix::from_fn(np, np, |i, j| a_mat[(i, j)] * d[i] * d[j]);
+    let eig = scaled.clone().symmetric_eigenvalues();
+    if eig.max() <= 0.0 || eig.min() / eig.max() < MIN_RCOND {
+        return None;
+    }
+    let inv_scaled = scaled.cholesky()?.inverse();
+    let cov = DMatrix::from_fn(np, np, |i, j| inv_scaled[(i, j)] * d[i] * d[j]);
+    let delta = &cov * &b;
+    let rss = residual_after(g, sel, &delta);
+    let chi2 = (0..3).map(|a| weights[a] * rss[a]).sum();
+    Some(JointSolution { delta, cov, chi2, rss, n: g.n })
+}
+
+/// Residual sum of squares per axis of the sums `g` after the step `delta` (of a solve with the
+/// same selection, possibly on other runs: a held-out prediction).
+pub fn residual_after(g: &Gram, sel: &Selection, delta: &DVector<f64>) -> [f64; 3] {
+    let l = g.l;
+    std::array::from_fn(|a| {
+        let cols: Vec<(usize, usize)> = sel.axis_columns(a).collect();
+        let mut rss = g.ete[a];
+        for &(pi, ci) in &cols {
+            rss -= 2.0 * delta[pi] * g.xte[a][ci];
+            for &(pj, cj) in &cols {
+                rss += delta[pi] * g.xtx[a][ci * l + cj] * delta[pj];
+            }
+        }
+        rss.max(0.0)
+    })
+}
+
+/// A model fitted to convergence.
+#[derive(Debug, Clone)]
+pub struct Fitted {
+    /// The model at the solution.
+    pub model: Model,
+    /// Per-run sums of the model's columns at the last linearisation point.
+    pub per_run: Vec<Gram>,
+    /// The last solve (its `delta` is the final, negligible, step; `cov` the covariance).
+    pub solution: JointSolution,
+    /// Gauss-Newton passes made.
+    pub passes: usize,
+}
+
+impl Fitted {
+    /// The selection of all the model's columns.
+    pub fn selection(&self) -> Selection {
+        full_selection(&self.model)
+    }
+
+    /// Index of a parameter in `solution.delta`/`cov`: linear column `c` of axis `a`.
+    pub fn lin_index(&self, a: usize, c: LinCol) -> Option<usize> {
+        let nl = self.model.lin.len();
+        self.model.lin.iter().position(|&q| q == c).map(|p| a * nl + p)
+    }
+
+    /// Index of a shared parameter in `solution.delta`/`cov`.
+    pub fn shared_index(&self, p: SharedPar) -> Option<usize> {
+        let nl = self.model.lin.len();
+        self.model.shared.iter().position(|&q| q == p).map(|q| 3 * nl + q)
+    }
+
+    /// 1-σ of a parameter by its index.
+    pub fn sigma(&self, index: usize) -> f64 {
+        self.solution.cov[(index, index)].max(0.0).sqrt()
+    }
+}
+
+/// All columns of a model, in `Model::cols` order.
+pub fn full_selection(m: &Model) -> Selection {
+    let nl = m.lin.len();
+    Selection { lin: (0..nl).collect(), shared: (nl..nl + m.shared.len()).collect() }
+}
+
+/// Applies a step to a model.
+pub fn apply_step(m: &mut Model, sel_lin: usize, delta: &DVector<f64>, frozen: &[bool]) {
+    let nl = sel_lin;
+    for a in 0..3 {
+        for p in 0..nl {
+            m.beta[a][p] += delta[a * nl + p];
+        }
+    }
+    let mut q = 0;
+    for (k, th) in m.theta.iter_mut().enumerate() {
+        if frozen[k] {
+            continue;
+        }
+        *th += delta[3 * nl + q];
+        q += 1;
+    }
+    for (p, th) in m.shared.iter().zip(m.theta.iter_mut()) {
+        match p {
+            SharedPar::Delay => *th = th.clamp(-MAX_DELAY_S, MAX_DELAY_S),
+            SharedPar::DriftTau => *th = th.clamp(DRIFT_TAU_RANGE_S.0, DRIFT_TAU_RANGE_S.1),
+            _ => {}
+        }
+    }
+    m.update_directions();
+}
+
+/// Fits a model by Gauss-Newton from its current values. Shared parameters whose Jacobian is
+/// zero at the start (a warm-up time constant while its amplitude is 0) are held for the first
+/// pass.
+pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, CalError> {
+    let mut model = start;
+    let cols = model.cols();
+    let nl = model.lin.len();
+    let linear_only = model.shared.is_empty() && !model.lin.contains(&LinCol::RateAbs);
+    for pass in 1..=MAX_ITERATIONS {
+        let per_run = accumulate(data, &model, &cols);
+        let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
+        let frozen: Vec<bool> = model
+            .shared
+            .iter()
+            .map(|&p| p == SharedPar::DriftTau && (0..3).all(|a| model.beta_of(a, LinCol::DriftExp) == Some(0.0)))
+            .collect();
+        let sel = Selection {
+            lin: (0..nl).collect(),
+            shared: (0..model.shared.len()).filter(|&k| !frozen[k]).map(|k| nl + k).collect(),
+        };
+        let solution = solve_joint(&total, &sel, weights).ok_or_else(|| singular(&model))?;
+        let converged = !frozen.contains(&true)
+            && (0..solution.delta.len()).all(|i| {
+                let sd = solution.cov[(i, i)].max(0.0).sqrt();
+                solution.delta[i].abs() <= CONVERGED_SIGMAS * sd
+            });
+        apply_step(&mut model, nl, &solution.delta, &frozen);
+        if converged || (linear_only && pass == 1) || pass == MAX_ITERATIONS {
+            // The sums were taken before the (negligible, or exact linear) last step: the
+            // solution describes the model as it now is.
+            return Ok(Fitted { model, per_run, solution, passes: pass });
+        }
+    }
+    unreachable!("the loop returns at MAX_ITERATIONS")
+}
+
+/// The error for a joint system that cannot be solved: the runs do not separate the model's
+/// parameters.
+fn singular(model: &Model) -> CalError {
+    CalError::Unidentifiable { effects: model.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ") }
+}
+
+/// The harmonics in the catalogue, as effects.
+pub fn harmonic_effects() -> impl Iterator<Item = Effect> {
+    HARMONIC_ORDERS.map(Effect::TableHarmonic)
+}

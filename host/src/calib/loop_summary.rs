@@ -1,0 +1,179 @@
+//! The loop's account in plain text: what the linear model left, each effect added and what it
+//! changed, the before/after table, the final calibration with σ, and the verdict.
+
+use super::closure::{LoopReport, StepReport, Verdict};
+use std::fmt::Write as _;
+
+fn step_name(s: &StepReport) -> String {
+    match s.effect {
+        None => "linear model".into(),
+        Some(e) => format!("+ {}", e.name()),
+    }
+}
+
+fn triple(v: [f64; 3], digits: usize) -> String {
+    v.iter().map(|x| format!("{x:.digits$}")).collect::<Vec<_>>().join(" / ")
+}
+
+/// The before/after table, one row per model.
+pub fn table(r: &LoopReport) -> String {
+    let mut o = String::new();
+    let truth = r.steps.iter().any(|s| s.truth.is_some());
+    let _ = write!(o, "  {:<52} {:>22} {:>14}", "model", "RMS/floor x / y / z", "held-out °/s");
+    if truth {
+        let _ = write!(o, " {:>12} {:>12} {:>7}", "dir err °", "sens ppm", "max z");
+    }
+    o.push('\n');
+    for s in &r.steps {
+        let ratio: [f64; 3] = std::array::from_fn(|a| s.rms_dps[a] / s.floor_dps[a]);
+        let ho = s.held_out_excess_dps.map_or("n/a".to_string(), |v| format!("{v:.4}"));
+        let _ = write!(o, "  {:<52} {:>22} {:>14}", step_name(s), triple(ratio, 3), ho);
+        if let Some(t) = &s.truth {
+            let _ = write!(o, " {:>12.5} {:>12.1} {:>7.2}", t.max_direction_deg(), t.max_sensitivity_ppm(), t.max_z());
+        }
+        o.push('\n');
+    }
+    o
+}
+
+/// The whole account.
+pub fn summary(r: &LoopReport) -> String {
+    let mut o = String::new();
+    let cal = &r.final_report;
+    let _ = writeln!(o, "Closed-loop calibration of {} runs ({} samples used).", cal.runs.len(), cal.samples_used);
+    let _ = writeln!(o, "\nWhat the linear model left in the residual:");
+    if r.initial.findings.is_empty() {
+        let _ = writeln!(o, "  nothing: residual at the noise floor.");
+    }
+    for f in &r.initial.findings {
+        let _ = writeln!(o, "  - {}", f.text);
+    }
+    for s in r.steps.iter().skip(1) {
+        let Some(sc) = &s.score else { continue };
+        let _ = writeln!(
+            o,
+            "\nStep {}: {} — Δχ² = {:.1} for {} parameters (threshold {:.1}), ΔBIC {:.1}. Means: {}.",
+            s.number,
+            step_name(s),
+            sc.delta_chi2,
+            sc.dof,
+            sc.threshold,
+            sc.delta_bic,
+            sc.effect.meaning()
+        );
+        let others: Vec<String> = s
+            .alternatives
+            .iter()
+            .filter(|a| a.effect != sc.effect || a.drift_tau_s != sc.drift_tau_s)
+            .take(3)
+            .map(|a| match a.drift_tau_s {
+                Some(t) => format!("{} (T = {t} s) Δχ² {:.1}", a.effect.name(), a.delta_chi2),
+                None => format!("{} Δχ² {:.1}", a.effect.name(), a.delta_chi2),
+            })
+            .collect();
+        if !others.is_empty() {
+            let _ = writeln!(o, "  next best (linearised): {}", others.join("; "));
+        }
+        if !s.drift_choice.is_empty() {
+            let c: Vec<String> =
+                s.drift_choice.iter().map(|d| format!("{} BIC {:.1}", d.effect.name(), d.bic)).collect();
+            let _ = writeln!(o, "  drift models fitted and compared (lowest BIC kept): {}", c.join("; "));
+        }
+        for p in &s.effect_params {
+            let _ = writeln!(o, "  {} = {:.5} ± {:.5} {}", p.name, p.value, p.sigma, p.unit);
+        }
+        let prev = &r.steps[s.number - 1];
+        let _ = writeln!(
+            o,
+            "  residual RMS x / y / z: {} → {} °/s (floor {})",
+            triple(prev.rms_dps, 4),
+            triple(s.rms_dps, 4),
+            triple(s.floor_dps, 4)
+        );
+        let mut moves = s.moves.clone();
+        moves.sort_by(|a, b| b.moved_sigma.abs().total_cmp(&a.moved_sigma.abs()));
+        let top: Vec<String> = moves.iter().take(3).map(|m| format!("{} {:+.1}σ", m.name, m.moved_sigma)).collect();
+        let _ = writeln!(o, "  base parameters moved most: {}", top.join(", "));
+        match (prev.held_out_excess_dps, s.held_out_excess_dps) {
+            (Some(b), Some(a)) => {
+                let _ = writeln!(
+                    o,
+                    "  held-out prediction (fit the other runs, predict each run), error above the floor: {b:.4} → {a:.4} °/s"
+                );
+            }
+            _ => {
+                let _ = writeln!(o, "  held-out prediction: not available (the remaining runs cannot fit the model)");
+            }
+        }
+        if let (Some(b), Some(a)) = (&prev.truth, &s.truth) {
+            let _ = writeln!(
+                o,
+                "  against the truth: direction {:.5} → {:.5}°, sensitivity {:.1} → {:.1} ppm (max |z| {:.2} → {:.2})",
+                b.max_direction_deg(),
+                a.max_direction_deg(),
+                b.max_sensitivity_ppm(),
+                a.max_sensitivity_ppm(),
+                b.max_z(),
+                a.max_z()
+            );
+        }
+    }
+    let _ = writeln!(o, "\nBefore and after:\n{}", table(r));
+    let _ = writeln!(o, "Final calibration ({}):", cal.model);
+    let _ = writeln!(o, "  axis  k [counts/(°/s)]        tilt [°]            offset [counts]     direction s");
+    for a in &cal.axes {
+        let _ = writeln!(
+            o,
+            "  {}     {:.5} ± {:.5}   {:.4} ± {:.4}   {:+9.3} ± {:.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
+            a.axis,
+            a.k_counts_per_dps,
+            a.k_sigma,
+            a.tilt_deg,
+            a.tilt_sigma_deg,
+            a.offset_counts,
+            a.offset_sigma_counts,
+            a.s[0],
+            a.s[1],
+            a.s[2],
+            a.s_sigma[0],
+            a.s_sigma[1],
+            a.s_sigma[2]
+        );
+    }
+    for p in &cal.inter_axis {
+        let _ = writeln!(o, "  angle {}–{}: {:.4} ± {:.4}°", p.axes[0], p.axes[1], p.angle_deg, p.sigma_deg);
+    }
+    if let Some(last) = r.steps.last() {
+        if !last.effect_params.is_empty() {
+            let _ = writeln!(o, "  effects:");
+            for p in &last.effect_params {
+                let _ = writeln!(o, "    {} = {:.5} ± {:.5} {}", p.name, p.value, p.sigma, p.unit);
+            }
+        }
+    }
+    if !r.notes.is_empty() {
+        let _ = writeln!(o, "\nNotes:");
+        for n in &r.notes {
+            let _ = writeln!(o, "  - {n}");
+        }
+    }
+    if !r.asks.is_empty() {
+        let _ = writeln!(o, "\nRuns needed:");
+        for a in &r.asks {
+            let _ = writeln!(o, "  - {a}");
+        }
+    }
+    let _ = writeln!(o, "\nResidual of the final model:");
+    if r.final_diagnostics.findings.is_empty() {
+        let _ = writeln!(o, "  no structure found.");
+    }
+    for f in &r.final_diagnostics.findings {
+        let _ = writeln!(o, "  - {}", f.text);
+    }
+    let tag = match r.verdict {
+        Verdict::AtNoiseFloor => "VERDICT: calibrated, residual at the noise floor.",
+        Verdict::UnexplainedStructure => "VERDICT: UNEXPLAINED STRUCTURE — do not trust this calibration.",
+    };
+    let _ = writeln!(o, "\n{tag}\n{}", r.verdict_text);
+    o
+}

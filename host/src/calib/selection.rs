@@ -1,0 +1,348 @@
+//! Forward stepwise selection over the catalogue. At each step one pass accumulates the sums of
+//! the current model's columns and every candidate's (the linearised fit of each candidate is a
+//! solve of a sub-system of them); the candidate with the best BIC gain is added if its χ² drop
+//! passes a nested-model test at a Bonferroni-corrected level, and the model is then refitted by
+//! Gauss-Newton.
+//!
+//! The test: with the χ² weighted by the long-run noise variance measured between the table
+//! harmonics, the drop Δχ² from adding k parameters is χ²_k-distributed if the effect is absent;
+//! the effect is added if Δχ² exceeds the upper α/m point, m the candidates tried at this step.
+//! Among those that pass, the one with the largest Δχ² − k·ln n (BIC) is taken, which prefers the
+//! effect with fewer parameters when two explain the same structure.
+
+use super::catalogue::Effect;
+use super::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
+use super::error::CalError;
+use super::extended::{
+    accumulate, apply_step, effect_columns, fit, full_selection, harmonic_effects, residual_after, solve_joint, Col,
+    Fitted, Gram, LinCol, LoopData, Selection, SharedPar,
+};
+use crate::geometry::Pose;
+use serde::{Deserialize, Serialize};
+
+/// Candidate warm-up time constants, s, spaced by 2×: the exponential's shape changes slowly
+/// with T, so the best of them starts Gauss-Newton inside its basin; 15 s to 16 min covers a
+/// board's thermal time constants.
+const WARM_UP_GRID_S: [f64; 7] = [15.0, 30.0, 60.0, 120.0, 240.0, 480.0, 960.0];
+
+/// Smallest spread of the smoothed temperature over the capture for the temperature drift to be a
+/// candidate, °C: below it the column is a constant and only duplicates the offset.
+const MIN_TEMPERATURE_SPREAD_C: f64 = 0.5;
+
+/// Two runs' θ2' differ enough to separate a delay from an index offset if they differ by this
+/// fraction (5 %: their phases then differ by 5 % of the delay's).
+const DISTINCT_RATE_FRACTION: f64 = 0.05;
+
+/// A candidate addition.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    /// The effect.
+    pub effect: Effect,
+    /// Its columns in the accumulation.
+    pub cols: Vec<Col>,
+    /// For the warm-up: the grid time constant this variant uses, s.
+    pub drift_tau_s: Option<f64>,
+}
+
+/// A candidate's score at one step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Score {
+    /// Effect name.
+    pub effect: Effect,
+    /// Warm-up variant, s.
+    pub drift_tau_s: Option<f64>,
+    /// χ² drop.
+    pub delta_chi2: f64,
+    /// Parameters added.
+    pub dof: usize,
+    /// Threshold the drop had to exceed.
+    pub threshold: f64,
+    /// Δχ² − k·ln n.
+    pub delta_bic: f64,
+}
+
+/// Whether the runs contain two distinct signed θ2' (speeds or directions).
+pub fn separates_delay_and_index(data: &LoopData) -> bool {
+    let rates: Vec<f64> = data.kin.runs.iter().map(|r| r.gear_ratio * r.steady_rate_dps).collect();
+    rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.abs().max(b.abs())))
+}
+
+/// Whether the runs include both directions.
+pub fn both_directions(data: &LoopData) -> bool {
+    let r = &data.kin.runs;
+    r.iter().any(|k| k.steady_rate_dps > 0.0) && r.iter().any(|k| k.steady_rate_dps < 0.0)
+}
+
+fn temperature_spread_c(data: &LoopData) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for r in &data.runs {
+        for &t in &r.temp_c {
+            lo = lo.min(f64::from(t));
+            hi = hi.max(f64::from(t));
+        }
+    }
+    hi - lo
+}
+
+/// Which effects the residual points to: an effect is tried only if the structure it makes was
+/// found (the loop traces the residual to effects; an effect too weak to show in any run's
+/// diagnostics cannot bias the calibration beyond its noise either). Broadband structure alone
+/// (not white, RMS excess) points to every effect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Evidence {
+    /// 1× harmonic in some run: phase (delay, index offset).
+    pub phase: bool,
+    /// Run offsets, drift in time, or temperature dependence.
+    pub drift: bool,
+    /// Harmonics 2× and up, or dependence on the rate magnitude.
+    pub rate_scale: bool,
+    /// Per harmonic order 0..=8, whether it was significant somewhere.
+    pub orders: [bool; MAX_ORDER + 1],
+}
+
+impl Evidence {
+    /// Reads the findings of a fit's diagnostics.
+    pub fn of(d: &Diagnostics) -> Self {
+        let mut e = Self { phase: false, drift: false, rate_scale: false, orders: [false; MAX_ORDER + 1] };
+        let mut broadband = false;
+        for f in &d.findings {
+            match f.kind {
+                FindingKind::Harmonic(n) => {
+                    e.orders[n as usize] = true;
+                    if n == 1 {
+                        e.phase = true;
+                    } else {
+                        e.rate_scale = true;
+                    }
+                }
+                FindingKind::RunOffset | FindingKind::TimeDrift | FindingKind::Temperature => e.drift = true,
+                FindingKind::RateDependence => e.rate_scale = true,
+                FindingKind::NotWhite | FindingKind::RmsExcess | FindingKind::SpeedRipple => broadband = true,
+            }
+        }
+        if broadband && !(e.phase || e.drift || e.rate_scale) {
+            e.phase = true;
+            e.drift = true;
+            e.rate_scale = true;
+            e.orders = [true; MAX_ORDER + 1];
+        }
+        e
+    }
+}
+
+/// The candidates applicable to a model, among those the evidence points to.
+pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> Vec<Candidate> {
+    let has = |e: Effect| current.contains(&e);
+    let plain = |effect: Effect| {
+        let (lin, shared) = effect_columns(effect);
+        Candidate {
+            effect,
+            cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
+            drift_tau_s: None,
+        }
+    };
+    let mut out = Vec::new();
+    if evidence.phase && separates_delay_and_index(data) {
+        for e in [Effect::Delay, Effect::IndexOffset] {
+            if !has(e) && !has(Effect::Phase) {
+                out.push(plain(e));
+            }
+        }
+    } else if evidence.phase && !has(Effect::Phase) && !has(Effect::Delay) && !has(Effect::IndexOffset) {
+        out.push(plain(Effect::Phase));
+    }
+    if evidence.drift && !current.iter().any(|e| e.is_drift()) {
+        for t in WARM_UP_GRID_S {
+            out.push(Candidate {
+                effect: Effect::DriftWarmUp,
+                cols: vec![Col::Lin(LinCol::DriftExpFixed(t))],
+                drift_tau_s: Some(t),
+            });
+        }
+        out.push(plain(Effect::DriftPolynomial));
+        if temperature_spread_c(data) >= MIN_TEMPERATURE_SPREAD_C {
+            out.push(plain(Effect::DriftTemperature));
+        }
+    }
+    if evidence.rate_scale && !has(Effect::RateScale) {
+        out.push(plain(Effect::RateScale));
+    }
+    for e in harmonic_effects() {
+        if let Effect::TableHarmonic(n) = e {
+            if evidence.orders[n as usize] && !has(e) {
+                out.push(plain(e));
+            }
+        }
+    }
+    out
+}
+
+/// The outcome of one selection step.
+#[derive(Debug, Clone)]
+pub struct StepOutcome {
+    /// Every candidate's score, best first.
+    pub scores: Vec<Score>,
+    /// The accepted candidate's index in `scores` and the refitted model, if one passed.
+    pub accepted: Option<(usize, Fitted)>,
+    /// When a drift model was added: each alternative fitted, and its BIC.
+    pub drift_choice: Vec<DriftChoice>,
+}
+
+/// A drift model fitted as an alternative.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DriftChoice {
+    /// The model.
+    pub effect: Effect,
+    /// χ² after fitting.
+    pub chi2: f64,
+    /// χ² + k·ln n.
+    pub bic: f64,
+}
+
+/// The model with a candidate added, started at the candidate's linearised solution; the
+/// warm-up's time constant is not in that solution (its grid value stands).
+fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
+    let ns = state.model.shared.len();
+    let (lin, shared) = effect_columns(c.effect);
+    let mut model = state.model.with(
+        c.effect,
+        std::array::from_fn(|_| vec![0.0; lin.len()]),
+        shared.iter().map(|&p| if p == SharedPar::DriftTau { c.drift_tau_s.unwrap_or(1.0) } else { 0.0 }).collect(),
+    );
+    let frozen: Vec<bool> =
+        model.shared.iter().enumerate().map(|(k, &p)| k >= ns && p == SharedPar::DriftTau).collect();
+    let nl = model.lin.len();
+    apply_step(&mut model, nl, &sol.delta, &frozen);
+    model
+}
+
+/// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level.
+pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> Result<StepOutcome, CalError> {
+    let weights = diag.weights();
+    let cands = candidates(data, &state.model.effects, &Evidence::of(diag));
+    if cands.is_empty() {
+        return Ok(StepOutcome { scores: Vec::new(), accepted: None, drift_choice: Vec::new() });
+    }
+    let mut cols = state.model.cols();
+    let nl = state.model.lin.len();
+    let ns = state.model.shared.len();
+    let mut positions = Vec::with_capacity(cands.len());
+    for c in &cands {
+        let start = cols.len();
+        cols.extend(c.cols.iter().copied());
+        positions.push(start..cols.len());
+    }
+    let per_run = accumulate(data, &state.model, &cols);
+    let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
+    let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
+    let base = solve_joint(&total, &base_sel, weights).ok_or(CalError::Unidentifiable {
+        effects: state.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+    })?;
+    let n_total: u64 = total.n.iter().sum();
+    let m = cands.len();
+    let mut scores: Vec<(Score, usize, Option<super::extended::JointSolution>)> = Vec::with_capacity(m);
+    for (ci, (c, pos)) in cands.iter().zip(&positions).enumerate() {
+        let mut sel = base_sel.clone();
+        let mut dof = 0;
+        for (j, col) in pos.clone().zip(&c.cols) {
+            match col {
+                Col::Lin(_) => {
+                    sel.lin.push(j);
+                    dof += 3;
+                }
+                Col::Shared(_) => {
+                    sel.shared.push(j);
+                    dof += 1;
+                }
+            }
+        }
+        let threshold = super::stats::chi2_upper_quantile(dof, alpha / m as f64);
+        let sol = solve_joint(&total, &sel, weights);
+        let delta_chi2 = sol.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
+        scores.push((
+            Score {
+                effect: c.effect,
+                drift_tau_s: c.drift_tau_s,
+                delta_chi2,
+                dof,
+                threshold,
+                delta_bic: delta_chi2 - dof as f64 * (n_total as f64).ln(),
+            },
+            ci,
+            sol,
+        ));
+    }
+    scores.sort_by(|a, b| b.0.delta_bic.total_cmp(&a.0.delta_bic));
+    let mut drift_choice = Vec::new();
+    let best = scores.iter().position(|(s, _, sol)| sol.is_some() && s.delta_chi2 > s.threshold);
+    let accepted = match best {
+        None => None,
+        Some(bi) => {
+            let fit_of = |i: usize| -> Result<Fitted, CalError> {
+                let (_, ci, sol) = &scores[i];
+                let sol = sol.as_ref().expect("passing candidates were solved");
+                fit(data, start_model(state, &cands[*ci], sol), weights)
+            };
+            if scores[bi].0.effect.is_drift() {
+                // The drift models are alternatives: fit the best-scoring variant of each that
+                // passed, and keep the one with the lowest BIC after fitting (the warm-up's time
+                // constant is only on its grid before).
+                let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
+                for (i, (sc, _, sol)) in scores.iter().enumerate() {
+                    let passed = sol.is_some() && sc.delta_chi2 > sc.threshold && sc.effect.is_drift();
+                    if passed && !choices.iter().any(|c| scores[c.0].0.effect == sc.effect) {
+                        let f = fit_of(i)?;
+                        let (lin, shared) = effect_columns(sc.effect);
+                        let k = 3 * lin.len() + shared.len();
+                        let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
+                        choices.push((i, f, bic));
+                    }
+                }
+                drift_choice = choices
+                    .iter()
+                    .map(|c| DriftChoice { effect: scores[c.0].0.effect, chi2: c.1.solution.chi2, bic: c.2 })
+                    .collect();
+                choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).map(|c| (c.0, c.1))
+            } else {
+                Some((bi, fit_of(bi)?))
+            }
+        }
+    };
+    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), accepted, drift_choice })
+}
+
+/// Prediction of one held-out run from a fit to the others.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// Run number held out.
+    pub run: usize,
+    /// RMS prediction error per axis, counts (noise included).
+    pub rms_counts: [f64; 3],
+}
+
+/// For every run whose removal leaves a solvable system: fit the other runs, predict it.
+///
+/// A run is only held out when another run has its pose: one pose alone leaves M unidentified
+/// (EXCITER.md: two poses give two planes per axis), so "predicting" a lone pose would measure
+/// nothing but the rank deficiency.
+pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses: &[Pose]) -> Vec<HeldOut> {
+    let sel = full_selection(&fitted.model);
+    let mut out = Vec::new();
+    for (r, g) in fitted.per_run.iter().enumerate() {
+        if !poses.iter().enumerate().any(|(i, &p)| i != r && p == poses[r]) {
+            continue;
+        }
+        let Some(others) = Gram::sum(fitted.per_run.iter().enumerate().filter(|(i, _)| *i != r).map(|(_, g)| g)) else {
+            continue;
+        };
+        let Some(sol) = solve_joint(&others, &sel, weights) else {
+            continue;
+        };
+        let rss = residual_after(g, &sel, &sol.delta);
+        out.push(HeldOut {
+            run: run_numbers[r],
+            rms_counts: std::array::from_fn(|a| (rss[a] / g.n[a].max(1) as f64).sqrt()),
+        });
+    }
+    out
+}
