@@ -20,6 +20,39 @@ pub const VIRTUAL_GYRO_KS: [[f64; 3]; 3] =
 /// The virtual rig's zero-rate offsets, °/s.
 pub const VIRTUAL_GYRO_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
 
+/// The firmware's virtual rig (the `virtual_rig` binary) serving a pseudo-terminal; killed when
+/// dropped.
+pub struct VirtualRigProcess {
+    child: std::process::Child,
+    /// The pty device to open, e.g. `/dev/pts/3`.
+    pub path: String,
+}
+
+impl VirtualRigProcess {
+    /// Starts `exe` (pass `env!("CARGO_BIN_EXE_virtual_rig")`) and reads the pty path it prints.
+    pub fn spawn(exe: &str, speedup: f64) -> Self {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(exe)
+            .args(["--speedup", &speedup.to_string()])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::inherit())
+            .spawn()
+            .expect("spawn virtual_rig");
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("pty path");
+        let path = line.trim().to_string();
+        assert!(path.starts_with("/dev/"), "unexpected first line {path:?}");
+        Self { child, path }
+    }
+}
+
+impl Drop for VirtualRigProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 /// Path of a file under `tests/data/`.
 pub fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)

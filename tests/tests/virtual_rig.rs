@@ -1,12 +1,12 @@
 //! The virtual rig on a real pseudo-terminal: protocol commands in, valid frames out.
 
+use e2e::VirtualRigProcess;
 use protocol::{
     encode_frame, Ack, CmdResult, Command, Direction, Edge, Event, GyroConfig, RigMsg, SeqTracker, StartRun,
     StreamDecoder, MAX_FRAME_LEN,
 };
 use serialport::SerialPort;
-use std::io::{BufRead, BufReader, Read, Write};
-use std::process::{Child, Command as Process, Stdio};
+use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
 /// Simulated seconds per wall second: 10 keeps the test short while the 2 s link timeout is
@@ -14,7 +14,8 @@ use std::time::{Duration, Instant};
 const SPEEDUP: f64 = 10.0;
 
 struct Rig {
-    child: Child,
+    /// Killed on drop.
+    _process: VirtualRigProcess,
     port: Box<dyn SerialPort>,
     decoder: StreamDecoder,
     seq: SeqTracker,
@@ -24,28 +25,12 @@ struct Rig {
     missing: u64,
 }
 
-impl Drop for Rig {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 impl Rig {
     fn spawn() -> Rig {
-        let mut child = Process::new(env!("CARGO_BIN_EXE_virtual_rig"))
-            .args(["--speedup", &SPEEDUP.to_string()])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("spawn virtual_rig");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).expect("pty path");
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/"), "unexpected first line {path:?}");
-        let port = serialport::new(&path, 115_200).timeout(Duration::from_millis(20)).open().expect("open pty");
+        let process = VirtualRigProcess::spawn(env!("CARGO_BIN_EXE_virtual_rig"), SPEEDUP);
+        let port = serialport::new(&process.path, 115_200).timeout(Duration::from_millis(20)).open().expect("open pty");
         Rig {
-            child,
+            _process: process,
             port,
             decoder: StreamDecoder::new(),
             seq: SeqTracker::new(),
