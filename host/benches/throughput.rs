@@ -52,6 +52,16 @@ fn child(path: &Path) {
     println!("{samples} {t_decode} {t_total} {c_decode} {c_total} {}", peak_rss_mib());
 }
 
+/// The whole of `host calibrate`: decode, then the closed loop (fit, diagnostics, effect
+/// selection). Prints `wall_s cpu_s peak_mib`.
+fn child_loop(path: &Path) {
+    let (t0, c0) = (Instant::now(), cpu_s());
+    let cap = capture::decode_reader(std::fs::File::open(path).expect("open capture")).expect("read capture");
+    let lr = calib::close_loop(&cap.runs, &calib::LoopOptions::default(), None).expect("calibrates");
+    std::hint::black_box(&lr);
+    println!("{} {} {}", t0.elapsed().as_secs_f64(), cpu_s() - c0, peak_rss_mib());
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -61,6 +71,10 @@ fn main() {
     let path = data_path();
     if let Ok(p) = std::env::var("THROUGHPUT_CHILD") {
         child(Path::new(&p));
+        return;
+    }
+    if let Ok(p) = std::env::var("THROUGHPUT_CHILD_LOOP") {
+        child_loop(Path::new(&p));
         return;
     }
     if !path.exists() {
@@ -106,4 +120,25 @@ fn main() {
         cpu_total_s.iter().map(|x| (x * 1000.0).round() / 1000.0).collect::<Vec<_>>()
     );
     println!("peak resident memory: {:.0} MiB (median of {REPEATS})", median(peaks));
+
+    // The full `host calibrate` (closed loop) on the same capture, for scale: three runs.
+    let mut wall = Vec::new();
+    let mut cpu = Vec::new();
+    let mut peak = Vec::new();
+    for _ in 0..3 {
+        let out = Command::new(&exe).env("THROUGHPUT_CHILD_LOOP", &path).arg("--bench").output().expect("child runs");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let f: Vec<f64> =
+            String::from_utf8_lossy(&out.stdout).split_whitespace().map(|x| x.parse().expect("number")).collect();
+        wall.push(f[0]);
+        cpu.push(f[1]);
+        peak.push(f[2]);
+    }
+    let (w, c) = (median(wall), median(cpu));
+    println!(
+        "closed loop (decode + fit + diagnostics + effect selection, what `host calibrate` runs): {w:.2} s wall, \
+         {c:.2} s on-CPU ({:.2} M samples/s), peak {:.0} MiB (median of 3)",
+        samples as f64 / c / 1e6,
+        median(peak)
+    );
 }
