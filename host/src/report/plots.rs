@@ -266,6 +266,21 @@ fn legend_width(width: u32, y_area: i32) -> i32 {
     width as i32 - MARGIN_LEFT - y_area - MARGIN_RIGHT
 }
 
+/// Draws the title and, under it, the legend strip aligned with the plot frame; returns the pixel
+/// row where the plot body may begin. Every chart starts this way.
+fn heading(
+    root: &chart::Area<'_>,
+    title: &str,
+    items: &[LegendItem],
+    width_px: u32,
+    y_label_area: i32,
+) -> Result<i32, PlotError> {
+    let top = chart::title(root, title)?;
+    let lw = legend_width(width_px, y_label_area);
+    chart::legend(root, items, MARGIN_LEFT + y_label_area, top, lw)?;
+    Ok(top + chart::legend_height(items, lw))
+}
+
 /// Line, dot and band series on shared axes, with a legend strip above the plot.
 pub fn line_plot(spec: &PlotSpec, series: &[Series]) -> Result<String, PlotError> {
     series.iter().try_for_each(Series::check)?;
@@ -278,10 +293,8 @@ pub fn line_plot(spec: &PlotSpec, series: &[Series]) -> Result<String, PlotError
     let items: Vec<_> = series.iter().filter_map(Series::legend_item).collect();
     chart::render(spec.width_px, spec.height_px, |root| {
         let ya = chart::y_label_area(&y);
-        let top = chart::title(root, &spec.title)?;
-        let lw = legend_width(spec.width_px, ya);
-        chart::legend(root, &items, MARGIN_LEFT + ya, top, lw)?;
-        let (_, body) = root.split_vertically(top + chart::legend_height(&items, lw));
+        let below_legend = heading(root, &spec.title, &items, spec.width_px, ya)?;
+        let (_, body) = root.split_vertically(below_legend);
         let text =
             FrameText { x_desc: &spec.x_label, y_desc: &spec.y_label, y_label_area: ya, x_labels: true, x_grid: true };
         let m = chart::frame(&body, &x, &y, &text)?;
@@ -411,10 +424,8 @@ pub fn theta2_panel(spec: &Theta2Spec, curves: &[Theta2Bins]) -> Result<String, 
     let unit = &spec.unit;
     chart::render(spec.width_px, spec.height_px, |root| {
         let ya = chart::y_label_area(&y_top).max(chart::y_label_area(&y_bot));
-        let top = chart::title(root, &spec.title)?;
-        let lw = legend_width(spec.width_px, ya);
-        chart::legend(root, &items, MARGIN_LEFT + ya, top, lw)?;
-        let (_, body) = root.split_vertically(top + chart::legend_height(&items, lw));
+        let below_legend = heading(root, &spec.title, &items, spec.width_px, ya)?;
+        let (_, body) = root.split_vertically(below_legend);
         let (_, body_h) = body.dim_in_pixel();
         let (upper, lower) = body.split_vertically(body_h * 11 / 20);
         let up_desc = format!("output [{unit}]");
@@ -551,9 +562,7 @@ pub fn spectra_plot(
     }
     chart::render(spec.width_px, spec.height_px, |root| {
         let ya = chart::y_label_area(&y);
-        let top = chart::title(root, &spec.title)?;
-        let lw = legend_width(spec.width_px, ya);
-        chart::legend(root, &items, MARGIN_LEFT + ya, top, lw)?;
+        let below_legend = heading(root, &spec.title, &items, spec.width_px, ya)?;
         // Lay the labels out on the x mapping the frame will have: its pixel span is fixed by
         // the margins and the label area.
         let (left, right) = ((MARGIN_LEFT + ya) as f64, (spec.width_px as i32 - MARGIN_RIGHT) as f64);
@@ -562,7 +571,7 @@ pub fn spectra_plot(
         };
         let lanes = marker_lanes(markers, predicted);
         let strip = lanes.iter().map(|l| (l.2 + 1) * MARKER_LANE).max().unwrap_or(0);
-        let (_, body) = root.split_vertically(top + chart::legend_height(&items, lw) + strip);
+        let (_, body) = root.split_vertically(below_legend + strip);
         let text =
             FrameText { x_desc: &spec.x_label, y_desc: &spec.y_label, y_label_area: ya, x_labels: true, x_grid: true };
         let m = chart::frame(&body, &x, &y, &text)?;
@@ -640,10 +649,8 @@ pub fn bar_chart(
     }
     chart::render(spec.width_px, spec.height_px, |root| {
         let ya = chart::y_label_area(&y);
-        let top = chart::title(root, &spec.title)?;
-        let lw = legend_width(spec.width_px, ya);
-        chart::legend(root, &items, MARGIN_LEFT + ya, top, lw)?;
-        let (_, body) = root.split_vertically(top + chart::legend_height(&items, lw));
+        let below_legend = heading(root, &spec.title, &items, spec.width_px, ya)?;
+        let (_, body) = root.split_vertically(below_legend);
         let text =
             FrameText { x_desc: &spec.x_label, y_desc: &spec.y_label, y_label_area: ya, x_labels: true, x_grid: false };
         let m = chart::frame(&body, &x, &y, &text)?;
