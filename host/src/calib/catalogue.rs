@@ -5,10 +5,21 @@
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
-/// Harmonics of the sensor-table rate in the catalogue: 2× to 8×. 1× is the linear model itself
-/// (and the phase effects); 8× at 0.5 Hz is 4 Hz, well inside every L3G4200D bandwidth (≥ 12.5
-/// Hz) and well resolved by 20 ms of encoder slope.
-pub const HARMONIC_ORDERS: std::ops::RangeInclusive<u32> = 2..=8;
+/// Highest harmonic of the sensor-table rate fitted sample by sample (diagnostics and the
+/// transmission-error model): the 12-pole magnetic gears (EXCITER.md, "Mechanism") pass a pole
+/// pair 12 times a turn, so their transmission error sits at 12× and its overtone at 24×; 32
+/// leaves margin above both. 32× at 0.5 Hz is 16 Hz, inside every L3G4200D bandwidth (≥ 12.5 Hz
+/// only at 100 Hz ODR). Harmonics above it are searched in the residual spectrum up to what the
+/// sample rate resolves (`diagnostics`).
+pub const MAX_HARMONIC_ORDER: usize = 32;
+
+/// Harmonics of the sensor-table rate in the catalogue: 1× (a once-per-turn eccentricity of the
+/// sensor table's angle, as an angle error it is not the linear model's 1× term) up to
+/// [`MAX_HARMONIC_ORDER`].
+pub const HARMONIC_ORDERS: std::ops::RangeInclusive<u32> = 1..=MAX_HARMONIC_ORDER as u32;
+
+/// Pole pairs passed per relative turn by the 12-pole magnetic gears (EXCITER.md).
+pub const GEAR_POLE_PASS_ORDER: u32 = 12;
 
 /// One catalogued effect.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -30,6 +41,10 @@ pub enum Effect {
     /// Scale depending on the rate along the axis: |r| (asymmetry between the signs) and r·|r|
     /// (odd quadratic non-linearity).
     RateScale,
+    /// Earth's rotation, fixed in the lab, seen through θ1 and θ2: its component along the base
+    /// axis adds to θ1' (a scale error that shrinks with speed), its horizontal component turns
+    /// with the base. Three components, °/s.
+    EarthRotation,
     /// A ripple of the sensor table's speed at n× its rate that the base encoder cannot see
     /// (the magnetic gears are compliant), seen by every axis through M R_qᵀ.
     TableHarmonic(u32),
@@ -46,6 +61,11 @@ impl Effect {
             Effect::DriftPolynomial => "offset drift: quadratic in time".into(),
             Effect::DriftTemperature => "offset drift: linear in temperature".into(),
             Effect::RateScale => "rate-dependent scale (non-linearity, asymmetry)".into(),
+            Effect::EarthRotation => "Earth rotation".into(),
+            Effect::TableHarmonic(n) if n % GEAR_POLE_PASS_ORDER == 0 => {
+                format!("magnetic-gear transmission error at {n}× (pole pass)")
+            }
+            Effect::TableHarmonic(1) => "sensor-table eccentricity (transmission error at 1×)".into(),
             Effect::TableHarmonic(n) => format!("table-speed ripple at {n}× the sensor-table rate"),
         }
     }
@@ -60,6 +80,7 @@ impl Effect {
             Effect::DriftPolynomial => "drift_polynomial".into(),
             Effect::DriftTemperature => "drift_temperature".into(),
             Effect::RateScale => "rate_scale".into(),
+            Effect::EarthRotation => "earth_rotation".into(),
             Effect::TableHarmonic(n) => format!("table_harmonic_{n}"),
         }
     }
@@ -81,7 +102,12 @@ impl Effect {
             Effect::DriftPolynomial => "the zero-rate level wanders slowly",
             Effect::DriftTemperature => "the zero-rate level follows the die temperature",
             Effect::RateScale => "the sense chain is not linear, or its gain differs with the sign of the rate",
-            Effect::TableHarmonic(_) => "the sensor table's speed ripples relative to the base (gear compliance)",
+            Effect::EarthRotation => {
+                "the lab turns with the Earth at 15.041 °/h (IERS: 7.292115e-5 rad/s); at 180 °/s its vertical part alone is ≈ 13 ppm of θ1'"
+            }
+            Effect::TableHarmonic(_) => {
+                "the sensor table's angle departs periodically from what encoder and index imply (magnetic-gear pole pass, eccentricity, compliance); its derivative ripples θ2'"
+            }
         }
     }
 
@@ -96,6 +122,9 @@ impl Effect {
                 "its slow change within and between runs; runs in both directions separate the offset from the constant θ2' term without relying on it"
             }
             Effect::RateScale => "the harmonics it makes in proportion to each axis's own rate",
+            Effect::EarthRotation => {
+                "runs at two speeds or in both directions (its vertical part does not scale with θ1', a sensitivity does); the horizontal part turns with the base angle θ1"
+            }
             Effect::TableHarmonic(_) => "the same ripple in every axis and both poses, in proportion to M R_qᵀ",
         }
     }

@@ -10,7 +10,7 @@ use super::diagnostics::{diagnose, Diagnostics};
 use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
 use super::lsq::AXES;
 use super::report::{Autocorrelation, AxisResidual, RunResidualReport};
-use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score};
+use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score, Skipped};
 use super::truth_check::TruthErrors;
 use super::{calibrate, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
@@ -134,6 +134,8 @@ pub struct LoopReport {
     pub asks: Vec<String>,
     /// Informative sentences (clipping, speed ripple, identifiability).
     pub notes: Vec<String>,
+    /// Candidates that passed a step's test but could not be fitted, with why (never fatal).
+    pub skipped: Vec<Skipped>,
     /// Diagnostics of the linear model (with its plot data).
     pub initial: Diagnostics,
     /// Diagnostics of the final model (with its plot data).
@@ -226,6 +228,9 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             SharedPar::IndexOffset => ("index offset δ".to_string(), 180.0 / std::f64::consts::PI, "°"),
             SharedPar::Phase => ("phase δ − θ2'·τ".to_string(), 180.0 / std::f64::consts::PI, "°"),
             SharedPar::DriftTau => ("warm-up time constant T".to_string(), 1.0, "s"),
+            SharedPar::EarthVertical => ("Earth rate, vertical".to_string(), 3600.0, "°/h"),
+            SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at encoder zero".to_string(), 3600.0, "°/h"),
+            SharedPar::EarthWestAtZero => ("Earth rate, horizontal 90° on".to_string(), 3600.0, "°/h"),
             SharedPar::Harmonic { order, quadrature } => {
                 (format!("table-speed ripple {order}× {}", if quadrature { "sin" } else { "cos" }), 1e6, "ppm of θ2'")
             }
@@ -432,8 +437,14 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
     let initial = state.diag.clone();
     let mut steps = vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())];
     let mut asks = Vec::new();
+    let mut skipped: Vec<Skipped> = Vec::new();
     while state.fitted.model.effects.len() < opts.max_effects {
         let outcome = step(&data, &state.fitted, &state.diag, opts.alpha)?;
+        for sk in outcome.skipped {
+            if !skipped.contains(&sk) {
+                skipped.push(sk);
+            }
+        }
         let Some((bi, fitted)) = outcome.accepted else {
             break;
         };
@@ -481,5 +492,15 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
         }
     };
     let final_report = final_cal_report(&base_report, &state, &data);
-    Ok(LoopReport { steps, verdict, verdict_text, asks, notes, initial, final_diagnostics: state.diag, final_report })
+    Ok(LoopReport {
+        steps,
+        verdict,
+        verdict_text,
+        asks,
+        notes,
+        skipped,
+        initial,
+        final_diagnostics: state.diag,
+        final_report,
+    })
 }

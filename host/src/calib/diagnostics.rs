@@ -13,8 +13,8 @@ use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Highest harmonic of the table rate examined (the catalogue's, see `catalogue::HARMONIC_ORDERS`).
-pub const MAX_ORDER: usize = 8;
+/// Highest harmonic of the table rate examined sample by sample (the catalogue's).
+pub const MAX_ORDER: usize = super::catalogue::MAX_HARMONIC_ORDER;
 
 /// θ2 bins of the plotted residual: 1° each.
 pub const THETA2_BINS: usize = 360;

@@ -11,7 +11,7 @@
 //! The same accumulation over the union of the model's columns and every candidate's gives the
 //! linearised fit of any candidate model from one pass (see [`super::selection`]).
 
-use super::catalogue::{Effect, HARMONIC_ORDERS};
+use super::catalogue::{Effect, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{KinSample, Kinematics};
 use super::lsq::is_clipped;
@@ -79,6 +79,13 @@ pub enum SharedPar {
     Phase,
     /// Warm-up time constant T, s.
     DriftTau,
+    /// Earth's rate along the base axis z1 (vertical), °/s.
+    EarthVertical,
+    /// Earth's horizontal rate, the component along the base-frame direction the encoder's zero
+    /// points to, °/s.
+    EarthNorthAtZero,
+    /// The horizontal component 90° further on, °/s.
+    EarthWestAtZero,
     /// Relative table-speed ripple at `order`× θ2: θ2' → θ2'(1 + a·cos nθ2 + b·sin nθ2), with the
     /// matching angle ripple; `quadrature` selects b.
     Harmonic {
@@ -108,6 +115,9 @@ pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
         Effect::DriftPolynomial => (vec![LinCol::DriftT1, LinCol::DriftT2], vec![]),
         Effect::DriftTemperature => (vec![LinCol::DriftTemp], vec![]),
         Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
+        Effect::EarthRotation => {
+            (vec![], vec![SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
+        }
         Effect::TableHarmonic(order) => (
             vec![],
             vec![SharedPar::Harmonic { order, quadrature: false }, SharedPar::Harmonic { order, quadrature: true }],
@@ -309,8 +319,12 @@ pub struct Point {
     pub t_scaled: f64,
     /// Smoothed temperature from the capture mean, °C.
     pub temp_c: f64,
-    /// sin and cos of n·θ2 for n = 0..=8.
-    pub harmonics: [(f64, f64); 9],
+    /// Base angle against the ground from the encoder, rad (the transmission error's argument).
+    pub gear_rad: f64,
+    /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame.
+    pub d_earth: [[f64; 3]; 3],
+    /// sin and cos of n·θ2 for n = 0..=MAX_HARMONIC_ORDER.
+    pub harmonics: [(f64, f64); MAX_HARMONIC_ORDER + 1],
 }
 
 /// Values derived from a model once per pass.
@@ -319,6 +333,8 @@ struct Shifts {
     delay_s: f64,
     theta2_offset_rad: f64,
     drift_tau_s: f64,
+    /// Earth's rate: vertical, and the two horizontal components, °/s.
+    earth_dps: [f64; 3],
     /// (n, a, b) of each ripple harmonic.
     ripple: Vec<(u32, f64, f64)>,
 }
@@ -347,6 +363,8 @@ impl Shifts {
             theta2_offset_rad: m.theta_of(SharedPar::IndexOffset).unwrap_or(0.0)
                 + m.theta_of(SharedPar::Phase).unwrap_or(0.0),
             drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
+            earth_dps: [SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero]
+                .map(|p| m.theta_of(p).unwrap_or(0.0)),
             ripple,
         }
     }
@@ -426,15 +444,18 @@ impl<'a> Evaluator<'a> {
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
         let (s1, c1) = th.sin_cos();
-        let mut harmonics = [(0.0, 1.0); 9];
-        for n in 1..9 {
+        let mut harmonics = [(0.0, 1.0); MAX_HARMONIC_ORDER + 1];
+        for n in 1..=MAX_HARMONIC_ORDER {
             let (sp, cp) = harmonics[n - 1];
             harmonics[n] = (sp * c1 + cp * s1, cp * c1 - sp * s1);
         }
+        // The transmission error is a function of the base's angle against the ground (the
+        // gear mesh), from the encoder; the index offset does not move it.
+        let gear_rad = rk.theta1_at_index_rad + theta2 / rk.gear_ratio;
         let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
         for &(n, a, b) in &sh.ripple {
-            let (sn, cn) = harmonics[n as usize];
             let nf = f64::from(n);
+            let (sn, cn) = (nf * gear_rad).sin_cos();
             th_eff += (a * sn - b * cn) / nf;
             ripple += a * cn + b * sn;
             dripple += nf * (b * cn - a * sn);
@@ -446,7 +467,15 @@ impl<'a> Evaluator<'a> {
         let (se, ce) = th_eff.sin_cos();
         let w2 = [rate1 * se, rate1 * ce, rate2_eff];
         let dw2 = [rate1 * ce, -rate1 * se];
-        let omega = std::array::from_fn(|i| rt[i][0] * w2[0] + rt[i][1] * w2[1] + rt[i][2] * w2[2]);
+        // Earth's rate in the table frame O2, per unit of each component (module docs of
+        // `earth_basis`), added to ω2.
+        let basis = earth_basis(gear_rad, th_eff);
+        let [ev, en, ew] = sh.earth_dps;
+        let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
+        let to_package =
+            |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
+        let d_earth = [to_package(&basis[0]), to_package(&basis[1]), to_package(&basis[2])];
+        let omega = to_package(&w2);
         let d_theta2 = std::array::from_fn(|i| rt[i][0] * dw2[0] + rt[i][1] * dw2[1]);
         let d_rate2 = std::array::from_fn(|i| rt[i][2]);
         Point {
@@ -461,6 +490,8 @@ impl<'a> Evaluator<'a> {
             t_rel_s: s.t_s - self.data.t0_s,
             t_scaled: (s.t_s - self.data.t_mid_s) / self.data.t_half_s,
             temp_c: f64::from(self.data.runs[r].temp_c[i]),
+            gear_rad,
+            d_earth,
             harmonics,
         }
     }
@@ -496,34 +527,40 @@ impl<'a> Evaluator<'a> {
         self.model.lin.iter().zip(&self.model.beta[a]).map(|(&c, b)| b * self.lin_value(c, p, a)).sum()
     }
 
-    /// ∂(output of axis a)/∂θ2 and ∂/∂θ2', counts per rad and counts per °/s.
+    /// ∂(output of axis a)/∂ω_s, counts per °/s.
     #[inline]
-    fn sensitivities(&self, p: &Point, a: usize) -> (f64, f64) {
+    fn gradient(&self, p: &Point, a: usize) -> [f64; 3] {
         let r = self.axis_rate(p, a);
         let g = self.c_abs[a] * r.signum() + 2.0 * self.c_sq[a] * r.abs();
-        let u: [f64; 3] = std::array::from_fn(|i| self.m_rows[a][i] + self.s_hat[a][i] * g);
-        (dot(&u, &p.d_theta2), dot(&u, &p.d_rate2))
+        std::array::from_fn(|i| self.m_rows[a][i] + self.s_hat[a][i] * g)
     }
 
     /// Fills `out[a * cols.len() + j]` with column j on axis a.
     pub fn fill(&self, p: &Point, cols: &[Col], out: &mut [f64]) {
         let l = cols.len();
         for a in 0..3 {
-            let (e2, ez) = self.sensitivities(p, a);
+            let u = self.gradient(p, a);
+            // ∂(output)/∂θ2 and ∂/∂θ2', counts per rad and counts per °/s.
+            let (e2, ez) = (dot(&u, &p.d_theta2), dot(&u, &p.d_rate2));
             // Moving θ2 (before ripple) moves the rippled angle and speed too.
             let d_shift = e2 * p.dtheta_eff + ez * p.drate_eff_dps;
             for (j, &c) in cols.iter().enumerate() {
                 out[a * l + j] = match c {
                     Col::Lin(lc) => self.lin_value(lc, p, a),
-                    Col::Shared(SharedPar::IndexOffset | SharedPar::Phase) => d_shift,
+                    // The index offset moves θ2 but not the gear mesh's angle (the ripple).
+                    Col::Shared(SharedPar::IndexOffset) => e2,
+                    Col::Shared(SharedPar::Phase) => d_shift,
+                    Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
+                    Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
+                    Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),
                     Col::Shared(SharedPar::Delay) => -p.rate2_dps.to_radians() * d_shift,
                     Col::Shared(SharedPar::DriftTau) => {
                         let t = self.shifts.drift_tau_s;
                         self.c_exp[a] * (-p.t_rel_s / t).exp() * p.t_rel_s / (t * t)
                     }
                     Col::Shared(SharedPar::Harmonic { order, quadrature }) => {
-                        let (sn, cn) = p.harmonics[order as usize];
                         let n = f64::from(order);
+                        let (sn, cn) = (n * p.gear_rad).sin_cos();
                         if quadrature {
                             -e2 * cn / n + ez * p.rate2_dps * sn
                         } else {
@@ -534,6 +571,20 @@ impl<'a> Evaluator<'a> {
             }
         }
     }
+}
+
+/// A lab-fixed rate in the table frame O2, per unit of its components: along the base axis z1
+/// (vertical), and the two horizontal directions at the encoder's zero and 90° on about z1.
+/// EXCITER.md eq. 1 puts z1 at (sin θ2, cos θ2, 0) in O2; the base's horizontal pair there is
+/// e_z2 = (0, 0, 1) and u = z1 × z2 = (cos θ2, −sin θ2, 0), right-handed as (e_z2, u, z1). A
+/// lab-fixed horizontal vector at azimuth ψ lies at ψ − θ1 in the base frame, cos(ψ−θ1)·e_z2 +
+/// sin(ψ−θ1)·u; expanding in cos ψ and sin ψ gives the two horizontal columns. θ1 is the
+/// encoder's angle (`Point::gear_rad`), θ2 the index-referenced table angle.
+#[inline]
+fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
+    let (s1, c1) = theta1_rad.sin_cos();
+    let (s2, c2) = theta2_rad.sin_cos();
+    [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
 }
 
 #[inline]
@@ -779,6 +830,24 @@ impl Fitted {
     pub fn shared_index(&self, p: SharedPar) -> Option<usize> {
         let nl = self.model.lin.len();
         self.model.shared.iter().position(|&q| q == p).map(|q| 3 * nl + q)
+    }
+
+    /// Why the fit is not an estimate, if a bounded parameter ended at its bound: there the
+    /// data pushed it further than the model allows, so its value and σ mean nothing.
+    pub fn at_bound(&self) -> Option<String> {
+        for (&p, &v) in self.model.shared.iter().zip(&self.model.theta) {
+            let (lo, hi, what, unit) = match p {
+                SharedPar::Delay => (-MAX_DELAY_S, MAX_DELAY_S, "delay", "s"),
+                SharedPar::DriftTau => (DRIFT_TAU_RANGE_S.0, DRIFT_TAU_RANGE_S.1, "warm-up time constant", "s"),
+                _ => continue,
+            };
+            // A bound is reached when the value sits within 1e-9 of the range of it.
+            let tol = 1e-9 * (hi - lo);
+            if v <= lo + tol || v >= hi - tol {
+                return Some(format!("the {what} ended at its bound ({v} {unit}, allowed {lo} to {hi})"));
+            }
+        }
+        None
     }
 
     /// 1-σ of a parameter by its index.

@@ -142,6 +142,10 @@ pub struct RunKinematics {
     pub rate_quantisation_dps: f64,
     /// θ2 reference.
     pub index: IndexStats,
+    /// Base-table angle θ1 on the encoder's own scale (2π·count/counts-per-rev, modulo a turn)
+    /// where θ2 = 0: the magnetic gears' pole-pass error follows the base's rotation against the
+    /// ground, which only the encoder sees; θ1 = this + θ2/ratio.
+    pub theta1_at_index_rad: f64,
 }
 
 impl RunKinematics {
@@ -487,7 +491,9 @@ fn run_kinematics(
         });
     }
 
+    let theta1_at_index_rad = ref_counts.rem_euclid(cpr) / cpr * std::f64::consts::TAU;
     Ok(RunKinematics {
+        theta1_at_index_rad,
         run: p.number,
         pose: run.pose,
         label,

@@ -6,7 +6,8 @@ use std::fmt::Write as _;
 
 fn step_name(s: &StepReport) -> String {
     match s.effect {
-        None => "linear model".into(),
+        None if s.effects.is_empty() => "linear model".into(),
+        None => format!("linear model + {}", s.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(" + ")),
         Some(e) => format!("+ {}", e.name()),
     }
 }
@@ -155,6 +156,12 @@ pub fn summary(r: &LoopReport) -> String {
         let _ = writeln!(o, "\nNotes:");
         for n in &r.notes {
             let _ = writeln!(o, "  - {n}");
+        }
+    }
+    if !r.skipped.is_empty() {
+        let _ = writeln!(o, "\nCandidates skipped (passed the test, could not be fitted):");
+        for sk in &r.skipped {
+            let _ = writeln!(o, "  - {}: {}", sk.effect.name(), sk.why);
         }
     }
     if !r.asks.is_empty() {

@@ -164,6 +164,9 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
             out.push(plain(Effect::DriftTemperature));
         }
     }
+    if (evidence.phase || evidence.drift || evidence.orders[2]) && !has(Effect::EarthRotation) {
+        out.push(plain(Effect::EarthRotation));
+    }
     if evidence.rate_scale && !has(Effect::RateScale) {
         out.push(plain(Effect::RateScale));
     }
@@ -177,11 +180,22 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
     out
 }
 
+/// A candidate that passed the test on its linearised fit but could not be fitted to the end.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Skipped {
+    /// The effect.
+    pub effect: Effect,
+    /// Why, in words (singular, a parameter at its bound).
+    pub why: String,
+}
+
 /// The outcome of one selection step.
 #[derive(Debug, Clone)]
 pub struct StepOutcome {
     /// Every candidate's score, best first.
     pub scores: Vec<Score>,
+    /// Candidates that passed but could not be fitted, with why; the step moved on to the next.
+    pub skipped: Vec<Skipped>,
     /// The accepted candidate's index in `scores` and the refitted model, if one passed.
     pub accepted: Option<(usize, Fitted)>,
     /// When a drift model was added: each alternative fitted, and its BIC.
@@ -221,7 +235,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     let weights = diag.weights();
     let cands = candidates(data, &state.model.effects, &Evidence::of(diag));
     if cands.is_empty() {
-        return Ok(StepOutcome { scores: Vec::new(), accepted: None, drift_choice: Vec::new() });
+        return Ok(StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() });
     }
     let mut cols = state.model.cols();
     let nl = state.model.lin.len();
@@ -235,9 +249,11 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     let per_run = accumulate(data, &state.model, &cols);
     let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
-    let base = solve_joint(&total, &base_sel, weights).ok_or(CalError::Unidentifiable {
-        effects: state.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
-    })?;
+    let Some(base) = solve_joint(&total, &base_sel, weights) else {
+        // The current model was fitted, so this only happens at the edge of f64: nothing more
+        // can be added on top of it.
+        return Ok(StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() });
+    };
     let n_total: u64 = total.n.iter().sum();
     let m = cands.len();
     let mut scores: Vec<(Score, usize, Option<super::extended::JointSolution>)> = Vec::with_capacity(m);
@@ -274,41 +290,76 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     }
     scores.sort_by(|a, b| b.0.delta_bic.total_cmp(&a.0.delta_bic));
     let mut drift_choice = Vec::new();
-    let best = scores.iter().position(|(s, _, sol)| sol.is_some() && s.delta_chi2 > s.threshold);
-    let accepted = match best {
-        None => None,
-        Some(bi) => {
-            let fit_of = |i: usize| -> Result<Fitted, CalError> {
-                let (_, ci, sol) = &scores[i];
-                let sol = sol.as_ref().expect("passing candidates were solved");
-                fit(data, start_model(state, &cands[*ci], sol), weights)
-            };
-            if scores[bi].0.effect.is_drift() {
-                // The drift models are alternatives: fit the best-scoring variant of each that
-                // passed, and keep the one with the lowest BIC after fitting (the warm-up's time
-                // constant is only on its grid before).
-                let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
-                for (i, (sc, _, sol)) in scores.iter().enumerate() {
-                    let passed = sol.is_some() && sc.delta_chi2 > sc.threshold && sc.effect.is_drift();
-                    if passed && !choices.iter().any(|c| scores[c.0].0.effect == sc.effect) {
-                        let f = fit_of(i)?;
+    let mut skipped = Vec::new();
+    let passed = |i: usize| {
+        let (sc, _, sol) = &scores[i];
+        sol.is_some() && sc.delta_chi2 > sc.threshold
+    };
+    // A candidate that cannot be fitted to the end (singular, or a parameter at its bound) is
+    // skipped with its reason and the next passing one is tried: one bad candidate never ends
+    // the calibration.
+    let fit_of = |i: usize| -> Result<Fitted, String> {
+        let (_, ci, sol) = &scores[i];
+        let sol = sol.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
+        let f = fit(data, start_model(state, &cands[*ci], sol), weights).map_err(|e| e.to_string())?;
+        match f.at_bound() {
+            Some(why) => Err(why),
+            None => Ok(f),
+        }
+    };
+    let mut accepted = None;
+    let mut tried_drift = false;
+    for bi in (0..scores.len()).filter(|&i| passed(i)) {
+        let effect = scores[bi].0.effect;
+        if effect.is_drift() {
+            if tried_drift {
+                continue;
+            }
+            tried_drift = true;
+            // The drift models are alternatives: fit the best-scoring variant of each that
+            // passed, and keep the one with the lowest BIC after fitting (the warm-up's time
+            // constant is only on its grid before).
+            let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
+            let mut seen: Vec<Effect> = Vec::new();
+            for i in (0..scores.len()).filter(|&i| passed(i) && scores[i].0.effect.is_drift()) {
+                let sc = &scores[i].0;
+                if seen.contains(&sc.effect) {
+                    continue;
+                }
+                match fit_of(i) {
+                    Ok(f) => {
+                        seen.push(sc.effect);
                         let (lin, shared) = effect_columns(sc.effect);
                         let k = 3 * lin.len() + shared.len();
                         let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
                         choices.push((i, f, bic));
                     }
+                    Err(why) => {
+                        if !skipped.iter().any(|s: &Skipped| s.effect == sc.effect) {
+                            skipped.push(Skipped { effect: sc.effect, why });
+                        }
+                    }
                 }
-                drift_choice = choices
-                    .iter()
-                    .map(|c| DriftChoice { effect: scores[c.0].0.effect, chi2: c.1.solution.chi2, bic: c.2 })
-                    .collect();
-                choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).map(|c| (c.0, c.1))
-            } else {
-                Some((bi, fit_of(bi)?))
+            }
+            drift_choice = choices
+                .iter()
+                .map(|c| DriftChoice { effect: scores[c.0].0.effect, chi2: c.1.solution.chi2, bic: c.2 })
+                .collect();
+            if let Some(c) = choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)) {
+                accepted = Some((c.0, c.1));
+                break;
+            }
+        } else {
+            match fit_of(bi) {
+                Ok(f) => {
+                    accepted = Some((bi, f));
+                    break;
+                }
+                Err(why) => skipped.push(Skipped { effect, why }),
             }
         }
-    };
-    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), accepted, drift_choice })
+    }
+    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), skipped, accepted, drift_choice })
 }
 
 /// Prediction of one held-out run from a fit to the others.

@@ -25,6 +25,81 @@ pub struct Effects {
     pub gear_ratio_error: Option<GearRatioError>,
     /// Structure outside every model: a θ2 harmonic on one axis.
     pub mystery_harmonic: Option<MysteryHarmonic>,
+    /// Earth's rotation, fixed in the lab.
+    pub earth_rotation: Option<EarthRotation>,
+    /// Periodic transmission error of the magnetic gears.
+    pub gear_transmission: Option<GearTransmission>,
+}
+
+/// Earth's sidereal rotation rate, rad/s (IERS Conventions 2010, §1.2: 7.292115×10⁻⁵ rad/s,
+/// 15.041 °/h).
+pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
+
+/// Earth's rotation as the lab feels it: vertical component Ω·sin(latitude), horizontal
+/// Ω·cos(latitude) towards north, at `heading_deg` from the base's encoder zero.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EarthRotation {
+    /// Latitude, degrees (default 45°, a mid-latitude lab).
+    pub latitude_deg: f64,
+    /// Azimuth of north from the base table's encoder zero, degrees (default 30°).
+    pub heading_deg: f64,
+}
+
+impl Default for EarthRotation {
+    fn default() -> Self {
+        Self { latitude_deg: 45.0, heading_deg: 30.0 }
+    }
+}
+
+impl EarthRotation {
+    /// (vertical, horizontal) rate, °/s.
+    pub fn components_dps(&self) -> (f64, f64) {
+        let w = EARTH_RATE_RAD_S.to_degrees();
+        let lat = self.latitude_deg.to_radians();
+        (w * lat.sin(), w * lat.cos())
+    }
+
+    /// The lab-fixed rate in the table frame O2 (EXCITER.md eq. 1 conventions: z1 = (sin θ2,
+    /// cos θ2, 0), the base's horizontal pair e_z2 and u = z1 × z2 = (cos θ2, −sin θ2, 0)) for a
+    /// base angle θ1 from the encoder zero and table angle θ2, °/s.
+    pub fn in_table_frame_dps(&self, theta1_rad: f64, theta2_rad: f64) -> [f64; 3] {
+        let (v, h) = self.components_dps();
+        let psi = self.heading_deg.to_radians() - theta1_rad;
+        let (s2, c2) = theta2_rad.sin_cos();
+        let (sp, cp) = psi.sin_cos();
+        [v * s2 + h * sp * c2, v * c2 - h * sp * s2, h * cp]
+    }
+}
+
+/// Physical source: the magnetic gears' torque ripples as poles pass (12 poles, EXCITER.md), so
+/// the sensor table lags and leads the ideal 1:1 angle at 12× and 24× the base's turn against the
+/// ground, plus a once-per-turn eccentricity. Default sizes: 0.03° at 12× and 0.01° at 24× (a
+/// few % of a pole pitch's 30° lost to compliance, of the order magnetic-gear makers quote for
+/// transmission error). A once-per-turn eccentricity is left out of the default: at 1× it
+/// tilts the fitted axes as much as it ripples θ2' (the runs of two poses do not separate it).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GearTransmission {
+    /// (order, amplitude in degrees, phase in rad) of each harmonic of θ1.
+    pub harmonics: [(u32, f64, f64); 2],
+}
+
+impl Default for GearTransmission {
+    fn default() -> Self {
+        Self { harmonics: [(12, 0.03, 0.7), (24, 0.01, -1.2)] }
+    }
+}
+
+impl GearTransmission {
+    /// Angle error of the sensor table, rad, and its derivative with respect to θ1.
+    pub fn error_rad(&self, theta1_rad: f64) -> (f64, f64) {
+        self.harmonics.iter().fold((0.0, 0.0), |(e, de), &(n, a_deg, ph)| {
+            let nf = f64::from(n);
+            let (s, c) = (nf * theta1_rad + ph).sin_cos();
+            (e + a_deg.to_radians() * s, de + a_deg.to_radians() * nf * c)
+        })
+    }
 }
 
 /// Output delay. Physical source: the L3G4200D's digital low-pass filter (CTRL_REG1 BW bits;
@@ -200,7 +275,7 @@ impl std::error::Error for EffectSpecError {}
 
 impl Effects {
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 8] = [
+    pub const NAMES: [(&'static str, &'static str); 10] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -209,6 +284,8 @@ impl Effects {
         ("nonlinearity", "quadratic term at full scale, fraction (default 0.002)"),
         ("gear_ratio_error", "gear ratio error, ppm (default 200)"),
         ("mystery_harmonic", "3×θ2 harmonic on x, °/s (default 0.3)"),
+        ("earth_rotation", "Earth's rotation at this latitude, degrees (default 45)"),
+        ("gear_transmission", "magnetic-gear error at 12×, degrees (default 0.03; 24× scales with it)"),
     ];
 
     /// True when no effect is on.
@@ -277,6 +354,26 @@ impl Effects {
                     m.amplitude_dps = v;
                 }
                 self.mystery_harmonic = Some(m);
+            }
+            "earth_rotation" => {
+                let mut e = EarthRotation::default();
+                if let Some(v) = value {
+                    if !(-90.0..=90.0).contains(&v) {
+                        return Err(EffectSpecError("earth_rotation latitude must be within ±90°".into()));
+                    }
+                    e.latitude_deg = v;
+                }
+                self.earth_rotation = Some(e);
+            }
+            "gear_transmission" => {
+                let mut g = GearTransmission::default();
+                if let Some(v) = value {
+                    let scale = v / g.harmonics[0].1;
+                    for h in &mut g.harmonics {
+                        h.1 *= scale;
+                    }
+                }
+                self.gear_transmission = Some(g);
             }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();

@@ -212,7 +212,14 @@ impl Session {
     }
 
     fn theta2_rad(&self, theta1_deg: f64) -> f64 {
-        self.gear_ratio * theta1_deg.to_radians() + self.theta2_start_rad
+        let error = self.effects.gear_transmission.map_or(0.0, |g| g.error_rad(theta1_deg.to_radians()).0);
+        self.gear_ratio * theta1_deg.to_radians() + self.theta2_start_rad + error
+    }
+
+    /// θ2' for a base state, °/s (the transmission error's derivative included).
+    fn theta2_rate_dps(&self, st: &BaseState) -> f64 {
+        let slope = self.effects.gear_transmission.map_or(0.0, |g| g.error_rad(st.theta1_deg.to_radians()).1);
+        (self.gear_ratio + slope) * st.theta1_rate_dps
     }
 
     /// Starts a run at `t_s`: `RunStarted`, then the motor ramps to `rate_dps` (signed).
@@ -409,7 +416,13 @@ impl Session {
     /// Sensed counts for a base-table state.
     fn sensed_counts_at(&self, chain: &SenseChain, st: &BaseState) -> [f64; 3] {
         let theta2 = self.theta2_rad(st.theta1_deg);
-        let w2 = omega2(st.theta1_rate_dps, theta2, self.gear_ratio * st.theta1_rate_dps);
+        let mut w2 = omega2(st.theta1_rate_dps, theta2, self.theta2_rate_dps(st));
+        if let Some(e) = &self.effects.earth_rotation {
+            // θ1 on the encoder's scale: the heading is measured from the encoder's zero.
+            let theta1 = st.theta1_deg.to_radians()
+                + f64::from(self.encoder.start_counts) / f64::from(self.encoder.counts_per_rev) * std::f64::consts::TAU;
+            w2 += nalgebra::Vector3::from(e.in_table_frame_dps(theta1, theta2));
+        }
         chain.counts(&w2, theta2)
     }
 
