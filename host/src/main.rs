@@ -74,6 +74,10 @@ enum Cmd {
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
+        /// Latitude of the lab, degrees (north positive): Earth's vertical rate is then known
+        /// rather than fitted, which tightens every sensitivity's σ by 10-20 ppm.
+        #[arg(long, allow_negative_numbers = true, value_parser = parse_latitude)]
+        latitude_deg: Option<f64>,
         /// Baud rate (ignored by USB CDC-ACM).
         #[arg(long, default_value_t = link::DEFAULT_BAUD)]
         baud: u32,
@@ -130,6 +134,13 @@ enum Cmd {
     },
 }
 
+fn parse_latitude(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (-90.0..=90.0).contains(&v) => Ok(v),
+        _ => Err(format!("latitude must be a number of degrees within ±90, not {s:?}")),
+    }
+}
+
 fn parse_pose(s: &str) -> Result<Pose, String> {
     match s {
         "1" => Ok(Pose::One),
@@ -169,7 +180,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Record { port, out, pose, rate_dps, duration, baud } => {
             record(&port, &out, pose, rate_dps, duration, baud)
         }
-        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, yes, baud } => {
+        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, yes, latitude_deg, baud } => {
             let files = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
@@ -179,7 +190,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 }
                 None => replay,
             };
-            calibrate(&files, &out_dir, truth.as_deref())
+            let opts = calib::LoopOptions { latitude_deg, ..calib::LoopOptions::default() };
+            calibrate(&files, &out_dir, truth.as_deref(), &opts)
         }
         Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
             let cfg = match config {
@@ -268,7 +280,12 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
 /// effect models), writes `calibration.json`, `loop.json` and `report.html`; the exit status
 /// carries the verdict.
-fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Result<ExitCode> {
+fn calibrate(
+    files: &[PathBuf],
+    out_dir: &Path,
+    truth_path: Option<&Path>,
+    opts: &calib::LoopOptions,
+) -> Result<ExitCode> {
     let mut runs = Vec::new();
     for f in files {
         let cap = read_capture(f)?;
@@ -295,7 +312,7 @@ fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Re
         runs.extend(cap.runs);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop(&runs, &calib::LoopOptions::default(), truth.as_ref()).context("calibration failed")?;
+    let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
     print!("{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let json = out_dir.join("calibration.json");

@@ -41,10 +41,20 @@ pub enum Effect {
     /// Scale depending on the rate along the axis: |r| (asymmetry between the signs) and r·|r|
     /// (odd quadratic non-linearity).
     RateScale,
+    /// The sensor table lags the base by an angle proportional to speed (the magnetic gears'
+    /// compliance under drag): θ2 moves by −θ1'·c, while the transmission error, a function of the
+    /// base angle, does not. Only the transmission error's phase tells it from a gyro delay.
+    GearLag,
+    /// The gyro's low-pass filter beyond its delay: H(jω) ≈ e^{−jωτ}(1 − κω²), the gain lost at the
+    /// table frequency (1st order: κ = τ²/2; 2nd-order Butterworth: κ ≈ 0).
+    FilterGain,
     /// Earth's rotation, fixed in the lab, seen through θ1 and θ2: its component along the base
     /// axis adds to θ1' (a scale error that shrinks with speed), its horizontal component turns
     /// with the base. Three components, °/s.
     EarthRotation,
+    /// Earth's rotation with its vertical part known from the latitude the user gave: only the
+    /// two horizontal components (the heading) are fitted.
+    EarthRotationAtLatitude,
     /// A ripple of the sensor table's speed at n× its rate that the base encoder cannot see
     /// (the magnetic gears are compliant), seen by every axis through M R_qᵀ.
     TableHarmonic(u32),
@@ -62,6 +72,9 @@ impl Effect {
             Effect::DriftTemperature => "offset drift: linear in temperature".into(),
             Effect::RateScale => "rate-dependent scale (non-linearity, asymmetry)".into(),
             Effect::EarthRotation => "Earth rotation".into(),
+            Effect::EarthRotationAtLatitude => "Earth rotation (vertical from the latitude)".into(),
+            Effect::FilterGain => "gyro low-pass gain at the table frequency".into(),
+            Effect::GearLag => "magnetic-gear lag growing with speed".into(),
             Effect::TableHarmonic(n) if n % GEAR_POLE_PASS_ORDER == 0 => {
                 format!("magnetic-gear transmission error at {n}× (pole pass)")
             }
@@ -81,6 +94,9 @@ impl Effect {
             Effect::DriftTemperature => "drift_temperature".into(),
             Effect::RateScale => "rate_scale".into(),
             Effect::EarthRotation => "earth_rotation".into(),
+            Effect::EarthRotationAtLatitude => "earth_rotation_at_latitude".into(),
+            Effect::FilterGain => "filter_gain".into(),
+            Effect::GearLag => "gear_lag".into(),
             Effect::TableHarmonic(n) => format!("table_harmonic_{n}"),
         }
     }
@@ -102,7 +118,13 @@ impl Effect {
             Effect::DriftPolynomial => "the zero-rate level wanders slowly",
             Effect::DriftTemperature => "the zero-rate level follows the die temperature",
             Effect::RateScale => "the sense chain is not linear, or its gain differs with the sign of the rate",
-            Effect::EarthRotation => {
+            Effect::GearLag => {
+                "the sensor table trails the base by an angle that grows with speed, so the gears' pole-pass error reaches it later than the base angle says"
+            }
+            Effect::FilterGain => {
+                "the gyro's low-pass filter attenuates the table-rate sinusoid as well as delaying it (a 1st-order filter with 5 ms of delay loses 120 ppm at 0.5 Hz)"
+            }
+            Effect::EarthRotation | Effect::EarthRotationAtLatitude => {
                 "the lab turns with the Earth at 15.041 °/h (IERS: 7.292115e-5 rad/s); at 180 °/s its vertical part alone is ≈ 13 ppm of θ1'"
             }
             Effect::TableHarmonic(_) => {
@@ -122,6 +144,15 @@ impl Effect {
                 "its slow change within and between runs; runs in both directions separate the offset from the constant θ2' term without relying on it"
             }
             Effect::RateScale => "the harmonics it makes in proportion to each axis's own rate",
+            Effect::GearLag => {
+                "a transmission error seen at two speeds: its phase against the base angle shifts with speed, the gyro delay's does not"
+            }
+            Effect::FilterGain => {
+                "runs at two speeds: the loss grows with the square of the frequency, a sensitivity does not"
+            }
+            Effect::EarthRotationAtLatitude => {
+                "the base angle θ1: the horizontal part turns with it; the vertical part is Ω·sin(latitude), given"
+            }
             Effect::EarthRotation => {
                 "runs at two speeds or in both directions (its vertical part does not scale with θ1', a sensitivity does); the horizontal part turns with the base angle θ1"
             }

@@ -79,6 +79,11 @@ pub enum SharedPar {
     Phase,
     /// Warm-up time constant T, s.
     DriftTau,
+    /// Lag of the sensor table behind the base per unit of speed, s: the transmission error's
+    /// argument is θ1 + θ1'·c (`Effect::GearLag`).
+    GearLag,
+    /// The filter's curvature κ, s²: output = M(ω + κ·ω̈) at the delayed time.
+    FilterCurvature,
     /// Earth's rate along the base axis z1 (vertical), °/s.
     EarthVertical,
     /// Earth's horizontal rate, the component along the base-frame direction the encoder's zero
@@ -115,9 +120,12 @@ pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
         Effect::DriftPolynomial => (vec![LinCol::DriftT1, LinCol::DriftT2], vec![]),
         Effect::DriftTemperature => (vec![LinCol::DriftTemp], vec![]),
         Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
+        Effect::FilterGain => (vec![], vec![SharedPar::FilterCurvature]),
+        Effect::GearLag => (vec![], vec![SharedPar::GearLag]),
         Effect::EarthRotation => {
             (vec![], vec![SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
         }
+        Effect::EarthRotationAtLatitude => (vec![], vec![SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero]),
         Effect::TableHarmonic(order) => (
             vec![],
             vec![SharedPar::Harmonic { order, quadrature: false }, SharedPar::Harmonic { order, quadrature: true }],
@@ -233,6 +241,8 @@ pub struct Model {
     /// Unit axis directions (rows of M normalised) that define the rate along each axis for the
     /// rate-dependent scale, updated every iteration.
     pub s_hat: [Vector3<f64>; 3],
+    /// Earth's vertical rate when it is known (from a latitude) rather than fitted, °/s.
+    pub earth_vertical_known_dps: f64,
 }
 
 impl Model {
@@ -245,6 +255,7 @@ impl Model {
             beta: std::array::from_fn(|_| vec![0.0; 4]),
             theta: Vec::new(),
             s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
+            earth_vertical_known_dps: 0.0,
         }
     }
 
@@ -323,6 +334,10 @@ pub struct Point {
     pub gear_rad: f64,
     /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame.
     pub d_earth: [[f64; 3]; 3],
+    /// ω̈ in the package frame, °/s³ (∂ω_s/∂κ).
+    pub d_filter: [f64; 3],
+    /// θ1', rad/s.
+    pub theta1_rate_rad_s: f64,
     /// sin and cos of n·θ2 for n = 0..=MAX_HARMONIC_ORDER.
     pub harmonics: [(f64, f64); MAX_HARMONIC_ORDER + 1],
 }
@@ -335,6 +350,10 @@ struct Shifts {
     drift_tau_s: f64,
     /// Earth's rate: vertical, and the two horizontal components, °/s.
     earth_dps: [f64; 3],
+    /// Filter curvature κ, s².
+    filter_s2: f64,
+    /// Gear lag c, s.
+    gear_lag_s: f64,
     /// (n, a, b) of each ripple harmonic.
     ripple: Vec<(u32, f64, f64)>,
 }
@@ -363,8 +382,13 @@ impl Shifts {
             theta2_offset_rad: m.theta_of(SharedPar::IndexOffset).unwrap_or(0.0)
                 + m.theta_of(SharedPar::Phase).unwrap_or(0.0),
             drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
-            earth_dps: [SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero]
-                .map(|p| m.theta_of(p).unwrap_or(0.0)),
+            filter_s2: m.theta_of(SharedPar::FilterCurvature).unwrap_or(0.0),
+            gear_lag_s: m.theta_of(SharedPar::GearLag).unwrap_or(0.0),
+            earth_dps: [
+                m.theta_of(SharedPar::EarthVertical).unwrap_or(m.earth_vertical_known_dps),
+                m.theta_of(SharedPar::EarthNorthAtZero).unwrap_or(0.0),
+                m.theta_of(SharedPar::EarthWestAtZero).unwrap_or(0.0),
+            ],
             ripple,
         }
     }
@@ -451,7 +475,9 @@ impl<'a> Evaluator<'a> {
         }
         // The transmission error is a function of the base's angle against the ground (the
         // gear mesh), from the encoder; the index offset does not move it.
-        let gear_rad = rk.theta1_at_index_rad + theta2 / rk.gear_ratio;
+        let theta1_rate_rad_s = rate1.to_radians();
+        let theta1_rad = rk.theta1_at_index_rad + theta2 / rk.gear_ratio;
+        let gear_rad = theta1_rad + sh.gear_lag_s * theta1_rate_rad_s;
         let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
         for &(n, a, b) in &sh.ripple {
             let nf = f64::from(n);
@@ -467,16 +493,26 @@ impl<'a> Evaluator<'a> {
         let (se, ce) = th_eff.sin_cos();
         let w2 = [rate1 * se, rate1 * ce, rate2_eff];
         let dw2 = [rate1 * ce, -rate1 * se];
+        let to_package =
+            |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
+        // ω̈ of the table motion at steady speed (Earth's part is 1e-5 of it): the θ1' sinusoid
+        // turns at θ2', so its second derivative is −θ2'²·(θ1' sin θ2, θ1' cos θ2, 0).
+        let w2_rad_s = rate2.to_radians();
+        let d_filter = to_package(&[-w2_rad_s * w2_rad_s * w2[0], -w2_rad_s * w2_rad_s * w2[1], 0.0]);
         // Earth's rate in the table frame O2, per unit of each component (module docs of
         // `earth_basis`), added to ω2.
-        let basis = earth_basis(gear_rad, th_eff);
+        let basis = earth_basis(theta1_rad, th_eff);
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
         let to_package =
             |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
         let d_earth = [to_package(&basis[0]), to_package(&basis[1]), to_package(&basis[2])];
         let omega = to_package(&w2);
-        let d_theta2 = std::array::from_fn(|i| rt[i][0] * dw2[0] + rt[i][1] * dw2[1]);
+        let omega: [f64; 3] = std::array::from_fn(|i| omega[i] + sh.filter_s2 * d_filter[i]);
+        // The filter's ω̈ term turns with θ2 as the sinusoid does, scaled by −κ·θ2'².
+        let filter_scale = 1.0 - sh.filter_s2 * w2_rad_s * w2_rad_s;
+        let d_theta2 = std::array::from_fn(|i| filter_scale * (rt[i][0] * dw2[0] + rt[i][1] * dw2[1]));
+
         let d_rate2 = std::array::from_fn(|i| rt[i][2]);
         Point {
             omega,
@@ -492,6 +528,8 @@ impl<'a> Evaluator<'a> {
             temp_c: f64::from(self.data.runs[r].temp_c[i]),
             gear_rad,
             d_earth,
+            d_filter,
+            theta1_rate_rad_s,
             harmonics,
         }
     }
@@ -550,6 +588,12 @@ impl<'a> Evaluator<'a> {
                     // The index offset moves θ2 but not the gear mesh's angle (the ripple).
                     Col::Shared(SharedPar::IndexOffset) => e2,
                     Col::Shared(SharedPar::Phase) => d_shift,
+                    Col::Shared(SharedPar::FilterCurvature) => dot(&u, &p.d_filter),
+                    // Moving the gear angle moves the rippled angle by (ripple − 1) and the
+                    // rippled speed by θ2'·∂ripple/∂θ.
+                    Col::Shared(SharedPar::GearLag) => {
+                        p.theta1_rate_rad_s * (e2 * (p.dtheta_eff - 1.0) + ez * p.drate_eff_dps)
+                    }
                     Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
                     Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
                     Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),

@@ -48,10 +48,16 @@ fn capture_with(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str],
     (cap.runs, out.truth)
 }
 
+/// Latitude of every simulated lab of these tests, degrees: Earth rotates under each of them (as
+/// under every real rig), and the loop is told the latitude, as a lab would tell it.
+const LAB_LATITUDE_DEG: f64 = 45.0;
+
 fn run_loop(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str]) -> (LoopReport, Truth) {
-    let (runs, truth) = capture_with(seed, rates_dps, duration_s, effects, FullScale::Dps500);
-    let report =
-        close_loop(&runs, &LoopOptions::default(), Some(&truth)).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+    let earth = format!("earth_rotation={LAB_LATITUDE_DEG}");
+    let with_earth: Vec<&str> = effects.iter().copied().chain([earth.as_str()]).collect();
+    let (runs, truth) = capture_with(seed, rates_dps, duration_s, &with_earth, FullScale::Dps500);
+    let opts = LoopOptions { latitude_deg: Some(LAB_LATITUDE_DEG), ..LoopOptions::default() };
+    let report = close_loop(&runs, &opts, Some(&truth)).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
     (report, truth)
 }
 
@@ -104,12 +110,13 @@ fn bar_combined_undeclared_effects_ten_seeds() {
     eprintln!("bar over 10 seeds: max direction error {max_dir:.5}°, max sensitivity error {max_ppm:.1} ppm, max |z| {max_z:.2}");
 }
 
-/// No effect on: nothing is added and the verdict is "at the noise floor", on every seed.
+/// No effect on but Earth's rotation, which the base model holds: nothing is added and the
+/// verdict is "at the noise floor", on every seed.
 #[test]
 fn clean_captures_add_nothing_and_pass() {
     let results = seeds_in_parallel(1..=10, |seed| run_loop(seed, &BAR_RATES_DPS, SHORT_S, &[]));
     for (r, truth) in &results {
-        assert!(r.effects().is_empty(), "seed {}: {:?}\n{}", truth.seed, r.effects(), r.summary());
+        assert_eq!(r.effects(), [Effect::EarthRotationAtLatitude], "seed {}\n{}", truth.seed, r.summary());
         assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "seed {}\n{}", truth.seed, r.summary());
         assert!(r.initial.findings.is_empty(), "seed {}: {:?}", truth.seed, r.initial.findings);
     }
@@ -202,7 +209,7 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
 #[test]
 fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
     let (r, truth) = run_loop(2, &[180.0], SHORT_S, &["delay_ms=5"]);
-    assert_eq!(r.effects().first(), Some(&Effect::Phase), "{}", r.summary());
+    assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::Phase), "{}", r.summary());
     assert!(r.asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{:?}", r.asks);
     // The combined phase corrects these runs: the calibration is right for them.
     let t = TruthErrors::of(&r.final_report().axes, &truth);
@@ -260,7 +267,11 @@ fn shared_parameter_jacobians_match_finite_differences() {
         .with(Effect::Delay, Default::default(), vec![0.004])
         .with(Effect::DriftWarmUp, [vec![30.0], vec![-20.0], vec![10.0]], vec![40.0])
         .with(Effect::RateScale, [vec![0.01, 2e-5], vec![-0.01, 1e-5], vec![0.0, -2e-5]], vec![])
-        .with(Effect::TableHarmonic(2), Default::default(), vec![0.003, -0.002]);
+        .with(Effect::TableHarmonic(2), Default::default(), vec![0.003, -0.002])
+        .with(Effect::TableHarmonic(12), Default::default(), vec![0.004, 0.001])
+        .with(Effect::EarthRotation, Default::default(), vec![0.003, -0.002, 0.001])
+        .with(Effect::FilterGain, Default::default(), vec![1.2e-5])
+        .with(Effect::GearLag, Default::default(), vec![0.003]);
     let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
     let ev = Evaluator::new(&data, &model);
     let mut jac = vec![0.0; 3 * cols.len()];
@@ -317,7 +328,7 @@ fn undeclared_gear_transmission_error_is_found_named_and_corrected() {
     let (r, _) = run_loop(3, &BAR_RATES_DPS, BAR_DURATION_S, &["gear_transmission"]);
     assert!(r.initial.findings.iter().any(|f| f.kind == FindingKind::Harmonic(12)), "{}", r.summary());
     let effects = r.effects();
-    assert_eq!(effects.first(), Some(&Effect::TableHarmonic(12)), "{}", r.summary());
+    assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::TableHarmonic(12)), "{}", r.summary());
     assert!(effects.contains(&Effect::TableHarmonic(24)), "{effects:?}\n{}", r.summary());
     assert!(Effect::TableHarmonic(12).name().contains("magnetic-gear transmission error"));
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "gear_transmission");

@@ -164,6 +164,13 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
             out.push(plain(Effect::DriftTemperature));
         }
     }
+    let has_transmission = current.iter().any(|e| matches!(e, Effect::TableHarmonic(_)));
+    if has_transmission && !has(Effect::GearLag) && separates_delay_and_index(data) {
+        out.push(plain(Effect::GearLag));
+    }
+    if has(Effect::Delay) && !has(Effect::FilterGain) && separates_delay_and_index(data) {
+        out.push(plain(Effect::FilterGain));
+    }
     if (evidence.phase || evidence.drift || evidence.orders[2]) && !has(Effect::EarthRotation) {
         out.push(plain(Effect::EarthRotation));
     }

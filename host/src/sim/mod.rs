@@ -14,7 +14,7 @@
 //! Everything is deterministic for a seed, with independent random streams for the sensor, the
 //! rig, the noise and the timestamp jitter: one seed is one sensor whatever the runs.
 
-mod effects;
+pub mod effects;
 mod filter;
 mod motion;
 mod rig;
