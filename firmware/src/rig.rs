@@ -16,7 +16,7 @@ use protocol::{
 };
 
 /// No host frame for this long during a run stops the motor (protocol: [`protocol::Command::Heartbeat`]).
-pub const HOST_LINK_TIMEOUT_US: u32 = 2_000_000;
+pub use protocol::timing::HOST_LINK_TIMEOUT_US;
 
 /// No data-ready for this long is a silent gyro: five periods at the slowest ODR (100 Hz).
 pub const GYRO_SILENT_US: u32 = 50_000;
@@ -77,6 +77,9 @@ pub struct Rig {
     /// A gyro fault in force: refuses runs until a ConfigureGyro succeeds (or samples resume,
     /// for [`Fault::GyroSilent`]).
     pub(crate) gyro_fault: Option<Fault>,
+    /// Why the MCU last restarted, if that is a fault ([`Fault::WatchdogReset`]): repeated after
+    /// every Hello, so a host that connects later still learns it.
+    pub(crate) reset_fault: Option<Fault>,
     pub(crate) run: Run,
     pub(crate) speed_loop: SpeedLoop,
     pub(crate) supervisor: Supervisor,
@@ -104,6 +107,7 @@ impl Rig {
             link: Link::new(),
             gyro_config,
             gyro_fault: None,
+            reset_fault: None,
             run: Run::Idle,
             speed_loop: SpeedLoop::new(Gains::RE30_GP32),
             supervisor: Supervisor::new(),
@@ -136,6 +140,7 @@ impl Rig {
             self.report(t_us, fault);
         }
         if watchdog_reset {
+            self.reset_fault = Some(Fault::WatchdogReset);
             self.report(t_us, Fault::WatchdogReset);
         }
     }
