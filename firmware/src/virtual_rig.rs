@@ -83,10 +83,15 @@ impl VirtualRig {
     /// Powers up: the core probes and configures the gyro and sends its hello. `t0_us` is the
     /// TIM5 count at simulated time 0 (start near 2^32 to exercise the wrap).
     pub fn new(plant: Plant, chip: L3g4200dModel, t0_us: u32) -> Self {
+        Self::restarted(plant, chip, t0_us, false)
+    }
+
+    /// [`Self::new`], for an MCU whose last reset was (`watchdog_reset`) forced by the watchdog.
+    pub fn restarted(plant: Plant, chip: L3g4200dModel, t0_us: u32, watchdog_reset: bool) -> Self {
         let mut gyro = L3g4200d::new(chip);
         let mut rig = Rig::new(GyroConfig::DEFAULT);
         let probe = crate::rig::GyroControl::apply(&mut gyro, GyroConfig::DEFAULT);
-        rig.power_up(t0_us, probe, false);
+        rig.power_up(t0_us, probe, watchdog_reset);
         Self {
             plant,
             gyro,

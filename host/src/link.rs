@@ -94,6 +94,11 @@ impl<P: Read + Write> Link<P> {
         }
     }
 
+    /// The port itself.
+    pub fn port_mut(&mut self) -> &mut P {
+        &mut self.port
+    }
+
     /// The link's time now.
     pub fn now(&self) -> Duration {
         self.clock.now()

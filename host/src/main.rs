@@ -290,8 +290,21 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
 /// carries the verdict.
 fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Result<ExitCode> {
     let mut runs = Vec::new();
+    // Each run once: the same data given twice would count twice and shrink every σ by √2.
+    let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
     for f in files {
         let cap = read_capture(f)?;
+        for (i, run) in cap.runs.iter().enumerate().filter(|(_, r)| !r.samples.is_empty()) {
+            if let Some((first, j)) = seen.insert(run.fingerprint(), (f.clone(), i + 1)) {
+                bail!(
+                    "run {} of {} ({}) is the same data as run {j} of {}: give each capture once",
+                    i + 1,
+                    f.display(),
+                    run.label(),
+                    first.display()
+                );
+            }
+        }
         let l = &cap.loss;
         eprintln!(
             "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
@@ -310,7 +323,22 @@ fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Re
             );
         }
         if cap.runs.is_empty() {
-            bail!("{} holds no run (no RunStarted frame and no motor status naming one)", f.display());
+            bail!(
+                "{} holds no run: no RunStarted frame and no motor status naming a pose ({} valid frames)",
+                f.display(),
+                l.frames_ok
+            );
+        }
+        if cap.loss.hello_assumed {
+            eprintln!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display());
+        }
+        for (t, fault) in &cap.faults {
+            eprintln!(
+                "{}: the rig reported {:?} outside any run at {:.3} s",
+                f.display(),
+                fault.fault,
+                *t as f64 * 1e-6
+            );
         }
         runs.extend(cap.runs);
     }

@@ -69,16 +69,27 @@ const AT_SPEED_TOLERANCE: f64 = 0.01;
 pub fn identify<P: Read + Write>(link: &mut Link<P>) -> Result<Hello> {
     let mut hello = None;
     let mut faults = Vec::new();
-    link.command(&Command::Identify, |m| match m {
-        RigMsg::Hello(h) => hello = Some(*h),
-        RigMsg::Fault(f) => faults.push(f.fault),
-        _ => {}
-    })?;
+    // The Hello itself may be lost on the way while the Ack arrives: ask again.
+    for _ in 0..timing::COMMAND_ATTEMPTS {
+        link.command(&Command::Identify, |m| match m {
+            RigMsg::Hello(h) => hello = Some(*h),
+            RigMsg::Fault(f) => faults.push(f.fault),
+            _ => {}
+        })?;
+        if hello.is_some() {
+            break;
+        }
+    }
+    faults.dedup();
     for f in faults {
         eprintln!("warning: the rig on {} reports {}", link.name(), describe_fault(f));
     }
     let Some(h) = hello else {
-        bail!("the rig on {} acknowledged Identify but its Hello was lost on the way", link.name());
+        bail!(
+            "the rig on {} acknowledged Identify {} times but no Hello came through: the link loses frames",
+            link.name(),
+            timing::COMMAND_ATTEMPTS
+        );
     };
     if h.protocol_version != PROTOCOL_VERSION {
         bail!(

@@ -29,6 +29,10 @@ pub const TIMESTAMP_HZ: u32 = 1_000_000;
 /// (EXCITER.md, "Parts in the prototype").
 pub const ENCODER_COUNTS_PER_REV: u32 = 4 * 81_000;
 
+/// Sensor-table turns per base-table turn of this rig design: the magnetic gears are 1:1
+/// (EXCITER.md, "Mechanism"). Also sent in [`Hello`]; a host that lost the `Hello` assumes it.
+pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
+
 /// Highest base-table rate a `Start` may ask for: 360 °/s (1 Hz), twice the paper's 0.5 Hz drive;
 /// the rig refuses more with `InvalidArgument`. Pose 1 then peaks at 502 °/s (EXCITER.md: 251 °/s
 /// at 0.5 Hz), so above 0.5 Hz the host must select the ±2000 °/s range.

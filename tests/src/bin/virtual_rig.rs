@@ -3,7 +3,15 @@
 //!
 //! ```text
 //! virtual_rig [--speedup N | --lockstep] [--ideal-gyro] [--duration SECONDS]
+//!             [--loss P] [--garbage-every S] [--drop KIND:N]... [--seed N] [--watchdog-reset]
 //! ```
+//!
+//! A hostile line, for the host to survive: `--loss P` drops each byte, both ways, with
+//! probability P; `--garbage-every S` sends a burst of 8-64 random bytes every S seconds of
+//! simulated time (between frames); `--drop KIND:N` drops the Nth frame (from 1) of a kind the
+//! rig sends (`Hello`, `Ack`, `RunStarted`, `RunStopped`, `Sample`, `Motor`, `Index`,
+//! `Counters`, `Temperature`, `Fault`), repeatable. `--seed` fixes the randomness (default 1).
+//! `--watchdog-reset` starts the rig as after a watchdog reset (it reports `WatchdogReset`).
 //!
 //! `--lockstep` hands the clock to the client (tests): simulated time only advances when a line
 //! `step <ns> <bytes>` arrives on standard input; the rig first waits until it has received
@@ -23,6 +31,8 @@ use e2e::{VIRTUAL_GYRO_KS as DUT_KS, VIRTUAL_GYRO_OFFSET_DPS as DUT_OFFSET_DPS};
 use firmware::plant::l3g4200d_model::L3g4200dModel;
 use firmware::plant::{Plant, Pose};
 use firmware::virtual_rig::{VirtualRig, Wire};
+use protocol::frame::decode_frame;
+use protocol::{RigMsg, MAX_FRAME_LEN};
 use serialport::{SerialPort, TTYPort};
 use std::io::{BufRead, ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
@@ -39,25 +49,53 @@ const LOCKSTEP_RX_TIMEOUT: Duration = Duration::from_secs(60);
 struct Args {
     speedup: f64,
     lockstep: bool,
+    watchdog_reset: bool,
+    line: LineFaults,
     ideal: bool,
     duration_s: Option<f64>,
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut args = Args { speedup: 1.0, lockstep: false, ideal: false, duration_s: None };
+    let mut args = Args {
+        speedup: 1.0,
+        lockstep: false,
+        watchdog_reset: false,
+        line: LineFaults::default(),
+        ideal: false,
+        duration_s: None,
+    };
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut value = |name: &str| {
             it.next()
                 .and_then(|v| v.parse::<f64>().ok())
-                .filter(|v| *v > 0.0)
+                .filter(|v| *v > 0.0 && v.is_finite())
                 .ok_or(format!("{name} needs a positive number"))
         };
         match a.as_str() {
+            "--loss" => {
+                let p = value("--loss")?;
+                if p >= 1.0 {
+                    return Err(format!("--loss is a probability below 1, not {p}"));
+                }
+                args.line.loss = p;
+            }
+            "--garbage-every" => args.line.garbage_every_ns = Some((value("--garbage-every")? * 1e9) as u64),
+            "--seed" => args.line.seed = value("--seed")? as u64,
+            "--drop" => {
+                let spec = it.next().ok_or("--drop needs KIND:N")?;
+                let (kind, n) = spec.split_once(':').ok_or(format!("--drop {spec}: expected KIND:N"))?;
+                let n: u32 = n.parse().ok().filter(|n| *n > 0).ok_or(format!("--drop {spec}: N counts from 1"))?;
+                if !KINDS.contains(&kind) {
+                    return Err(format!("--drop {spec}: unknown kind {kind:?} (one of {})", KINDS.join(", ")));
+                }
+                args.line.drops.push((kind.to_string(), n));
+            }
             "--speedup" => args.speedup = value("--speedup")?,
             "--duration" => args.duration_s = Some(value("--duration")?),
             "--ideal-gyro" => args.ideal = true,
             "--lockstep" => args.lockstep = true,
+            "--watchdog-reset" => args.watchdog_reset = true,
             other => return Err(format!("unknown argument {other}")),
         }
     }
@@ -82,7 +120,7 @@ fn main() {
         plant.sensor_offset_dps = DUT_OFFSET_DPS;
         eprintln!("virtual gyro: K S = {DUT_KS:?}, offset = {DUT_OFFSET_DPS:?} °/s");
     }
-    let vr = VirtualRig::new(plant, L3g4200dModel::new(), 0);
+    let vr = VirtualRig::restarted(plant, L3g4200dModel::new(), 0, args.watchdog_reset);
     println!("{path}");
     std::io::stdout().flush().ok();
 
@@ -98,6 +136,7 @@ fn main() {
         received: 0,
         queued: 0,
         mounted_tag: None,
+        line: Line::new(args.line),
     };
     if args.lockstep {
         lockstep(&mut server);
@@ -135,6 +174,7 @@ struct Server {
     /// Bytes queued for the host (not dropped), in total.
     queued: u64,
     mounted_tag: Option<u8>,
+    line: Line,
 }
 
 impl Server {
@@ -144,8 +184,9 @@ impl Server {
             match self.master.read(&mut rx) {
                 Ok(0) => return,
                 Ok(n) => {
-                    self.wire.to_rig.extend(&rx[..n]);
                     self.received += n as u64;
+                    let line = &mut self.line;
+                    self.wire.to_rig.extend(rx[..n].iter().filter(|_| !line.lose()));
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => return,
                 Err(e) if e.raw_os_error() == Some(5) => return, // EIO: no host has the pty open
@@ -165,8 +206,10 @@ impl Server {
             }
             self.mounted_tag = tag;
         }
-        self.queued += self.wire.from_rig.len() as u64;
-        self.backlog.append(&mut self.wire.from_rig);
+        let before = self.backlog.len();
+        self.line.pass(self.vr.now_ns(), &self.wire.from_rig, &mut self.backlog);
+        self.wire.from_rig.clear();
+        self.queued += (self.backlog.len() - before) as u64;
         if self.backlog.len() > PTY_BACKLOG {
             let excess = self.backlog.len() - PTY_BACKLOG;
             self.dropped += excess as u64;
@@ -235,6 +278,107 @@ fn lockstep(server: &mut Server) {
         }
         if writeln!(out, "at {} {}", server.vr.now_ns(), server.queued).and_then(|()| out.flush()).is_err() {
             return;
+        }
+    }
+}
+
+/// Frame kinds `--drop` knows, as the rig's messages are named.
+const KINDS: [&str; 10] =
+    ["Hello", "Ack", "RunStarted", "RunStopped", "Sample", "Motor", "Index", "Counters", "Temperature", "Fault"];
+
+fn kind(msg: &RigMsg) -> &'static str {
+    match msg {
+        RigMsg::Hello(_) => "Hello",
+        RigMsg::Ack(_) => "Ack",
+        RigMsg::RunStarted(_) => "RunStarted",
+        RigMsg::RunStopped(_) => "RunStopped",
+        RigMsg::Sample(_) => "Sample",
+        RigMsg::Motor(_) => "Motor",
+        RigMsg::Index(_) => "Index",
+        RigMsg::Counters(_) => "Counters",
+        RigMsg::Temperature(_) => "Temperature",
+        RigMsg::Fault(_) => "Fault",
+    }
+}
+
+/// What makes the line hostile (module documentation).
+#[derive(Debug, Clone)]
+struct LineFaults {
+    loss: f64,
+    garbage_every_ns: Option<u64>,
+    drops: Vec<(String, u32)>,
+    seed: u64,
+}
+
+impl Default for LineFaults {
+    fn default() -> Self {
+        Self { loss: 0.0, garbage_every_ns: None, drops: Vec::new(), seed: 1 }
+    }
+}
+
+/// The line between rig and host.
+struct Line {
+    faults: LineFaults,
+    rng: u64,
+    /// Bytes of the rig's frame in progress.
+    frame: Vec<u8>,
+    /// Frames seen per kind.
+    seen: std::collections::HashMap<&'static str, u32>,
+    next_garbage_ns: u64,
+}
+
+impl Line {
+    fn new(faults: LineFaults) -> Self {
+        let rng = faults.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let next_garbage_ns = faults.garbage_every_ns.unwrap_or(u64::MAX);
+        Self { faults, rng, frame: Vec::new(), seen: Default::default(), next_garbage_ns }
+    }
+
+    /// xorshift64*: deterministic for a seed, good enough to scatter losses.
+    fn next(&mut self) -> u64 {
+        self.rng ^= self.rng >> 12;
+        self.rng ^= self.rng << 25;
+        self.rng ^= self.rng >> 27;
+        self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Whether to lose the next byte.
+    fn lose(&mut self) -> bool {
+        self.faults.loss > 0.0 && (self.next() >> 11) as f64 * (1.0 / (1u64 << 53) as f64) < self.faults.loss
+    }
+
+    /// Passes what the rig sent at `now_ns` to `out`, through the line's faults.
+    fn pass(&mut self, now_ns: u64, bytes: &[u8], out: &mut Vec<u8>) {
+        for &b in bytes {
+            self.frame.push(b);
+            if b != 0 {
+                continue;
+            }
+            let frame = std::mem::take(&mut self.frame);
+            let mut scratch = [0u8; MAX_FRAME_LEN];
+            if let Ok((_, msg)) = decode_frame::<RigMsg>(&frame[..frame.len() - 1], &mut scratch) {
+                let k = kind(&msg);
+                let n = self.seen.entry(k).or_insert(0);
+                *n += 1;
+                let n = *n;
+                if self.faults.drops.iter().any(|(dk, dn)| dk == k && *dn == n) {
+                    eprintln!("virtual rig: dropped {k} #{n}");
+                    continue;
+                }
+            }
+            for &b in &frame {
+                if !self.lose() {
+                    out.push(b);
+                }
+            }
+            if now_ns >= self.next_garbage_ns {
+                self.next_garbage_ns = now_ns + self.faults.garbage_every_ns.unwrap_or(u64::MAX);
+                let len = 8 + (self.next() % 57) as usize;
+                for _ in 0..len {
+                    let byte = self.next() as u8;
+                    out.push(byte);
+                }
+            }
         }
     }
 }
