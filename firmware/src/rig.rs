@@ -35,6 +35,12 @@ pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / 10;
 /// Loop periods between [`Counters`] and [`Temperature`] frames (1 Hz).
 pub const COUNTERS_PERIODS: u32 = LOOP_HZ;
 
+/// Microseconds from `since` to `now` on the wrapping TIM5 clock, negative when `since` is later
+/// (an event stamped by a preempting task after `now` was read). Valid for spans under 35 min.
+pub fn elapsed_us(now: u32, since: u32) -> i32 {
+    now.wrapping_sub(since) as i32
+}
+
 /// The gyro as the command handler sees it: something that can be (re)configured.
 pub trait GyroControl {
     /// Checks the gyro is there and applies `config`.
@@ -154,11 +160,13 @@ impl Rig {
         }
         self.last_encoder = Some(encoder);
 
-        if self.gyro_fault.is_none() && t_us.wrapping_sub(self.last_sample_us) > GYRO_SILENT_US {
+        // Signed differences: a higher-priority task (data-ready, USB) may stamp its event a tick
+        // after the time this tick was given, which unsigned would make ≈ 4 295 s of silence.
+        if self.gyro_fault.is_none() && elapsed_us(t_us, self.last_sample_us) > GYRO_SILENT_US as i32 {
             self.gyro_failed(t_us, Fault::GyroSilent);
         }
         if self.run.tag().is_some() {
-            if t_us.wrapping_sub(self.last_host_us) > HOST_LINK_TIMEOUT_US {
+            if elapsed_us(t_us, self.last_host_us) > HOST_LINK_TIMEOUT_US as i32 {
                 self.trip(t_us, Fault::HostLinkLost);
             } else if let Some(fault) = self.supervisor.check(self.applied.duty(), delta) {
                 self.trip(t_us, fault);

@@ -92,6 +92,8 @@ impl VirtualRig {
         let mut rig = Rig::new(GyroConfig::DEFAULT);
         let probe = crate::rig::GyroControl::apply(&mut gyro, GyroConfig::DEFAULT);
         rig.power_up(t0_us, probe, watchdog_reset);
+        // The pin as it is: a sensor that kept its power across the reset may hold it high.
+        let drdy = gyro.spi_mut().drdy();
         Self {
             plant,
             gyro,
@@ -100,7 +102,7 @@ impl VirtualRig {
             now_ns: 0,
             t0_us,
             next_tick_ns: TICK_NS,
-            drdy: false,
+            drdy,
             motor: MotorCommand::OFF,
             #[cfg(any(test, feature = "sim"))]
             truth: Truth::default(),
