@@ -32,6 +32,18 @@ use {defmt_rtt as _, panic_probe as _};
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
+/// A panic (panic-probe ends every panic in a HardFault) or a fault: the motor is made safe
+/// before anything else, then the watchdog resets the MCU. Without this the bridge kept its
+/// last duty until the reset (34-94 ms: the LSI is 17-47 kHz).
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::force_motor_safe();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
 mod app {
@@ -91,6 +103,12 @@ mod app {
         // Why did we reset? Read before anything clears it.
         let watchdog_reset = dp.RCC.csr().read().wdgrstf().bit_is_set();
         dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+
+        // Debug halt (breakpoint, probe-rs): the watchdog pauses instead of resetting the MCU,
+        // and TIM1 stops with its outputs disabled as if MOE = 0 (RM0090, TIM1/TIM8 "Debug mode"), so a
+        // halted core does not leave the motor driven.
+        dp.DBGMCU.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
+        dp.DBGMCU.apb2_fz().modify(|_, w| w.dbg_tim1_stop().set_bit());
 
         // 8 MHz HSE crystal → 168 MHz core, 48 MHz for USB; APB1 timers 84 MHz, APB2 168 MHz.
         let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
@@ -202,13 +220,22 @@ mod app {
     }
 
     /// The speed loop period.
-    #[task(binds = TIM3, priority = 2, shared = [rig], local = [tim3, counters, motor, watchdog])]
+    #[task(binds = TIM3, priority = 2, shared = [rig, gyro], local = [tim3, counters, motor, watchdog])]
     fn control(mut cx: control::Context) {
         cx.local.tim3.sr().write(|w| w.uif().clear_bit());
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
-        let cmd = cx.shared.rig.lock(|r| r.control_tick(t_us, encoder));
+        let (cmd, silent) = cx
+            .shared
+            .rig
+            .lock(|r| (r.control_tick(t_us, encoder), r.gyro_fault() == Some(protocol::Fault::GyroSilent)));
         cx.local.motor.apply(cmd);
+        // Silent with DRDY high: an edge came while the capture could not see it and the line
+        // stays high until the outputs are read. Read them; the next sample raises an edge and
+        // its data-ready clears the fault.
+        if silent && board::drdy_level() {
+            let _ = cx.shared.gyro.lock(|g| g.read());
+        }
         cx.local.watchdog.feed();
         rtic::pend(Interrupt::OTG_FS);
     }

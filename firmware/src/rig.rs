@@ -242,8 +242,9 @@ impl Rig {
     /// An index edge: time and count latched by capture, level read after it, and whether the
     /// capture register was overwritten before it was read.
     pub fn index_edge(&mut self, t_us: u32, encoder: u32, level_after: bool, overcaptured: bool) {
-        let edge = self.index.capture(t_us, encoder, level_after, overcaptured);
-        self.link.send(&RigMsg::Index(edge));
+        if let Some(edge) = self.index.capture(t_us, encoder, level_after, overcaptured) {
+            self.link.send(&RigMsg::Index(edge));
+        }
     }
 
     /// Bytes from the host: each command is executed and acknowledged.
@@ -296,6 +297,11 @@ impl Rig {
     /// Gyro settings in force.
     pub fn gyro_config(&self) -> GyroConfig {
         self.gyro_config
+    }
+
+    /// Index edges rejected as chatter ([`crate::index::INDEX_CHATTER_COUNTS`]).
+    pub fn index_chatter(&self) -> u32 {
+        self.index.chatter()
     }
 
     /// Index edges seen and known lost.
