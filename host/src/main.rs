@@ -119,6 +119,9 @@ enum Cmd {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// The firmware's core and the simulated exciter on a pseudo-terminal, to try the live
+    /// session without hardware: prints the device path, then serves `calibrate --port PATH`.
+    VirtualRig(host::virtual_rig::Options),
     /// Describe a capture: rig, settings, runs, rates, losses with their byte offsets.
     Inspect {
         /// Capture files.
@@ -229,6 +232,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             simulate(&cfg, &out)
         }
         Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
+        Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
         Cmd::Inspect { files, json } => {
             for f in &files {
                 let cap = read_capture(f)?;

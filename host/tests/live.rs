@@ -289,3 +289,44 @@ fn end_of_input_at_the_prompt_is_an_abort() {
     assert!(err.lines().last().unwrap().starts_with("error: standard input ended at the prompt"), "{err}");
     assert!(!dir.join("pose1-p180dps.cap").exists(), "no run was started");
 }
+
+/// `host virtual-rig`: the pty path is the first line of standard output, and the rig behind it
+/// answers the host (here `record`, listening only: Identify, then the idle stream).
+#[test]
+fn virtual_rig_subcommand_prints_its_pty_and_serves_it() {
+    use std::io::BufRead;
+    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(["virtual-rig", "--speedup", "1"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(rig.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let path = line.trim().to_string();
+    assert!(path.starts_with("/dev/pts/"), "{line:?}");
+    let dir = scratch("virtual-rig");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("idle.cap");
+    let o = host(&["record", "--port", &path, "--out", out.to_str().unwrap(), "--duration", "1"]);
+    let _ = rig.kill();
+    let _ = rig.wait();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let cap = decode(&out);
+    assert!(cap.hello.is_some_and(|h| h.encoder_counts_per_rev == 324_000));
+    assert!(cap.loss.orphan_samples > 100, "the idle rig streams samples: {:?}", cap.loss);
+}
+
+/// `host virtual-rig` refuses bad options with a usage error.
+#[test]
+fn virtual_rig_subcommand_refuses_bad_options() {
+    for args in [
+        &["virtual-rig", "--loss", "1.5"][..],
+        &["virtual-rig", "--drop", "Helo:1"],
+        &["virtual-rig", "--speedup", "nan"],
+    ] {
+        let o = host(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(String::from_utf8_lossy(&o.stderr).starts_with("error: invalid value"), "{args:?}");
+    }
+}

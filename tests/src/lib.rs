@@ -11,14 +11,8 @@ pub const Z_1D: f64 = 3.0;
 /// a direction has two tilt components.
 pub const Z_2D: f64 = 3.44;
 
-/// The virtual rig's device under test (`virtual_rig` without `--ideal-gyro`): sensitivities
-/// 0.97, 1.02, 1.05; axes tilted by ≈ 1-2° from the package axes. Row i is k_i s_iᵀ
-/// (EXCITER.md eq. 6).
-pub const VIRTUAL_GYRO_KS: [[f64; 3]; 3] =
-    [[0.969_8, 0.017_0, -0.005_1], [-0.012_2, 1.019_7, 0.026_7], [0.018_3, -0.009_2, 1.049_8]];
-
-/// The virtual rig's zero-rate offsets, °/s.
-pub const VIRTUAL_GYRO_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
+/// The virtual rig's device under test and offsets (`host::virtual_rig`, one place).
+pub use host::virtual_rig::{VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS};
 
 /// The firmware's virtual rig (the `virtual_rig` binary) serving a pseudo-terminal; killed when
 /// dropped.
