@@ -14,39 +14,6 @@ pub const Z_2D: f64 = 3.44;
 /// The virtual rig's device under test and offsets (`host::virtual_rig`, one place).
 pub use host::virtual_rig::{VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS};
 
-/// The firmware's virtual rig (the `virtual_rig` binary) serving a pseudo-terminal; killed when
-/// dropped.
-pub struct VirtualRigProcess {
-    child: std::process::Child,
-    /// The pty device to open, e.g. `/dev/pts/3`.
-    pub path: String,
-}
-
-impl VirtualRigProcess {
-    /// Starts `exe` (pass `env!("CARGO_BIN_EXE_virtual_rig")`) and reads the pty path it prints.
-    pub fn spawn(exe: &str, speedup: f64) -> Self {
-        use std::io::BufRead;
-        let mut child = std::process::Command::new(exe)
-            .args(["--speedup", &speedup.to_string()])
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::inherit())
-            .spawn()
-            .expect("spawn virtual_rig");
-        let mut line = String::new();
-        std::io::BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("pty path");
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/"), "unexpected first line {path:?}");
-        Self { child, path }
-    }
-}
-
-impl Drop for VirtualRigProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 /// Simulated time per lockstep step: 5 ms, like a host polling its port every few milliseconds.
 pub const LOCKSTEP_STEP_NS: u64 = 5_000_000;
 
