@@ -4,6 +4,8 @@
 use anyhow::{bail, Context, Result};
 use protocol::{encode_frame, timing, CmdResult, Command, Event, RigMsg, StreamDecoder, MAX_FRAME_LEN};
 use std::io::{ErrorKind, Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Baud rate requested when opening the port. Ignored by USB CDC-ACM, used by a UART bridge;
@@ -70,6 +72,7 @@ pub struct Link<P: Read + Write> {
     last_tx: Duration,
     last_rx: Duration,
     buf: Vec<u8>,
+    interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl<P: Read + Write> Link<P> {
@@ -91,7 +94,14 @@ impl<P: Read + Write> Link<P> {
             last_tx,
             last_rx: last_tx,
             buf: vec![0; 4096],
+            interrupt: None,
         }
+    }
+
+    /// Makes every wait for an acknowledgement give up as soon as `flag` is set (Ctrl-C,
+    /// SIGTERM, SIGHUP), instead of after its retries.
+    pub fn watch_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
     }
 
     /// The port itself.
@@ -196,6 +206,9 @@ impl<P: Read + Write> Link<P> {
                 })?;
                 if let Some(result) = result {
                     return Ok(Answer { result, attempts: attempt });
+                }
+                if self.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst)) {
+                    bail!("interrupted while waiting for the rig to answer {}", command_name(cmd));
                 }
                 if self.clock.now() > deadline {
                     break;

@@ -194,6 +194,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
                     let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+                    link.watch_interrupt(interrupted.clone());
                     let plan = session::plan(&Pose::ALL, &rates_dps, duration);
                     let mut operator: Box<dyn session::Operator> =
                         if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
@@ -266,6 +267,7 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
 fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s: f64, baud: u32) -> Result<ExitCode> {
     let interrupted = interrupt_flag()?;
     let mut link = Link::new(link::open_port(port, baud)?, port);
+    link.watch_interrupt(interrupted.clone());
     match pose {
         Some(pose) => {
             let run = session::RunPlan { pose, rate_dps, duration_s };

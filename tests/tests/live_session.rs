@@ -246,20 +246,10 @@ fn f3_ctrl_c_at_the_prompt_stops_within_a_second() {
 /// the start of the ramp-down.
 #[test]
 fn f9_interrupt_mid_run_sends_stop_and_keeps_the_capture() {
-    /// The rig's clock, which raises the interrupt flag at 5 s (the table is at speed by then).
-    struct InterruptAt5s(Arc<AtomicBool>, e2e::SimClock);
-    impl Clock for InterruptAt5s {
-        fn now(&self) -> Duration {
-            let t = self.1.now();
-            if t >= Duration::from_secs(5) {
-                self.0.store(true, Ordering::SeqCst);
-            }
-            t
-        }
-    }
+    // At 5 s the table is at speed.
     let flag = Arc::new(AtomicBool::new(false));
     let f = flag.clone();
-    let mut b = bench_with("f9", &[], move |c| Box::new(InterruptAt5s(f, c)));
+    let mut b = bench_with("f9", &[], move |c| Box::new(InterruptAt(f, c, Duration::from_secs(5))));
     let path = b.dir.join("interrupted.cap");
     let plan = run(Pose::One, 180.0, 30.0);
     let e = session::record_run(&mut b.link, &plan, &path, &indicatif::ProgressBar::hidden(), &flag)
@@ -275,6 +265,39 @@ fn f9_interrupt_mid_run_sends_stop_and_keeps_the_capture() {
     // The rig received the Stop: its setpoint ramps down in the recorded motor status.
     let setpoints: Vec<i32> = r.motor.iter().map(|(_, m)| m.setpoint_cps).collect();
     assert!(setpoints.last() < setpoints.iter().max(), "{setpoints:?}");
+}
+
+/// The rig's clock, which raises the interrupt flag (as Ctrl-C, SIGTERM or SIGHUP do) at a given
+/// time.
+struct InterruptAt(Arc<AtomicBool>, e2e::SimClock, Duration);
+
+impl Clock for InterruptAt {
+    fn now(&self) -> Duration {
+        let t = self.1.now();
+        if t >= self.2 {
+            self.0.store(true, Ordering::SeqCst);
+        }
+        t
+    }
+}
+
+/// F3: Ctrl-C while the host waits for an acknowledgement that does not come (the first
+/// Identify's Ack is lost) ends the wait at once, not after the retries.
+#[test]
+fn f3_interrupt_while_waiting_for_an_ack_gives_up_at_once() {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    let mut b =
+        bench_with("f3-ack", &["--drop", "Ack:1"], move |c| Box::new(InterruptAt(f, c, Duration::from_millis(300))));
+    b.link.watch_interrupt(flag.clone());
+    let path = b.dir.join("never.cap");
+    let e =
+        session::record_run(&mut b.link, &run(Pose::One, 180.0, 1.0), &path, &indicatif::ProgressBar::hidden(), &flag)
+            .expect_err("interrupted");
+    assert!(format!("{e:#}").contains("interrupted while waiting for the rig to answer Identify"), "{e:#}");
+    let gone_at = b.clock.now();
+    assert!(gone_at < Duration::from_millis(800), "gave up at {gone_at:?}, interrupt at 0.3 s");
+    assert_eq!(b.stops_sent(), 1, "Stop sent on the way out");
 }
 
 /// F6: a rig that restarted from its watchdog says so with every Hello; the capture records the
