@@ -225,15 +225,10 @@ mod app {
         cx.local.tim3.sr().write(|w| w.uif().clear_bit());
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
-        let (cmd, silent) = cx
-            .shared
-            .rig
-            .lock(|r| (r.control_tick(t_us, encoder), r.gyro_fault() == Some(protocol::Fault::GyroSilent)));
+        let drdy_high = board::drdy_level();
+        let (cmd, release) = cx.shared.rig.lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high)));
         cx.local.motor.apply(cmd);
-        // Silent with DRDY high: an edge came while the capture could not see it and the line
-        // stays high until the outputs are read. Read them; the next sample raises an edge and
-        // its data-ready clears the fault.
-        if silent && board::drdy_level() {
+        if release {
             let _ = cx.shared.gyro.lock(|g| g.read());
         }
         cx.local.watchdog.feed();

@@ -299,6 +299,14 @@ impl Rig {
         self.gyro_config
     }
 
+    /// Whether the platform must read (and discard) the gyro's outputs now: the gyro is silent
+    /// while its DRDY line is high, so a data-ready edge was missed (the capture was not armed,
+    /// or was overrun) and the line stays high until the outputs are read; after the read, the
+    /// next sample raises an edge and its data-ready clears the fault.
+    pub fn needs_drdy_release(&self, drdy_high: bool) -> bool {
+        drdy_high && self.gyro_fault == Some(Fault::GyroSilent)
+    }
+
     /// Index edges rejected as chatter ([`crate::index::INDEX_CHATTER_COUNTS`]).
     pub fn index_chatter(&self) -> u32 {
         self.index.chatter()

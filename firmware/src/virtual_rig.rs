@@ -56,6 +56,9 @@ pub struct VirtualRig {
     pub gyro: L3g4200d<L3g4200dModel>,
     /// The firmware core.
     pub rig: Rig,
+    /// Fault injection: this many coming data-ready edges are missed by the capture (as while it
+    /// is not armed), leaving DRDY high.
+    pub missed_drdy_edges: u32,
     /// Link throughput, bytes per loop period (USB full-speed bulk moves ≥ 1 kB per ms; 0
     /// models a host that stopped reading).
     pub link_bytes_per_tick: usize,
@@ -98,6 +101,7 @@ impl VirtualRig {
             plant,
             gyro,
             rig,
+            missed_drdy_edges: 0,
             link_bytes_per_tick: 1_024,
             now_ns: 0,
             t0_us,
@@ -173,7 +177,11 @@ impl VirtualRig {
         #[cfg(any(test, feature = "sim"))]
         self.truth.samples.push((self.now_ns, self.plant.encoder_count(), self.gyro.spi_mut().outputs()));
         let drdy = self.gyro.spi_mut().drdy();
-        let rising = drdy && !self.drdy;
+        let mut rising = drdy && !self.drdy;
+        if rising && self.missed_drdy_edges > 0 {
+            self.missed_drdy_edges -= 1;
+            rising = false;
+        }
         if rising {
             let t_us = self.timer_us(self.now_ns);
             let encoder = self.plant.encoder_count();
@@ -194,8 +202,13 @@ impl VirtualRig {
             self.rig.receive(t_us, &rx[..n], &mut self.gyro);
         }
         let encoder = self.plant.encoder_count();
+        let drdy_high = self.gyro.spi_mut().drdy();
         self.motor = self.rig.control_tick(t_us, encoder);
         self.plant.set_drive(self.motor);
+        if self.rig.needs_drdy_release(drdy_high) {
+            let _ = self.gyro.read();
+            self.drdy = self.gyro.spi_mut().drdy();
+        }
         let mut budget = self.link_bytes_per_tick;
         let mut tx = [0u8; 256];
         while budget > 0 {

@@ -204,3 +204,24 @@ fn a_warm_reset_with_the_gyro_powered_and_drdy_high_recovers() {
     let samples = s.msgs().filter(|m| matches!(m, RigMsg::Sample(_))).count();
     assert!(samples > 790, "{samples} samples in 1 s at 800 Hz");
 }
+
+/// B2: a data-ready edge the capture misses leaves DRDY high for good; once GyroSilent is in
+/// force the core asks for the outputs to be read (`Rig::needs_drdy_release`), the next sample
+/// raises an edge, and sampling resumes by itself, the fault cleared.
+#[test]
+fn a_missed_data_ready_edge_recovers_without_a_power_cycle() {
+    let mut s = Session::prototype();
+    s.run(S / 2);
+    s.vr.missed_drdy_edges = 1;
+    let lost_at = s.vr.now_ns();
+    s.run(S / 2);
+    assert_eq!(s.faults(), vec![Fault::GyroSilent], "reported once, while idle");
+    assert_eq!(s.vr.rig.gyro_fault(), None, "cleared by the samples that followed");
+    let after: Vec<u64> = s
+        .frames
+        .iter()
+        .filter(|(t, _, m)| *t > lost_at + 100 * MS && matches!(m, RigMsg::Sample(_)))
+        .map(|(t, _, _)| *t)
+        .collect();
+    assert!(after.len() > 300, "{} samples in the last 0.4 s", after.len());
+}
