@@ -333,3 +333,41 @@ fn virtual_rig_subcommand_refuses_bad_options() {
         assert!(String::from_utf8_lossy(&o.stderr).starts_with("error: invalid value"), "{args:?}");
     }
 }
+
+/// The documented way to try the live session: `host virtual-rig` in one terminal, `host
+/// calibrate --port` in another, the operator pressing Enter at each prompt (standard input read
+/// while the port is drained), over a line that loses a byte in a thousand and the first Start's
+/// Ack. Both captures are kept, each one run without a fault, and the session calibrates.
+#[test]
+fn calibrate_against_host_virtual_rig_with_an_operator_at_the_keyboard() {
+    use std::io::{BufRead, Write};
+    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+        .args(["virtual-rig", "--speedup", &SPEEDUP.to_string(), "--loss", "1e-3", "--drop", "Ack:2"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(rig.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let path = line.trim().to_string();
+    let dir = scratch("keyboard");
+    let mut host = Running::start(
+        &["calibrate", "--port", &path, "--duration", "4", "--rates-dps", "180", "--out-dir", dir.to_str().unwrap()],
+        std::process::Stdio::piped(),
+    );
+    let mut stdin = host.child.stdin.take().unwrap();
+    host.wait_for("POSE 1");
+    host.wait_for("Press Enter when ready");
+    writeln!(stdin).unwrap();
+    host.wait_for("POSE 2");
+    writeln!(stdin).unwrap();
+    let (status, err, _) = host.finish();
+    let _ = rig.kill();
+    let _ = rig.wait();
+    assert!(matches!(status.code(), Some(0) | Some(3)), "{err}");
+    for file in ["pose1-p180dps.cap", "pose2-p180dps.cap"] {
+        let cap = decode(&dir.join(file));
+        assert_eq!(cap.runs.len(), 1, "{file}");
+        assert!(cap.runs[0].faults.is_empty() && cap.faults.is_empty(), "{file}: {:?}", cap.runs[0].faults);
+    }
+}
