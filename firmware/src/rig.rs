@@ -29,6 +29,10 @@ pub const GYRO_BAD_READS: u8 = 8;
 /// (≤ 1000 cps, 1.1 °/s) for this many periods (50 ms).
 pub const STOPPED_PERIODS: u16 = (LOOP_HZ / 20) as u16;
 
+/// Measured loop periods outside this range, µs, are not believed (the nominal one is used).
+const MIN_PERIOD_US: i32 = 200;
+const MAX_PERIOD_US: i32 = 10_000;
+
 /// Loop periods between [`MotorStatus`] frames (10 Hz).
 pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / 10;
 
@@ -95,6 +99,9 @@ pub struct Rig {
     index: IndexTracker,
     applied: MotorCommand,
     last_encoder: Option<u32>,
+    /// Length of the period that just ended, s, measured on TIM5 (nominally 1 / LOOP_HZ).
+    period_s: f32,
+    last_tick_us: Option<u32>,
     status_window_encoder: u32,
     periods: u32,
     stopped_periods: u16,
@@ -123,6 +130,8 @@ impl Rig {
             index: IndexTracker::new(),
             applied: MotorCommand::OFF,
             last_encoder: None,
+            period_s: 1.0 / LOOP_HZ as f32,
+            last_tick_us: None,
             status_window_encoder: 0,
             periods: 0,
             stopped_periods: 0,
@@ -159,6 +168,13 @@ impl Rig {
             self.status_window_encoder = encoder;
         }
         self.last_encoder = Some(encoder);
+        // Δcount/Δt: the period as measured, not as assumed; an implausible one (a stalled or
+        // restarted timer) falls back to the nominal period.
+        self.period_s = match self.last_tick_us.map(|last| elapsed_us(t_us, last)) {
+            Some(d) if (MIN_PERIOD_US..=MAX_PERIOD_US).contains(&d) => d as f32 * 1e-6,
+            _ => 1.0 / LOOP_HZ as f32,
+        };
+        self.last_tick_us = Some(t_us);
 
         // Signed differences: a higher-priority task (data-ready, USB) may stamp its event a tick
         // after the time this tick was given, which unsigned would make ≈ 4 295 s of silence.
@@ -318,7 +334,7 @@ impl Rig {
     }
 
     fn drive(&mut self, delta: i32) -> MotorCommand {
-        let duty = self.speed_loop.update(delta);
+        let duty = self.speed_loop.update_over(delta, self.period_s);
         self.modulator.drive(duty)
     }
 
