@@ -5,7 +5,7 @@
 //! | Priority | Source            | Work                                                      |
 //! |----------|-------------------|-----------------------------------------------------------|
 //! | 3        | TIM5 capture      | data-ready: captured time + count, SPI burst read; index  |
-//! | 2        | TIM3 update, 1 kHz| speed loop, supervision, periodic frames, watchdog feed   |
+//! | 2        | TIM3 update, 1 kHz| speed loop, supervision, periodic frames, watchdog feed (while USB runs) |
 //! | 1        | OTG_FS            | USB CDC-ACM: host bytes in, queued frames out             |
 //!
 //! Sampling preempts everything, so a slow host or a long USB transfer never delays a read.
@@ -226,12 +226,18 @@ mod app {
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
         let drdy_high = board::drdy_level();
-        let (cmd, release) = cx.shared.rig.lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high)));
+        let (cmd, release, feed) = cx
+            .shared
+            .rig
+            .lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us)));
         cx.local.motor.apply(cmd);
         if release {
             let _ = cx.shared.gyro.lock(|g| g.read());
         }
-        cx.local.watchdog.feed();
+        // Only while the USB task still runs: a hung one ends in a watchdog reset.
+        if feed {
+            cx.local.watchdog.feed();
+        }
         rtic::pend(Interrupt::OTG_FS);
     }
 
@@ -241,6 +247,8 @@ mod app {
     fn usb(cx: usb::Context) {
         let usb::SharedResources { mut rig, mut gyro, .. } = cx.shared;
         let usb::LocalResources { usb_dev, serial, clock, pending, sent, len, .. } = cx.local;
+        let now_us = clock.now_us();
+        rig.lock(|r| r.usb_task_ran(now_us));
         if usb_dev.poll(&mut [serial]) {
             let mut rx = [0u8; 64];
             if let Ok(n) = serial.read(&mut rx) {

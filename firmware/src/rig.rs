@@ -29,6 +29,11 @@ pub const GYRO_BAD_READS: u8 = 8;
 /// (≤ 1000 cps, 1.1 °/s) for this many periods (50 ms).
 pub const STOPPED_PERIODS: u16 = (LOOP_HZ / 20) as u16;
 
+/// The watchdog is fed only while the lowest-priority task (USB) still runs: it must have run
+/// within this long, µs. It runs every loop period (the control task pends it), so 20 ms is 20
+/// missed periods: a hung USB task, not a busy one.
+pub const TASK_ALIVE_US: i32 = 20_000;
+
 /// Measured loop periods outside this range, µs, are not believed (the nominal one is used).
 const MIN_PERIOD_US: i32 = 200;
 const MAX_PERIOD_US: i32 = 10_000;
@@ -102,6 +107,7 @@ pub struct Rig {
     /// Length of the period that just ended, s, measured on TIM5 (nominally 1 / LOOP_HZ).
     period_s: f32,
     last_tick_us: Option<u32>,
+    last_usb_us: u32,
     status_window_encoder: u32,
     periods: u32,
     stopped_periods: u16,
@@ -132,6 +138,7 @@ impl Rig {
             last_encoder: None,
             period_s: 1.0 / LOOP_HZ as f32,
             last_tick_us: None,
+            last_usb_us: 0,
             status_window_encoder: 0,
             periods: 0,
             stopped_periods: 0,
@@ -149,6 +156,7 @@ impl Rig {
     pub fn power_up(&mut self, t_us: u32, gyro_probe: Result<(), Fault>, watchdog_reset: bool) {
         self.last_host_us = t_us;
         self.last_sample_us = t_us;
+        self.last_usb_us = t_us;
         self.send_hello();
         if let Err(fault) = gyro_probe {
             self.gyro_fault = Some(fault);
@@ -313,6 +321,18 @@ impl Rig {
     /// Gyro settings in force.
     pub fn gyro_config(&self) -> GyroConfig {
         self.gyro_config
+    }
+
+    /// The USB (lowest-priority) task ran at `t_us`.
+    pub fn usb_task_ran(&mut self, t_us: u32) {
+        self.last_usb_us = t_us;
+    }
+
+    /// Whether the control task may feed the watchdog at `t_us`: only while the USB task still
+    /// runs ([`TASK_ALIVE_US`]). Fed unconditionally from the 1 kHz interrupt, the watchdog
+    /// would never catch a hung USB task (a host link that silently died with the motor on).
+    pub fn watchdog_may_feed(&self, t_us: u32) -> bool {
+        elapsed_us(t_us, self.last_usb_us) <= TASK_ALIVE_US
     }
 
     /// Whether the platform must read (and discard) the gyro's outputs now: the gyro is silent

@@ -193,6 +193,8 @@ impl VirtualRig {
 
     fn control_tick(&mut self, host: &mut impl HostLink) {
         let t_us = self.timer_us(self.now_ns);
+        // The USB task's poll of the link, as the rtic app runs it every period.
+        self.rig.usb_task_ran(t_us);
         let mut rx = [0u8; 64];
         loop {
             let n = host.receive(&mut rx);

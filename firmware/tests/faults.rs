@@ -225,3 +225,26 @@ fn a_missed_data_ready_edge_recovers_without_a_power_cycle() {
         .collect();
     assert!(after.len() > 300, "{} samples in the last 0.4 s", after.len());
 }
+
+/// The watchdog is fed only while the USB task runs: a hung USB task stops the feeding within
+/// `TASK_ALIVE_US`, so the IWDG resets the MCU (bridge off through the EN pull-down).
+#[test]
+fn a_hung_usb_task_stops_the_watchdog_feed() {
+    use firmware::rig::{Rig, TASK_ALIVE_US};
+    use protocol::GyroConfig;
+    let mut rig = Rig::new(GyroConfig::DEFAULT);
+    let t0 = u32::MAX - 5_000; // across the TIM5 wrap
+    rig.power_up(t0, Ok(()), false);
+    let at = |ms: u32| t0.wrapping_add(1_000 * ms);
+    for ms in 0..10 {
+        rig.usb_task_ran(at(ms));
+        rig.control_tick(at(ms), 0);
+        assert!(rig.watchdog_may_feed(at(ms)), "{ms} ms");
+    }
+    // The USB task last ran at 9 ms, then hangs.
+    let hung_until = 9 + TASK_ALIVE_US as u32 / 1_000;
+    assert!(rig.watchdog_may_feed(at(hung_until)));
+    assert!(!rig.watchdog_may_feed(at(hung_until + 1)));
+    rig.usb_task_ran(at(hung_until + 2));
+    assert!(rig.watchdog_may_feed(at(hung_until + 2)));
+}
