@@ -7,8 +7,8 @@
 //! | Motor DIR                 | PE10 | GPIO out                  |
 //! | Motor EN                  | PE11 | GPIO out, 10 kΩ pull-down |
 //! | Encoder A / B             | PA15 / PB3 | TIM2_CH1 / CH2 (AF1), encoder mode |
-//! | Index → encoder count     | PB10 | TIM2_CH3 (AF1), both edges |
-//! | Index → timestamp         | PA2  | TIM5_CH3 (AF2), both edges |
+//! | Index → encoder count     | PB10 | TIM2_CH3 (AF1), both edges, 12 µs filter |
+//! | Index → timestamp         | PA2  | TIM5_CH3 (AF2), both edges, 12 µs filter |
 //! | DRDY → encoder count      | PB11 | TIM2_CH4 (AF1), rising    |
 //! | DRDY → timestamp + IRQ    | PA3  | TIM5_CH4 (AF2), rising    |
 //! | Gyro SCK / MISO / MOSI    | PA5 / PA6 / PA7 | SPI1 (AF5), mode 3 |
@@ -30,6 +30,33 @@ pub const GYRO_SPI_HZ: u32 = 5_250_000;
 /// f_CK_INT (84 MHz), 95 ns. Identical on TIM2 and TIM5, so both latch the same edge after the
 /// same delay; the fastest encoder edges (324 kHz at 1 Hz) are 3 µs apart.
 pub const CAPTURE_FILTER: u8 = 0b0011;
+
+/// Input-capture filter of the index channels (CH3 of TIM2 and TIM5), CCMR2 IC3F = 0b1111: 8
+/// samples at f_DTS/32, with CR1.CKD = ÷4 (f_DTS = 21 MHz), 12.2 µs
+/// ([`firmware::index::INDEX_FILTER_US`]). CKD only slows the ICxF ≥ 0b0100 filters; the
+/// encoder and data-ready channels ([`CAPTURE_FILTER`]) sample at f_CK_INT and stay at 95 ns.
+pub const INDEX_FILTER: u8 = 0b1111;
+
+/// Level of the data-ready input (PA3): high while the gyro holds an unread sample.
+pub fn drdy_level() -> bool {
+    // SAFETY: a read of GPIOA.IDR, which has no side effects and is not written by anyone.
+    unsafe { (*pac::GPIOA::ptr()).idr().read().idr(3).bit_is_set() }
+}
+
+/// Makes the motor safe without owning the peripherals, from any context (HardFault, which a
+/// panic ends in): bridge enable (PE11, nSLEEP) low, PWM compare 0, TIM1 main output off. The
+/// motor then coasts; the watchdog resets the MCU 34-94 ms later and the EN pull-down holds the
+/// bridge off through the reset.
+pub fn force_motor_safe() {
+    // SAFETY: BSRR is a write-only set/reset register (one atomic write touches PE11 only);
+    // TIM1's CCR1 and BDTR are written only by the PWM channel, whose owner is no longer running.
+    unsafe {
+        (*pac::GPIOE::ptr()).bsrr().write(|w| w.br(11).set_bit());
+        let tim1 = &*pac::TIM1::ptr();
+        tim1.ccr1().write(|w| w.ccr().set(0));
+        tim1.bdtr().modify(|_, w| w.moe().clear_bit());
+    }
+}
 
 /// The H-bridge (e.g. TI DRV8874 in PH/EN mode: PWM on EN, DIR on PH, EN on nSLEEP). Its
 /// nSLEEP has a pull-down, so the bridge is off from reset until firmware drives it.

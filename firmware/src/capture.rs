@@ -6,7 +6,7 @@
 //! of each timer, because a pin reaches only one timer. The capture interrupt of TIM5 is the
 //! only interrupt these signals raise; interrupt latency affects neither value.
 
-use crate::board::CAPTURE_FILTER;
+use crate::board::{CAPTURE_FILTER, INDEX_FILTER};
 use stm32f4xx_hal::pac::{TIM2, TIM5};
 
 /// One captured edge.
@@ -59,7 +59,7 @@ impl Captures {
         tim2.ccmr2_input().write(|w| {
             w.cc3s().ti3();
             w.cc4s().ti4();
-            w.ic3f().set(CAPTURE_FILTER);
+            w.ic3f().set(INDEX_FILTER);
             w.ic4f().set(CAPTURE_FILTER)
         });
         // CH3 both edges (CC3P = CC3NP = 1), CH4 rising.
@@ -70,7 +70,11 @@ impl Captures {
             w.cc4e().set_bit()
         });
         tim2.arr().write(|w| w.arr().set(u32::MAX));
-        tim2.cr1().write(|w| w.cen().set_bit());
+        // CKD ÷4: f_DTS = 21 MHz for the index filter (board::INDEX_FILTER), as on TIM5.
+        tim2.cr1().write(|w| {
+            w.ckd().div4();
+            w.cen().set_bit()
+        });
 
         // TIM5: 1 MHz free-running, the same captures for time.
         tim5.psc().write(|w| w.psc().set((timclk1_hz / protocol::TIMESTAMP_HZ - 1) as u16));
@@ -80,7 +84,7 @@ impl Captures {
         tim5.ccmr2_input().write(|w| {
             w.cc3s().ti3();
             w.cc4s().ti4();
-            w.ic3f().set(CAPTURE_FILTER);
+            w.ic3f().set(INDEX_FILTER);
             w.ic4f().set(CAPTURE_FILTER)
         });
         tim5.ccer().write(|w| {
@@ -93,7 +97,10 @@ impl Captures {
             w.cc3ie().set_bit();
             w.cc4ie().set_bit()
         });
-        tim5.cr1().write(|w| w.cen().set_bit());
+        tim5.cr1().write(|w| {
+            w.ckd().div4();
+            w.cen().set_bit()
+        });
         (Self { tim2, tim5 }, Counters(()))
     }
 

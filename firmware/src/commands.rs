@@ -28,6 +28,10 @@ impl Rig {
         let result = match rx.command {
             Command::Identify => {
                 self.send_hello();
+                // Faults in force, again: the host may have connected after they were reported.
+                for fault in [self.reset_fault, self.gyro_fault].into_iter().flatten() {
+                    self.report(t_us, fault);
+                }
                 CmdResult::Ok
             }
             Command::Start(start) => self.start(t_us, &start),

@@ -43,6 +43,10 @@ const CTRL1_XYZ_EN: u8 = 0b111;
 const CTRL3_I2_DRDY: u8 = 1 << 3;
 /// CTRL_REG4 (§8.5): BDU = 1 so the low and high bytes of one axis always come from one sample.
 const CTRL4_BDU: u8 = 1 << 7;
+/// CTRL_REG5 Out_Sel = 10: the output registers take the data after the second low-pass filter,
+/// so CTRL_REG1.BW sets the bandwidth (datasheet Figure 18, Table 33). With 00 (the reset value)
+/// LPF2 is bypassed and the bandwidth setting does nothing.
+const CTRL5_OUT_SEL_LPF2: u8 = 0x02;
 
 /// STATUS_REG bits (§8.9).
 pub mod status {
@@ -100,7 +104,7 @@ pub fn control_registers(config: GyroConfig) -> [u8; 5] {
         0x00, // CTRL_REG2: high-pass filter unused (CTRL_REG5 HPen = 0).
         CTRL3_I2_DRDY,
         CTRL4_BDU | config.full_scale.fs_bits() << 4,
-        0x00, // CTRL_REG5: no FIFO, no high-pass, data register from the low-pass path.
+        CTRL5_OUT_SEL_LPF2, // CTRL_REG5: no FIFO, no high-pass; output after LPF2 (Out_Sel = 1x).
     ]
 }
 
@@ -115,13 +119,20 @@ impl<SPI: SpiDevice> L3g4200d<SPI> {
         Self { spi }
     }
 
-    /// Checks WHO_AM_I, then writes the whole configuration. Safe to call again to reconfigure.
+    /// Checks WHO_AM_I, writes the whole configuration, then reads (and discards) the outputs.
+    /// Safe to call again to reconfigure.
+    ///
+    /// The discarded read matters after a warm reset: the sensor keeps its power across an MCU
+    /// reset (watchdog, panic, debugger), and its DRDY stays high until the outputs are read, so
+    /// the rising edge the capture is armed for would never come. Call it after arming the
+    /// capture: the next sample then raises a fresh edge.
     pub fn init(&mut self, config: GyroConfig) -> Result<(), Error<SPI::Error>> {
         let id = self.who_am_i()?;
         if id != DEVICE_ID {
             return Err(Error::WrongDevice(id));
         }
         self.configure(config)?;
+        self.read()?;
         Ok(())
     }
 
@@ -195,7 +206,12 @@ mod tests {
         // 800 Hz (DR=11), BW=11, PD, XYZ: 0xFF; DRDY on INT2: 0x08; BDU + ±500 °/s: 0x90.
         expect.extend([
             T::transaction_start(),
-            T::write_vec(vec![0x60, 0xFF, 0x00, 0x08, 0x90, 0x00]),
+            T::write_vec(vec![0x60, 0xFF, 0x00, 0x08, 0x90, 0x02]),
+            T::transaction_end(),
+            // The discarded burst read that releases a DRDY left high by a warm reset.
+            T::transaction_start(),
+            T::write(0xE6),
+            T::read_vec(vec![0; 8]),
             T::transaction_end(),
         ]);
         let mut spi = Mock::new(&expect);
@@ -208,9 +224,24 @@ mod tests {
     fn other_configs_encode_their_fields() {
         let cfg = GyroConfig { full_scale: FullScale::Dps2000, odr: Odr::Hz100, bandwidth: Bandwidth::Bw1 };
         // DR=00 BW=01 PD XYZ = 0x1F; BDU | FS=10 = 0xA0.
-        assert_eq!(control_registers(cfg), [0x1F, 0x00, 0x08, 0xA0, 0x00]);
+        assert_eq!(control_registers(cfg), [0x1F, 0x00, 0x08, 0xA0, 0x02]);
         let cfg = GyroConfig { full_scale: FullScale::Dps250, odr: Odr::Hz200, bandwidth: Bandwidth::Bw2 };
-        assert_eq!(control_registers(cfg), [0x6F, 0x00, 0x08, 0x80, 0x00]);
+        assert_eq!(control_registers(cfg), [0x6F, 0x00, 0x08, 0x80, 0x02]);
+    }
+
+    /// B3: with CTRL_REG5 = 0x00 the output bypasses LPF2 and the bandwidth code does nothing;
+    /// Out_Sel = 1x (0x02) puts LPF2 in the path for every configuration, high-pass off.
+    #[test]
+    fn every_config_reads_through_the_second_low_pass_filter() {
+        for full_scale in [FullScale::Dps250, FullScale::Dps500, FullScale::Dps2000] {
+            for odr in [Odr::Hz100, Odr::Hz200, Odr::Hz400, Odr::Hz800] {
+                for bandwidth in [Bandwidth::Bw0, Bandwidth::Bw1, Bandwidth::Bw2, Bandwidth::Bw3] {
+                    let ctrl5 = control_registers(GyroConfig { full_scale, odr, bandwidth })[4];
+                    assert_eq!(ctrl5 & 0b11, 0b10, "Out_Sel selects LPF2");
+                    assert_eq!(ctrl5 & 0x10, 0, "HPen off");
+                }
+            }
+        }
     }
 
     #[test]

@@ -23,13 +23,13 @@ pub mod plant;
 #[cfg(any(test, feature = "plant"))]
 pub mod virtual_rig;
 
-use protocol::{GearRatio, Version};
+use protocol::Version;
 
 /// This firmware's version, as reported in [`protocol::Hello`]; must match `Cargo.toml`.
 pub const FIRMWARE_VERSION: Version = Version { major: 0, minor: 1, patch: 0 };
 
-/// Sensor-table turns per base-table turn: the magnetic gears are 1:1 (EXCITER.md, "Mechanism").
-pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
+/// Sensor-table turns per base-table turn ([`protocol::GEAR_RATIO`]).
+pub use protocol::GEAR_RATIO;
 
 /// `x` limited to `±bound`. Not `f32::clamp`: its panic message formats floats, which would
 /// pull ≈ 23 KiB of core's float formatting into the image.

@@ -5,7 +5,7 @@
 //! | Priority | Source            | Work                                                      |
 //! |----------|-------------------|-----------------------------------------------------------|
 //! | 3        | TIM5 capture      | data-ready: captured time + count, SPI burst read; index  |
-//! | 2        | TIM3 update, 1 kHz| speed loop, supervision, periodic frames, watchdog feed   |
+//! | 2        | TIM3 update, 1 kHz| speed loop, supervision, periodic frames, watchdog feed (while USB runs) |
 //! | 1        | OTG_FS            | USB CDC-ACM: host bytes in, queued frames out             |
 //!
 //! Sampling preempts everything, so a slow host or a long USB transfer never delays a read.
@@ -31,6 +31,18 @@ use {defmt_rtt as _, panic_probe as _};
 /// and the logic is exercised through the library's tests and the virtual rig.
 #[cfg(not(target_os = "none"))]
 fn main() {}
+
+/// A panic (panic-probe ends every panic in a HardFault) or a fault: the motor is made safe
+/// before anything else, then the watchdog resets the MCU. Without this the bridge kept its
+/// last duty until the reset (34-94 ms: the LSI is 17-47 kHz).
+#[cfg(all(target_os = "none", not(feature = "qemu")))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::force_motor_safe();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
 
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
 #[rtic::app(device = stm32f4xx_hal::pac, peripherals = true)]
@@ -91,6 +103,12 @@ mod app {
         // Why did we reset? Read before anything clears it.
         let watchdog_reset = dp.RCC.csr().read().wdgrstf().bit_is_set();
         dp.RCC.csr().modify(|_, w| w.rmvf().set_bit());
+
+        // Debug halt (breakpoint, probe-rs): the watchdog pauses instead of resetting the MCU,
+        // and TIM1 stops with its outputs disabled as if MOE = 0 (RM0090, TIM1/TIM8 "Debug mode"), so a
+        // halted core does not leave the motor driven.
+        dp.DBGMCU.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
+        dp.DBGMCU.apb2_fz().modify(|_, w| w.dbg_tim1_stop().set_bit());
 
         // 8 MHz HSE crystal → 168 MHz core, 48 MHz for USB; APB1 timers 84 MHz, APB2 168 MHz.
         let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
@@ -202,14 +220,24 @@ mod app {
     }
 
     /// The speed loop period.
-    #[task(binds = TIM3, priority = 2, shared = [rig], local = [tim3, counters, motor, watchdog])]
+    #[task(binds = TIM3, priority = 2, shared = [rig, gyro], local = [tim3, counters, motor, watchdog])]
     fn control(mut cx: control::Context) {
         cx.local.tim3.sr().write(|w| w.uif().clear_bit());
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
-        let cmd = cx.shared.rig.lock(|r| r.control_tick(t_us, encoder));
+        let drdy_high = board::drdy_level();
+        let (cmd, release, feed) = cx
+            .shared
+            .rig
+            .lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us)));
         cx.local.motor.apply(cmd);
-        cx.local.watchdog.feed();
+        if release {
+            let _ = cx.shared.gyro.lock(|g| g.read());
+        }
+        // Only while the USB task still runs: a hung one ends in a watchdog reset.
+        if feed {
+            cx.local.watchdog.feed();
+        }
         rtic::pend(Interrupt::OTG_FS);
     }
 
@@ -219,6 +247,8 @@ mod app {
     fn usb(cx: usb::Context) {
         let usb::SharedResources { mut rig, mut gyro, .. } = cx.shared;
         let usb::LocalResources { usb_dev, serial, clock, pending, sent, len, .. } = cx.local;
+        let now_us = clock.now_us();
+        rig.lock(|r| r.usb_task_ran(now_us));
         if usb_dev.poll(&mut [serial]) {
             let mut rx = [0u8; 64];
             if let Ok(n) = serial.read(&mut rx) {

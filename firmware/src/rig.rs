@@ -16,7 +16,7 @@ use protocol::{
 };
 
 /// No host frame for this long during a run stops the motor (protocol: [`protocol::Command::Heartbeat`]).
-pub const HOST_LINK_TIMEOUT_US: u32 = 2_000_000;
+pub use protocol::timing::HOST_LINK_TIMEOUT_US;
 
 /// No data-ready for this long is a silent gyro: five periods at the slowest ODR (100 Hz).
 pub const GYRO_SILENT_US: u32 = 50_000;
@@ -29,11 +29,26 @@ pub const GYRO_BAD_READS: u8 = 8;
 /// (≤ 1000 cps, 1.1 °/s) for this many periods (50 ms).
 pub const STOPPED_PERIODS: u16 = (LOOP_HZ / 20) as u16;
 
+/// The watchdog is fed only while the lowest-priority task (USB) still runs: it must have run
+/// within this long, µs. It runs every loop period (the control task pends it), so 20 ms is 20
+/// missed periods: a hung USB task, not a busy one.
+pub const TASK_ALIVE_US: i32 = 20_000;
+
+/// Measured loop periods outside this range, µs, are not believed (the nominal one is used).
+const MIN_PERIOD_US: i32 = 200;
+const MAX_PERIOD_US: i32 = 10_000;
+
 /// Loop periods between [`MotorStatus`] frames (10 Hz).
 pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / 10;
 
 /// Loop periods between [`Counters`] and [`Temperature`] frames (1 Hz).
 pub const COUNTERS_PERIODS: u32 = LOOP_HZ;
+
+/// Microseconds from `since` to `now` on the wrapping TIM5 clock, negative when `since` is later
+/// (an event stamped by a preempting task after `now` was read). Valid for spans under 35 min.
+pub fn elapsed_us(now: u32, since: u32) -> i32 {
+    now.wrapping_sub(since) as i32
+}
 
 /// The gyro as the command handler sees it: something that can be (re)configured.
 pub trait GyroControl {
@@ -77,6 +92,9 @@ pub struct Rig {
     /// A gyro fault in force: refuses runs until a ConfigureGyro succeeds (or samples resume,
     /// for [`Fault::GyroSilent`]).
     pub(crate) gyro_fault: Option<Fault>,
+    /// Why the MCU last restarted, if that is a fault ([`Fault::WatchdogReset`]): repeated after
+    /// every Hello, so a host that connects later still learns it.
+    pub(crate) reset_fault: Option<Fault>,
     pub(crate) run: Run,
     pub(crate) speed_loop: SpeedLoop,
     pub(crate) supervisor: Supervisor,
@@ -86,6 +104,10 @@ pub struct Rig {
     index: IndexTracker,
     applied: MotorCommand,
     last_encoder: Option<u32>,
+    /// Length of the period that just ended, s, measured on TIM5 (nominally 1 / LOOP_HZ).
+    period_s: f32,
+    last_tick_us: Option<u32>,
+    last_usb_us: u32,
     status_window_encoder: u32,
     periods: u32,
     stopped_periods: u16,
@@ -104,6 +126,7 @@ impl Rig {
             link: Link::new(),
             gyro_config,
             gyro_fault: None,
+            reset_fault: None,
             run: Run::Idle,
             speed_loop: SpeedLoop::new(Gains::RE30_GP32),
             supervisor: Supervisor::new(),
@@ -113,6 +136,9 @@ impl Rig {
             index: IndexTracker::new(),
             applied: MotorCommand::OFF,
             last_encoder: None,
+            period_s: 1.0 / LOOP_HZ as f32,
+            last_tick_us: None,
+            last_usb_us: 0,
             status_window_encoder: 0,
             periods: 0,
             stopped_periods: 0,
@@ -130,12 +156,14 @@ impl Rig {
     pub fn power_up(&mut self, t_us: u32, gyro_probe: Result<(), Fault>, watchdog_reset: bool) {
         self.last_host_us = t_us;
         self.last_sample_us = t_us;
+        self.last_usb_us = t_us;
         self.send_hello();
         if let Err(fault) = gyro_probe {
             self.gyro_fault = Some(fault);
             self.report(t_us, fault);
         }
         if watchdog_reset {
+            self.reset_fault = Some(Fault::WatchdogReset);
             self.report(t_us, Fault::WatchdogReset);
         }
     }
@@ -148,12 +176,21 @@ impl Rig {
             self.status_window_encoder = encoder;
         }
         self.last_encoder = Some(encoder);
+        // Δcount/Δt: the period as measured, not as assumed; an implausible one (a stalled or
+        // restarted timer) falls back to the nominal period.
+        self.period_s = match self.last_tick_us.map(|last| elapsed_us(t_us, last)) {
+            Some(d) if (MIN_PERIOD_US..=MAX_PERIOD_US).contains(&d) => d as f32 * 1e-6,
+            _ => 1.0 / LOOP_HZ as f32,
+        };
+        self.last_tick_us = Some(t_us);
 
-        if self.gyro_fault.is_none() && t_us.wrapping_sub(self.last_sample_us) > GYRO_SILENT_US {
+        // Signed differences: a higher-priority task (data-ready, USB) may stamp its event a tick
+        // after the time this tick was given, which unsigned would make ≈ 4 295 s of silence.
+        if self.gyro_fault.is_none() && elapsed_us(t_us, self.last_sample_us) > GYRO_SILENT_US as i32 {
             self.gyro_failed(t_us, Fault::GyroSilent);
         }
         if self.run.tag().is_some() {
-            if t_us.wrapping_sub(self.last_host_us) > HOST_LINK_TIMEOUT_US {
+            if elapsed_us(t_us, self.last_host_us) > HOST_LINK_TIMEOUT_US as i32 {
                 self.trip(t_us, Fault::HostLinkLost);
             } else if let Some(fault) = self.supervisor.check(self.applied.duty(), delta) {
                 self.trip(t_us, fault);
@@ -229,8 +266,9 @@ impl Rig {
     /// An index edge: time and count latched by capture, level read after it, and whether the
     /// capture register was overwritten before it was read.
     pub fn index_edge(&mut self, t_us: u32, encoder: u32, level_after: bool, overcaptured: bool) {
-        let edge = self.index.capture(t_us, encoder, level_after, overcaptured);
-        self.link.send(&RigMsg::Index(edge));
+        if let Some(edge) = self.index.capture(t_us, encoder, level_after, overcaptured) {
+            self.link.send(&RigMsg::Index(edge));
+        }
     }
 
     /// Bytes from the host: each command is executed and acknowledged.
@@ -285,13 +323,38 @@ impl Rig {
         self.gyro_config
     }
 
+    /// The USB (lowest-priority) task ran at `t_us`.
+    pub fn usb_task_ran(&mut self, t_us: u32) {
+        self.last_usb_us = t_us;
+    }
+
+    /// Whether the control task may feed the watchdog at `t_us`: only while the USB task still
+    /// runs ([`TASK_ALIVE_US`]). Fed unconditionally from the 1 kHz interrupt, the watchdog
+    /// would never catch a hung USB task (a host link that silently died with the motor on).
+    pub fn watchdog_may_feed(&self, t_us: u32) -> bool {
+        elapsed_us(t_us, self.last_usb_us) <= TASK_ALIVE_US
+    }
+
+    /// Whether the platform must read (and discard) the gyro's outputs now: the gyro is silent
+    /// while its DRDY line is high, so a data-ready edge was missed (the capture was not armed,
+    /// or was overrun) and the line stays high until the outputs are read; after the read, the
+    /// next sample raises an edge and its data-ready clears the fault.
+    pub fn needs_drdy_release(&self, drdy_high: bool) -> bool {
+        drdy_high && self.gyro_fault == Some(Fault::GyroSilent)
+    }
+
+    /// Index edges rejected as chatter ([`crate::index::INDEX_CHATTER_COUNTS`]).
+    pub fn index_chatter(&self) -> u32 {
+        self.index.chatter()
+    }
+
     /// Index edges seen and known lost.
     pub fn index_edges(&self) -> (u32, u32) {
         (self.index.edges(), self.index.missed())
     }
 
     fn drive(&mut self, delta: i32) -> MotorCommand {
-        let duty = self.speed_loop.update(delta);
+        let duty = self.speed_loop.update_over(delta, self.period_s);
         self.modulator.drive(duty)
     }
 

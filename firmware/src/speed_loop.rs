@@ -65,7 +65,8 @@ impl Gains {
     };
 }
 
-/// Ramp + PI state. Call [`SpeedLoop::update`] exactly [`LOOP_HZ`] times a second.
+/// Ramp + PI state. Call [`SpeedLoop::update_over`] once per period with the period measured
+/// (nominally [`LOOP_HZ`] times a second).
 #[derive(Debug, Clone)]
 pub struct SpeedLoop {
     gains: Gains,
@@ -91,15 +92,21 @@ impl SpeedLoop {
         *self = Self::new(self.gains);
     }
 
-    /// One period: `delta_counts` is how far the encoder moved since the last call. Returns the
-    /// duty to apply, signed, within `±duty_limit`.
+    /// One nominal period (1 / [`LOOP_HZ`]): [`Self::update_over`].
     pub fn update(&mut self, delta_counts: i32) -> f32 {
+        self.update_over(delta_counts, 1.0 / LOOP_HZ as f32)
+    }
+
+    /// One period of `period_s` seconds, as measured: `delta_counts` is how far the encoder
+    /// moved in it. A late or early tick changes the expected travel, not the speed error.
+    /// Returns the duty to apply, signed, within `±duty_limit`.
+    pub fn update_over(&mut self, delta_counts: i32, period_s: f32) -> f32 {
         let g = &self.gains;
         // The measured period ran at the previous setpoint: compare against that one.
-        let travel_error = self.setpoint_cps / LOOP_HZ as f32 - delta_counts as f32;
-        let error_cps = travel_error * LOOP_HZ as f32;
+        let travel_error = self.setpoint_cps * period_s - delta_counts as f32;
+        let error_cps = travel_error / period_s;
 
-        let step = g.ramp_cps_per_s / LOOP_HZ as f32;
+        let step = g.ramp_cps_per_s * period_s;
         self.setpoint_cps += crate::limit(self.target_cps - self.setpoint_cps, step);
         let output = |integral: f32| g.kff * self.setpoint_cps + g.kp * error_cps + g.ki * integral;
 
@@ -160,6 +167,27 @@ mod tests {
         l.set_target(-162_000);
         l.update(0);
         assert_eq!(l.setpoint_cps(), 162_000 - 81);
+    }
+
+    /// A tick 30 % late (interrupt latency, a long higher-priority task) finds 30 % more counts:
+    /// with Δcount/Δt that is no speed error, where dividing by the nominal 1 ms made it one.
+    #[test]
+    fn a_late_tick_is_not_a_speed_error() {
+        let run_at_speed = || {
+            let mut l = SpeedLoop::new(Gains::RE30_GP32);
+            l.set_target(162_000);
+            for _ in 0..2_000 {
+                l.update(162);
+            }
+            assert!(l.at_target());
+            l
+        };
+        let mut nominal = run_at_speed();
+        let mut late = run_at_speed();
+        let on_time = nominal.update_over(162, 1e-3);
+        let after_late = late.update_over(211, 1.3e-3); // 162 000 cps × 1.3 ms = 210.6 counts
+        assert!((after_late - on_time).abs() < 1e-3, "duty {after_late} after a late tick vs {on_time}");
+        assert!((late.integral_counts() - nominal.integral_counts()).abs() < 1.0);
     }
 
     #[test]

@@ -13,10 +13,8 @@ pub const STALL_DUTY: f32 = 0.10;
 /// current at 24 V, limited by the bridge) does not overheat.
 pub const STALL_PERIODS: u16 = (LOOP_HZ / 10) as u16;
 
-/// Highest speed the rig may be commanded to: 360 °/s (1 Hz), twice the paper's 0.5 Hz drive.
-/// Pose 1 then peaks at 502 °/s (EXCITER.md: 251 °/s at 0.5 Hz), so above 0.5 Hz the host must
-/// select the ±2000 °/s range.
-pub const MAX_RATE_MDPS: u32 = 360_000;
+/// Highest speed the rig may be commanded to ([`protocol::MAX_RATE_MDPS`]).
+pub use protocol::MAX_RATE_MDPS;
 
 /// Over-speed limit, counts/s: 125 % of [`MAX_RATE_MDPS`] (450 °/s), beyond any setpoint plus
 /// ramp overshoot and, at 1 count per period, far beyond the measurement noise.

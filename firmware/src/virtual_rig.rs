@@ -56,6 +56,9 @@ pub struct VirtualRig {
     pub gyro: L3g4200d<L3g4200dModel>,
     /// The firmware core.
     pub rig: Rig,
+    /// Fault injection: this many coming data-ready edges are missed by the capture (as while it
+    /// is not armed), leaving DRDY high.
+    pub missed_drdy_edges: u32,
     /// Link throughput, bytes per loop period (USB full-speed bulk moves ≥ 1 kB per ms; 0
     /// models a host that stopped reading).
     pub link_bytes_per_tick: usize,
@@ -83,19 +86,27 @@ impl VirtualRig {
     /// Powers up: the core probes and configures the gyro and sends its hello. `t0_us` is the
     /// TIM5 count at simulated time 0 (start near 2^32 to exercise the wrap).
     pub fn new(plant: Plant, chip: L3g4200dModel, t0_us: u32) -> Self {
+        Self::restarted(plant, chip, t0_us, false)
+    }
+
+    /// [`Self::new`], for an MCU whose last reset was (`watchdog_reset`) forced by the watchdog.
+    pub fn restarted(plant: Plant, chip: L3g4200dModel, t0_us: u32, watchdog_reset: bool) -> Self {
         let mut gyro = L3g4200d::new(chip);
         let mut rig = Rig::new(GyroConfig::DEFAULT);
         let probe = crate::rig::GyroControl::apply(&mut gyro, GyroConfig::DEFAULT);
-        rig.power_up(t0_us, probe, false);
+        rig.power_up(t0_us, probe, watchdog_reset);
+        // The pin as it is: a sensor that kept its power across the reset may hold it high.
+        let drdy = gyro.spi_mut().drdy();
         Self {
             plant,
             gyro,
             rig,
+            missed_drdy_edges: 0,
             link_bytes_per_tick: 1_024,
             now_ns: 0,
             t0_us,
             next_tick_ns: TICK_NS,
-            drdy: false,
+            drdy,
             motor: MotorCommand::OFF,
             #[cfg(any(test, feature = "sim"))]
             truth: Truth::default(),
@@ -166,7 +177,11 @@ impl VirtualRig {
         #[cfg(any(test, feature = "sim"))]
         self.truth.samples.push((self.now_ns, self.plant.encoder_count(), self.gyro.spi_mut().outputs()));
         let drdy = self.gyro.spi_mut().drdy();
-        let rising = drdy && !self.drdy;
+        let mut rising = drdy && !self.drdy;
+        if rising && self.missed_drdy_edges > 0 {
+            self.missed_drdy_edges -= 1;
+            rising = false;
+        }
         if rising {
             let t_us = self.timer_us(self.now_ns);
             let encoder = self.plant.encoder_count();
@@ -178,6 +193,8 @@ impl VirtualRig {
 
     fn control_tick(&mut self, host: &mut impl HostLink) {
         let t_us = self.timer_us(self.now_ns);
+        // The USB task's poll of the link, as the rtic app runs it every period.
+        self.rig.usb_task_ran(t_us);
         let mut rx = [0u8; 64];
         loop {
             let n = host.receive(&mut rx);
@@ -187,8 +204,13 @@ impl VirtualRig {
             self.rig.receive(t_us, &rx[..n], &mut self.gyro);
         }
         let encoder = self.plant.encoder_count();
+        let drdy_high = self.gyro.spi_mut().drdy();
         self.motor = self.rig.control_tick(t_us, encoder);
         self.plant.set_drive(self.motor);
+        if self.rig.needs_drdy_release(drdy_high) {
+            let _ = self.gyro.read();
+            self.drdy = self.gyro.spi_mut().drdy();
+        }
         let mut budget = self.link_bytes_per_tick;
         let mut tx = [0u8; 256];
         while budget > 0 {

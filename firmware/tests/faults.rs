@@ -157,3 +157,94 @@ fn wrong_who_am_i_is_reported_at_power_up_and_blocks_runs() {
     assert_eq!(s.ack_for(start), Some(CmdResult::Faulted));
     assert!(s.probes.iter().all(|p| !p.motor.enable));
 }
+
+/// B1: the data-ready task (priority 3) preempts the control task between its clock read and its
+/// lock of the rig, and stamps a sample one tick *after* the control task's time. Unsigned, that
+/// difference wrapped to ≈ 4 295 s of "silence" and tripped GyroSilent mid-run.
+#[test]
+fn a_sample_stamped_after_the_control_tick_time_is_not_silence() {
+    use firmware::l3g4200d::Measurement;
+    use firmware::rig::Rig;
+    use protocol::GyroConfig;
+    let mut rig = Rig::new(GyroConfig::DEFAULT);
+    let t0 = u32::MAX - 10_000; // across the TIM5 wrap, too
+    rig.power_up(t0, Ok(()), false);
+    let m = Measurement { temp_raw: 20, status: 0x08, rate_counts: [1, 2, 3] };
+    for k in 0..100u32 {
+        let control_t = t0.wrapping_add(1_000 * k);
+        // Interleaving: control reads TIM5 (control_t) → data-ready preempts, stamps control_t + 1
+        // → control locks the rig and runs its tick with control_t.
+        rig.data_ready(control_t.wrapping_add(1), 0, Ok::<_, ()>(m));
+        rig.control_tick(control_t, 0);
+        assert_eq!(rig.gyro_fault(), None, "tick {k}");
+    }
+    // Real silence is still caught.
+    let late = t0.wrapping_add(1_000 * 99 + 1 + GYRO_SILENT_US + 1);
+    rig.control_tick(late, 0);
+    assert_eq!(rig.gyro_fault(), Some(Fault::GyroSilent));
+}
+
+/// B2: the MCU restarts (watchdog, panic, debugger) while the gyro keeps its power, its DRDY
+/// high with an unread sample. The capture waits for a rising edge; the driver's discarded read
+/// after configuring releases the line, so samples flow again without a power cycle.
+#[test]
+fn a_warm_reset_with_the_gyro_powered_and_drdy_high_recovers() {
+    use firmware::l3g4200d::L3g4200d;
+    use protocol::GyroConfig;
+    // The gyro as the previous firmware left it: configured, a sample latched and never read.
+    let mut before = L3g4200d::new(L3g4200dModel::new());
+    before.configure(GyroConfig::DEFAULT).unwrap();
+    let mut chip = before.release();
+    assert!(chip.next_sample_s(0.0).is_some());
+    chip.latch([0.0; 3], 20);
+    assert!(chip.drdy(), "DRDY held high across the reset");
+    let mut s = Session::new(VirtualRig::new(Plant::prototype(), chip, 0));
+    s.run(S);
+    assert!(s.faults().is_empty(), "{:?}", s.faults());
+    let samples = s.msgs().filter(|m| matches!(m, RigMsg::Sample(_))).count();
+    assert!(samples > 790, "{samples} samples in 1 s at 800 Hz");
+}
+
+/// B2: a data-ready edge the capture misses leaves DRDY high for good; once GyroSilent is in
+/// force the core asks for the outputs to be read (`Rig::needs_drdy_release`), the next sample
+/// raises an edge, and sampling resumes by itself, the fault cleared.
+#[test]
+fn a_missed_data_ready_edge_recovers_without_a_power_cycle() {
+    let mut s = Session::prototype();
+    s.run(S / 2);
+    s.vr.missed_drdy_edges = 1;
+    let lost_at = s.vr.now_ns();
+    s.run(S / 2);
+    assert_eq!(s.faults(), vec![Fault::GyroSilent], "reported once, while idle");
+    assert_eq!(s.vr.rig.gyro_fault(), None, "cleared by the samples that followed");
+    let after: Vec<u64> = s
+        .frames
+        .iter()
+        .filter(|(t, _, m)| *t > lost_at + 100 * MS && matches!(m, RigMsg::Sample(_)))
+        .map(|(t, _, _)| *t)
+        .collect();
+    assert!(after.len() > 300, "{} samples in the last 0.4 s", after.len());
+}
+
+/// The watchdog is fed only while the USB task runs: a hung USB task stops the feeding within
+/// `TASK_ALIVE_US`, so the IWDG resets the MCU (bridge off through the EN pull-down).
+#[test]
+fn a_hung_usb_task_stops_the_watchdog_feed() {
+    use firmware::rig::{Rig, TASK_ALIVE_US};
+    use protocol::GyroConfig;
+    let mut rig = Rig::new(GyroConfig::DEFAULT);
+    let t0 = u32::MAX - 5_000; // across the TIM5 wrap
+    rig.power_up(t0, Ok(()), false);
+    let at = |ms: u32| t0.wrapping_add(1_000 * ms);
+    for ms in 0..10 {
+        rig.usb_task_ran(at(ms));
+        rig.control_tick(at(ms), 0);
+        assert!(rig.watchdog_may_feed(at(ms)), "{ms} ms");
+    }
+    // The USB task last ran at 9 ms, then hangs.
+    let hung_until = 9 + TASK_ALIVE_US as u32 / 1_000;
+    assert!(rig.watchdog_may_feed(at(hung_until)));
+    assert!(!rig.watchdog_may_feed(at(hung_until + 1)));
+    rig.usb_task_ran(at(hung_until + 2));
+    assert!(rig.watchdog_may_feed(at(hung_until + 2)));
+}

@@ -98,6 +98,22 @@ impl Run {
         }
     }
 
+    /// A digest of the run's content (samples, index edges, settings): two runs with the same
+    /// fingerprint are the same data given twice, never two recordings (the gyro's noise alone
+    /// makes every recording different).
+    pub fn fingerprint(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        (self.pose.number(), self.rate_mdps, self.direction.sign(), self.samples.len()).hash(&mut h);
+        for s in &self.samples {
+            (s.t_us, s.encoder, s.rate_counts, s.status).hash(&mut h);
+        }
+        for e in &self.index {
+            (e.t_us, e.encoder).hash(&mut h);
+        }
+        h.finish()
+    }
+
     /// A one-line label such as `pose 1, +180.0 °/s`.
     pub fn label(&self) -> String {
         format!("{}, {:+.1} °/s", self.pose, self.commanded_rate_dps())
@@ -129,6 +145,11 @@ pub struct SeqGap {
     pub missing: u64,
 }
 
+/// Bad stretches and sequence gaps recorded one by one; beyond this, only counted, so memory
+/// stays bounded however much garbage a capture holds (1 GiB of noise would otherwise make
+/// millions of records).
+pub const MAX_LOSS_RECORDS: usize = 1_000;
+
 /// Everything lost or damaged in a capture.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct LossReport {
@@ -142,22 +163,61 @@ pub struct LossReport {
     pub seq_gaps: Vec<SeqGap>,
     /// Samples that arrived outside any identifiable run (dropped from calibration).
     pub orphan_samples: u64,
+    /// Bad stretches beyond the first [`MAX_LOSS_RECORDS`]: how many, and their bytes.
+    pub more_errors: u64,
+    /// Bytes in the bad stretches beyond the cap.
+    pub more_bytes_skipped: u64,
+    /// Sequence gaps beyond the first [`MAX_LOSS_RECORDS`]: how many, and the frames missing.
+    pub more_seq_gaps: u64,
+    /// Frames missing in the gaps beyond the cap.
+    pub more_frames_missing: u64,
+    /// No `Hello` was read before a run began (lost on the line): the rig's constants were taken
+    /// from the protocol ([`assumed_hello`]) and the run's gyro settings from its `RunStarted`.
+    pub hello_assumed: bool,
 }
 
 impl LossReport {
     /// Frames missing according to sequence numbers.
     pub fn frames_missing(&self) -> u64 {
-        self.seq_gaps.iter().map(|g| g.missing).sum()
+        self.seq_gaps.iter().map(|g| g.missing).sum::<u64>() + self.more_frames_missing
     }
 
     /// Bytes that did not belong to a valid frame.
     pub fn bytes_skipped(&self) -> u64 {
-        self.errors.iter().map(|e| e.len).sum()
+        self.errors.iter().map(|e| e.len).sum::<u64>() + self.more_bytes_skipped
+    }
+
+    /// Bad stretches, recorded or only counted.
+    pub fn error_count(&self) -> u64 {
+        self.errors.len() as u64 + self.more_errors
+    }
+
+    /// Sequence gaps, recorded or only counted.
+    pub fn seq_gap_count(&self) -> u64 {
+        self.seq_gaps.len() as u64 + self.more_seq_gaps
+    }
+
+    fn push_error(&mut self, e: StreamError) {
+        if self.errors.len() < MAX_LOSS_RECORDS {
+            self.errors.push(e);
+        } else {
+            self.more_errors += 1;
+            self.more_bytes_skipped += e.len;
+        }
+    }
+
+    fn push_gap(&mut self, g: SeqGap) {
+        if self.seq_gaps.len() < MAX_LOSS_RECORDS {
+            self.seq_gaps.push(g);
+        } else {
+            self.more_seq_gaps += 1;
+            self.more_frames_missing += g.missing;
+        }
     }
 
     /// True when nothing was lost or damaged.
     pub fn is_clean(&self) -> bool {
-        self.errors.is_empty() && self.seq_gaps.is_empty() && self.orphan_samples == 0
+        self.error_count() == 0 && self.seq_gap_count() == 0 && self.orphan_samples == 0 && !self.hello_assumed
     }
 }
 
@@ -168,6 +228,9 @@ pub struct Capture {
     pub hello: Option<Hello>,
     /// Runs in stream order.
     pub runs: Vec<Run>,
+    /// Faults reported outside any run (a watchdog reset, a gyro fault while idle), µs on the
+    /// capture's clock; at most [`MAX_LOSS_RECORDS`].
+    pub faults: Vec<(i64, FaultReport)>,
     /// Loss accounting.
     pub loss: LossReport,
 }
@@ -241,7 +304,7 @@ impl CaptureDecoder {
     /// Ends the stream: reports a trailing partial frame and closes the open run.
     pub fn finish(mut self) -> Capture {
         if let Some(Event::Error { offset, len, error }) = self.stream.finish::<RigMsg>() {
-            self.capture.loss.errors.push(StreamError { offset, len, error });
+            self.capture.loss.push_error(StreamError { offset, len, error });
         }
         self.close_run(false);
         self.capture.loss.bytes = self.stream.position();
@@ -250,12 +313,12 @@ impl CaptureDecoder {
 
     fn on_event(&mut self, ev: Event<RigMsg>) {
         match ev {
-            Event::Error { offset, len, error } => self.capture.loss.errors.push(StreamError { offset, len, error }),
+            Event::Error { offset, len, error } => self.capture.loss.push_error(StreamError { offset, len, error }),
             Event::Frame { offset, seq, msg } => {
                 self.capture.loss.frames_ok += 1;
                 let missing = self.seq.observe(seq);
                 if missing > 0 {
-                    self.capture.loss.seq_gaps.push(SeqGap { offset, missing: u64::from(missing) });
+                    self.capture.loss.push_gap(SeqGap { offset, missing: u64::from(missing) });
                 }
                 self.on_msg(offset, msg);
             }
@@ -329,8 +392,10 @@ impl CaptureDecoder {
             }
             RigMsg::Fault(f) => {
                 let t_us = self.clock.unwrap(f.t_us);
-                if let Some(run) = self.open.as_mut() {
-                    run.faults.push((t_us, f));
+                match self.open.as_mut() {
+                    Some(run) => run.faults.push((t_us, f)),
+                    None if self.capture.faults.len() < MAX_LOSS_RECORDS => self.capture.faults.push((t_us, f)),
+                    None => {}
                 }
             }
             RigMsg::Ack(_) => {}
@@ -338,8 +403,15 @@ impl CaptureDecoder {
     }
 
     fn open_run(&mut self, offset: u64, rs: RunStarted, origin: RunOrigin) {
-        let (Some(hello), Some(pose)) = (self.capture.hello, Pose::from_run_tag(rs.run_tag)) else {
+        let Some(pose) = Pose::from_run_tag(rs.run_tag) else {
             return;
+        };
+        let hello = match self.capture.hello {
+            Some(h) => h,
+            None => {
+                self.capture.loss.hello_assumed = true;
+                assumed_hello(rs.gyro)
+            }
         };
         self.open = Some(Run {
             hello,
@@ -361,7 +433,7 @@ impl CaptureDecoder {
 
     /// Opens a run whose `RunStarted` was lost, from a motor status that names it.
     fn recover_run(&mut self, offset: u64, _t_us: i64, m: &MotorStatus) {
-        let Some(hello) = self.capture.hello else { return };
+        let hello = self.capture.hello.unwrap_or_else(|| assumed_hello(GyroConfig::DEFAULT));
         let deg_per_count = 360.0 / f64::from(hello.encoder_counts_per_rev);
         let rate_mdps = (f64::from(m.setpoint_cps.unsigned_abs()) * deg_per_count * 1000.0).round() as u32;
         let rs = RunStarted {
@@ -379,6 +451,20 @@ impl CaptureDecoder {
             run.stopped = stopped;
             self.capture.runs.push(run);
         }
+    }
+}
+
+/// What a run assumes of the rig when the capture's `Hello` was lost: the protocol's constants
+/// (encoder resolution, timestamp rate, gear ratio: every rig of this design has them), the
+/// gyro settings given (a `RunStarted` carries its own), firmware version 0.0.0 (unknown).
+pub fn assumed_hello(gyro: GyroConfig) -> Hello {
+    Hello {
+        protocol_version: protocol::PROTOCOL_VERSION,
+        firmware: protocol::Version { major: 0, minor: 0, patch: 0 },
+        gyro,
+        encoder_counts_per_rev: protocol::ENCODER_COUNTS_PER_REV,
+        gear_ratio: protocol::GEAR_RATIO,
+        timestamp_hz: protocol::TIMESTAMP_HZ,
     }
 }
 

@@ -74,6 +74,8 @@ pub struct Inspection {
     pub gear_ratio: Option<(u16, u16)>,
     /// Runs.
     pub runs: Vec<RunSummary>,
+    /// Faults reported outside any run, e.g. `WatchdogReset at 0.000 s`.
+    pub faults: Vec<String>,
     /// Loss accounting.
     pub loss: crate::capture::LossReport,
 }
@@ -155,6 +157,7 @@ pub fn inspect(source: &str, capture: &Capture) -> Inspection {
         encoder_counts_per_rev: h.map(|h| h.encoder_counts_per_rev),
         gear_ratio: h.map(|h| (h.gear_ratio.num, h.gear_ratio.den)),
         runs: capture.runs.iter().map(summarize_run).collect(),
+        faults: capture.faults.iter().map(|(t, f)| format!("{:?} at {:.3} s", f.fault, *t as f64 * 1e-6)).collect(),
         loss: capture.loss.clone(),
     }
 }
@@ -177,6 +180,15 @@ impl fmt::Display for Inspection {
             _ => writeln!(f, "  rig: no Hello frame in this capture")?,
         }
         let l = &self.loss;
+        if l.hello_assumed {
+            writeln!(
+                f,
+                "  note: the Hello was lost; runs use the protocol's rig constants and their RunStarted gyro settings"
+            )?;
+        }
+        for fault in &self.faults {
+            writeln!(f, "  FAULT outside any run: {fault}")?;
+        }
         writeln!(
             f,
             "  stream: {} bytes, {} frames valid, {} frames missing (sequence gaps), {} bytes in {} bad stretches, {} samples outside any run",
@@ -184,20 +196,20 @@ impl fmt::Display for Inspection {
             l.frames_ok,
             l.frames_missing(),
             l.bytes_skipped(),
-            l.errors.len(),
+            l.error_count(),
             l.orphan_samples
         )?;
         for e in l.errors.iter().take(10) {
             writeln!(f, "    byte {}: {} ({} bytes skipped)", e.offset, e.error, e.len)?;
         }
-        if l.errors.len() > 10 {
-            writeln!(f, "    … {} more", l.errors.len() - 10)?;
+        if l.error_count() > 10 {
+            writeln!(f, "    … {} more", l.error_count() - 10)?;
         }
         for g in l.seq_gaps.iter().take(10) {
             writeln!(f, "    byte {}: {} frame(s) missing before this one", g.offset, g.missing)?;
         }
-        if l.seq_gaps.len() > 10 {
-            writeln!(f, "    … {} more sequence gaps", l.seq_gaps.len() - 10)?;
+        if l.seq_gap_count() > 10 {
+            writeln!(f, "    … {} more sequence gaps", l.seq_gap_count() - 10)?;
         }
         if self.runs.is_empty() {
             writeln!(f, "  runs: none")?;

@@ -7,3 +7,4 @@ pub mod link;
 pub mod report;
 pub mod session;
 pub mod sim;
+pub mod virtual_rig;

@@ -2,20 +2,56 @@
 //! byte written to the capture file before it is decoded, so nothing recorded is ever lost.
 
 use anyhow::{bail, Context, Result};
-use protocol::{encode_frame, CmdResult, Command, Event, RigMsg, StreamDecoder, MAX_FRAME_LEN};
+use protocol::{encode_frame, timing, CmdResult, Command, Event, RigMsg, StreamDecoder, MAX_FRAME_LEN};
 use std::io::{ErrorKind, Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Baud rate requested when opening the port. Ignored by USB CDC-ACM, used by a UART bridge;
 /// 921 600 keeps the 800 Hz stream under 27 % load (protocol/README.md, "Link budget").
 pub const DEFAULT_BAUD: u32 = 921_600;
 
-/// How long the rig has to acknowledge a command.
-pub const ACK_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long one attempt at a command waits for its acknowledgement
+/// ([`protocol::timing::ACK_TIMEOUT_MS`]).
+pub const ACK_TIMEOUT: Duration = Duration::from_millis(timing::ACK_TIMEOUT_MS as u64);
 
-/// Interval between heartbeats: the rig stops the motor after 2 s without a host frame; 4 Hz
-/// leaves margin for a loaded host and for simulated rigs running faster than real time.
-pub const HEARTBEAT_INTERVAL: Duration = Duration::from_millis(250);
+/// Interval between heartbeats ([`protocol::timing::HEARTBEAT_INTERVAL_MS`]).
+pub const HEARTBEAT_INTERVAL: Duration = Duration::from_millis(timing::HEARTBEAT_INTERVAL_MS as u64);
+
+/// Not one byte for this long is a dead link ([`protocol::timing::SILENT_LINK_MS`]).
+pub const SILENT_LINK: Duration = Duration::from_millis(timing::SILENT_LINK_MS as u64);
+
+/// What a command came back with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Answer {
+    /// The rig's result.
+    pub result: CmdResult,
+    /// Attempts it took (1 = the first was acknowledged).
+    pub attempts: u32,
+}
+
+/// Where the link's time comes from: the wall clock for a real rig, the rig's simulated time in
+/// tests, so every timeout and heartbeat is measured in the time the rig lives in.
+pub trait Clock {
+    /// Time since an arbitrary origin.
+    fn now(&self) -> Duration;
+}
+
+/// The wall clock.
+pub struct WallClock(Instant);
+
+impl Default for WallClock {
+    fn default() -> Self {
+        Self(Instant::now())
+    }
+}
+
+impl Clock for WallClock {
+    fn now(&self) -> Duration {
+        self.0.elapsed()
+    }
+}
 
 /// Opens a serial port by path, with a one-line error that names it.
 pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
@@ -32,22 +68,50 @@ pub struct Link<P: Read + Write> {
     tx_seq: u16,
     rx: StreamDecoder,
     record: Option<Box<dyn Write>>,
-    last_tx: Instant,
+    clock: Box<dyn Clock>,
+    last_tx: Duration,
+    last_rx: Duration,
     buf: Vec<u8>,
+    interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl<P: Read + Write> Link<P> {
     /// Wraps an open port; `name` is used in error messages.
     pub fn new(port: P, name: impl Into<String>) -> Self {
+        Self::with_clock(port, name, Box::new(WallClock::default()))
+    }
+
+    /// Wraps an open port whose time is `clock`'s.
+    pub fn with_clock(port: P, name: impl Into<String>, clock: Box<dyn Clock>) -> Self {
+        let last_tx = clock.now();
         Self {
             port,
             name: name.into(),
             tx_seq: 0,
             rx: StreamDecoder::new(),
             record: None,
-            last_tx: Instant::now(),
+            clock,
+            last_tx,
+            last_rx: last_tx,
             buf: vec![0; 4096],
+            interrupt: None,
         }
+    }
+
+    /// Makes every wait for an acknowledgement give up as soon as `flag` is set (Ctrl-C,
+    /// SIGTERM, SIGHUP), instead of after its retries.
+    pub fn watch_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
+    }
+
+    /// The port itself.
+    pub fn port_mut(&mut self) -> &mut P {
+        &mut self.port
+    }
+
+    /// The link's time now.
+    pub fn now(&self) -> Duration {
+        self.clock.now()
     }
 
     /// Port name, for messages.
@@ -74,29 +138,41 @@ impl<P: Read + Write> Link<P> {
             .write_all(&frame[..n])
             .and_then(|()| self.port.flush())
             .with_context(|| format!("writing to {}", self.name))?;
-        self.last_tx = Instant::now();
+        self.last_tx = self.clock.now();
         Ok(seq)
     }
 
     /// Sends a heartbeat if the link has been quiet for [`HEARTBEAT_INTERVAL`].
     pub fn keep_alive(&mut self) -> Result<()> {
-        if self.last_tx.elapsed() >= HEARTBEAT_INTERVAL {
+        if self.clock.now().saturating_sub(self.last_tx) >= HEARTBEAT_INTERVAL {
             self.send(&Command::Heartbeat)?;
         }
         Ok(())
     }
 
     /// Reads what is available (waiting at most the port's timeout), records it, and passes every
-    /// decoded message to `on_msg`. Returns the number of bytes read (0 on a timeout).
+    /// decoded message to `on_msg`. Returns the number of bytes read (0 on a timeout). Fails when
+    /// the link has been silent for [`SILENT_LINK`], naming the link and the rig, not the gyro.
     pub fn poll(&mut self, mut on_msg: impl FnMut(&RigMsg)) -> Result<usize> {
         let n = match self.port.read(&mut self.buf) {
             Ok(0) => bail!("{} closed (the rig was disconnected?)", self.name),
             Ok(n) => n,
             Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
-                return Ok(0)
+                // Checked only after a read found nothing: a host that was itself descheduled
+                // does not call a link dead without looking first.
+                if self.clock.now().saturating_sub(self.last_rx) > SILENT_LINK {
+                    bail!(
+                        "the link to the rig on {} is silent: not one byte for {} s (check the cable, the rig's \
+                         power and that no other program holds the port)",
+                        self.name,
+                        SILENT_LINK.as_secs_f64()
+                    );
+                }
+                return Ok(0);
             }
             Err(e) => return Err(e).with_context(|| format!("reading from {}", self.name)),
         };
+        self.last_rx = self.clock.now();
         if let Some(rec) = self.record.as_mut() {
             rec.write_all(&self.buf[..n]).and_then(|()| rec.flush()).context("writing capture")?;
         }
@@ -108,29 +184,52 @@ impl<P: Read + Write> Link<P> {
         Ok(n)
     }
 
-    /// Sends `cmd` and waits for its acknowledgement, passing every other message to `on_msg`.
-    pub fn command(&mut self, cmd: &Command, mut on_msg: impl FnMut(&RigMsg)) -> Result<()> {
-        let seq = self.send(cmd)?;
-        let deadline = Instant::now() + ACK_TIMEOUT;
-        let mut result = None;
-        while result.is_none() {
-            if Instant::now() > deadline {
-                bail!(
-                    "no answer from the rig on {} within {} s (command {})",
-                    self.name,
-                    ACK_TIMEOUT.as_secs(),
-                    command_name(cmd)
-                );
+    /// Forgets how long the link has been quiet (after a deliberate pause in reading).
+    pub fn reset_silence(&mut self) {
+        self.last_rx = self.clock.now();
+    }
+
+    /// Sends `cmd` and waits for its acknowledgement, heartbeating meanwhile (a run may be in
+    /// progress), and sends it again up to [`timing::COMMAND_ATTEMPTS`] times if no answer comes
+    /// within [`ACK_TIMEOUT`]. Every other message goes to `on_msg`. Returns the rig's result,
+    /// refusals included: a repeated command may be refused because its first attempt worked
+    /// (a repeated `Start` is `Busy`), which only the caller can judge.
+    pub fn request(&mut self, cmd: &Command, mut on_msg: impl FnMut(&RigMsg)) -> Result<Answer> {
+        for attempt in 1..=timing::COMMAND_ATTEMPTS {
+            let seq = self.send(cmd)?;
+            let deadline = self.clock.now() + ACK_TIMEOUT;
+            loop {
+                let mut result = None;
+                self.poll(|m| match m {
+                    RigMsg::Ack(a) if a.cmd_seq == seq => result = Some(a.result),
+                    other => on_msg(other),
+                })?;
+                if let Some(result) = result {
+                    return Ok(Answer { result, attempts: attempt });
+                }
+                if self.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst)) {
+                    bail!("interrupted while waiting for the rig to answer {}", command_name(cmd));
+                }
+                if self.clock.now() > deadline {
+                    break;
+                }
+                self.keep_alive()?;
             }
-            self.poll(|m| match m {
-                RigMsg::Ack(a) if a.cmd_seq == seq => result = Some(a.result),
-                other => on_msg(other),
-            })?;
         }
-        match result {
-            Some(CmdResult::Ok) => Ok(()),
-            Some(r) => bail!("the rig on {} refused {}: {r:?}", self.name, command_name(cmd)),
-            None => unreachable!("loop exits only with a result"),
+        bail!(
+            "no answer from the rig on {} to {} ({} attempts, {} s each): the link or the rig is down",
+            self.name,
+            command_name(cmd),
+            timing::COMMAND_ATTEMPTS,
+            ACK_TIMEOUT.as_secs_f64()
+        )
+    }
+
+    /// [`Self::request`], and any result but `Ok` is an error.
+    pub fn command(&mut self, cmd: &Command, on_msg: impl FnMut(&RigMsg)) -> Result<()> {
+        match self.request(cmd, on_msg)?.result {
+            CmdResult::Ok => Ok(()),
+            r => bail!("the rig on {} refused {}: {r:?}", self.name, command_name(cmd)),
         }
     }
 }

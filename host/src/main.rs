@@ -39,10 +39,10 @@ enum Cmd {
         #[arg(long, value_parser = parse_pose)]
         pose: Option<Pose>,
         /// Base-table rate, °/s, negative for clockwise.
-        #[arg(long, default_value_t = 180.0, allow_negative_numbers = true)]
+        #[arg(long, default_value_t = 180.0, allow_negative_numbers = true, value_parser = parse_rate)]
         rate_dps: f64,
         /// Seconds to record (at speed when running a pose).
-        #[arg(long, default_value_t = 120.0)]
+        #[arg(long, default_value_t = 120.0, value_parser = parse_duration)]
         duration: f64,
         /// Baud rate (ignored by USB CDC-ACM).
         #[arg(long, default_value_t = link::DEFAULT_BAUD)]
@@ -60,12 +60,12 @@ enum Cmd {
         #[arg(long, default_value = "calibration")]
         out_dir: PathBuf,
         /// Live: seconds of data per run once at speed.
-        #[arg(long, default_value_t = 120.0)]
+        #[arg(long, default_value_t = 120.0, value_parser = parse_duration)]
         duration: f64,
         /// Live: base-table rates to run in each pose, °/s, negative for clockwise. Two speeds
         /// (the default) tell a gyro delay from an index offset; add a negative rate (e.g.
         /// 180,90,-180) to separate the offsets from the constant θ2' term as well.
-        #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true)]
+        #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true, value_parser = parse_rate)]
         rates_dps: Vec<f64>,
         /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
         /// `x.cap`, if present).
@@ -123,6 +123,9 @@ enum Cmd {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// The firmware's core and the simulated exciter on a pseudo-terminal, to try the live
+    /// session without hardware: prints the device path, then serves `calibrate --port PATH`.
+    VirtualRig(host::virtual_rig::Options),
     /// Describe a capture: rig, settings, runs, rates, losses with their byte offsets.
     Inspect {
         /// Capture files.
@@ -149,6 +152,23 @@ fn parse_pose(s: &str) -> Result<Pose, String> {
     }
 }
 
+/// A duration in seconds: finite and positive (`nan` would record forever).
+fn parse_duration(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a duration: give a positive number of seconds")),
+    }
+}
+
+/// A base-table rate in °/s: finite, non-zero, at most the rig's limit (`nan` would send 0).
+fn parse_rate(s: &str) -> Result<f64, String> {
+    let max = f64::from(protocol::MAX_RATE_MDPS) / 1000.0;
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= max && (v.abs() * 1000.0).round() >= 1.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a rate: give °/s, non-zero, between -{max} and {max}")),
+    }
+}
+
 fn parse_counts(s: &str) -> Result<[i16; 3], String> {
     let v: Vec<i16> = s
         .split(',')
@@ -169,7 +189,10 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // Not eprintln!: after SIGHUP the terminal may be gone, and a failed write must not
+            // turn a clean failure into a panic.
+            use std::io::Write as _;
+            let _ = writeln!(std::io::stderr(), "error: {e:#}");
             ExitCode::FAILURE
         }
     }
@@ -185,8 +208,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
                     let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+                    link.watch_interrupt(interrupted.clone());
                     let plan = session::plan(&Pose::ALL, &rates_dps, duration);
-                    session::record_session(&mut link, &plan, &out_dir, yes, &interrupted)?
+                    let mut operator: Box<dyn session::Operator> =
+                        if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
+                    session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?
                 }
                 None => replay,
             };
@@ -222,6 +248,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             simulate(&cfg, &out)
         }
         Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
+        Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
         Cmd::Inspect { files, json } => {
             for f in &files {
                 let cap = read_capture(f)?;
@@ -243,7 +270,8 @@ fn read_capture(path: &Path) -> Result<Capture> {
     capture::decode_reader(file).with_context(|| format!("cannot read capture {}", path.display()))
 }
 
-/// Ctrl-C sets a flag that the session loops check, so the motor is stopped and the file closed.
+/// Ctrl-C, SIGTERM and SIGHUP set a flag that the session loops check, so the motor is stopped
+/// and the file closed.
 fn interrupt_flag() -> Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let f = flag.clone();
@@ -254,6 +282,7 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
 fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s: f64, baud: u32) -> Result<ExitCode> {
     let interrupted = interrupt_flag()?;
     let mut link = Link::new(link::open_port(port, baud)?, port);
+    link.watch_interrupt(interrupted.clone());
     match pose {
         Some(pose) => {
             let run = session::RunPlan { pose, rate_dps, duration_s };
@@ -263,8 +292,8 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
         None => {
             link.record_to(Some(Box::new(session::create_capture(out)?)))?;
             session::identify(&mut link)?;
-            let start = std::time::Instant::now();
-            while start.elapsed().as_secs_f64() < duration_s && !interrupted.load(Ordering::SeqCst) {
+            let start = link.now();
+            while (link.now() - start).as_secs_f64() < duration_s && !interrupted.load(Ordering::SeqCst) {
                 link.poll(|_| {})?;
             }
             link.record_to(None)?;
@@ -287,8 +316,21 @@ fn calibrate(
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
     let mut runs = Vec::new();
+    // Each run once: the same data given twice would count twice and shrink every σ by √2.
+    let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
     for f in files {
         let cap = read_capture(f)?;
+        for (i, run) in cap.runs.iter().enumerate().filter(|(_, r)| !r.samples.is_empty()) {
+            if let Some((first, j)) = seen.insert(run.fingerprint(), (f.clone(), i + 1)) {
+                bail!(
+                    "run {} of {} ({}) is the same data as run {j} of {}: give each capture once",
+                    i + 1,
+                    f.display(),
+                    run.label(),
+                    first.display()
+                );
+            }
+        }
         let l = &cap.loss;
         eprintln!(
             "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
@@ -307,7 +349,22 @@ fn calibrate(
             );
         }
         if cap.runs.is_empty() {
-            bail!("{} holds no run (no RunStarted frame and no motor status naming one)", f.display());
+            bail!(
+                "{} holds no run: no RunStarted frame and no motor status naming a pose ({} valid frames)",
+                f.display(),
+                l.frames_ok
+            );
+        }
+        if cap.loss.hello_assumed {
+            eprintln!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display());
+        }
+        for (t, fault) in &cap.faults {
+            eprintln!(
+                "{}: the rig reported {:?} outside any run at {:.3} s",
+                f.display(),
+                fault.fault,
+                *t as f64 * 1e-6
+            );
         }
         runs.extend(cap.runs);
     }

@@ -6,12 +6,13 @@ use crate::geometry::Pose;
 use crate::link::Link;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{Command, Direction, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
+use protocol::{timing, CmdResult, Command, Direction, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
 use std::fs::File;
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::mpsc;
+use std::time::Duration;
 
 /// One run of a session.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,25 +49,47 @@ pub fn plan(poses: &[Pose], rates_dps: &[f64], duration_s: f64) -> Vec<RunPlan> 
         .collect()
 }
 
+const fn ms(v: u32) -> Duration {
+    Duration::from_millis(v as u64)
+}
 /// How long the rig may take to reach speed.
-const SPIN_UP_TIMEOUT: Duration = Duration::from_secs(20);
-/// Without a sample for this long during a run, the gyro is declared silent.
-const SAMPLE_TIMEOUT: Duration = Duration::from_secs(2);
-/// How long to wait for RunStopped after Stop.
-const STOP_TIMEOUT: Duration = Duration::from_secs(10);
+const SPIN_UP_TIMEOUT: Duration = ms(timing::SPIN_UP_TIMEOUT_MS);
+/// Without a sample for this long during a run (while other frames arrive), the gyro is silent.
+const SAMPLE_TIMEOUT: Duration = ms(timing::SAMPLE_TIMEOUT_MS);
+/// How long to wait for the motor to stop after the Stop is acknowledged.
+const STOP_TIMEOUT: Duration = ms(timing::STOP_TIMEOUT_MS);
+/// After an interrupt, how long to keep reading (and recording) once Stop is sent: the host
+/// must be gone within 1 s of Ctrl-C.
+const INTERRUPT_DRAIN: Duration = Duration::from_millis(300);
 /// Speed within this fraction of the setpoint counts as "at speed".
 const AT_SPEED_TOLERANCE: f64 = 0.01;
 
-/// Asks the rig who it is and checks it speaks our protocol.
+/// Asks the rig who it is and checks it speaks our protocol. Faults the rig reports with its
+/// `Hello` (a watchdog reset, a gyro fault in force) are shown as warnings.
 pub fn identify<P: Read + Write>(link: &mut Link<P>) -> Result<Hello> {
     let mut hello = None;
-    link.command(&Command::Identify, |m| {
-        if let RigMsg::Hello(h) = m {
-            hello = Some(*h)
+    let mut faults = Vec::new();
+    // The Hello itself may be lost on the way while the Ack arrives: ask again.
+    for _ in 0..timing::COMMAND_ATTEMPTS {
+        link.command(&Command::Identify, |m| match m {
+            RigMsg::Hello(h) => hello = Some(*h),
+            RigMsg::Fault(f) => faults.push(f.fault),
+            _ => {}
+        })?;
+        if hello.is_some() {
+            break;
         }
-    })?;
+    }
+    faults.dedup();
+    for f in faults {
+        eprintln!("warning: the rig on {} reports {}", link.name(), describe_fault(f));
+    }
     let Some(h) = hello else {
-        bail!("the rig on {} acknowledged Identify but sent no Hello", link.name());
+        bail!(
+            "the rig on {} acknowledged Identify {} times but no Hello came through: the link loses frames",
+            link.name(),
+            timing::COMMAND_ATTEMPTS
+        );
     };
     if h.protocol_version != PROTOCOL_VERSION {
         bail!(
@@ -78,21 +101,140 @@ pub fn identify<P: Read + Write>(link: &mut Link<P>) -> Result<Hello> {
     Ok(h)
 }
 
+/// A fault in words, for the operator.
+pub fn describe_fault(f: Fault) -> String {
+    match f {
+        Fault::WatchdogReset => "WatchdogReset: its last restart was forced by the watchdog (the firmware hung)".into(),
+        Fault::GyroAbsent { who_am_i } => format!("GyroAbsent: the gyro answers WHO_AM_I {who_am_i:#04x}, not 0xd3"),
+        Fault::GyroSpi => "GyroSpi: reads from the gyro keep failing".into(),
+        Fault::GyroSilent => "GyroSilent: the gyro stopped signalling data-ready".into(),
+        Fault::HostLinkLost => "HostLinkLost: it heard nothing from this host for 2 s and cut the drive".into(),
+        Fault::Stall => "Stall: the table did not move while driven".into(),
+        Fault::OverSpeed => "OverSpeed".into(),
+    }
+}
+
 /// Sets the gyro (only between runs).
 pub fn configure<P: Read + Write>(link: &mut Link<P>, gyro: GyroConfig) -> Result<()> {
     link.command(&Command::ConfigureGyro(gyro), |_| {})
 }
 
-/// Waits for the operator to press Enter, unless `assume_yes`.
-pub fn prompt(message: &str, assume_yes: bool) -> Result<()> {
-    eprintln!("{message}");
-    if assume_yes {
-        return Ok(());
+/// What the operator said at a prompt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reply {
+    /// Ready (Enter).
+    Ready,
+    /// Standard input ended (or failed): nobody is there to mount the gyro.
+    EndOfInput,
+}
+
+/// The person at the rig: asked to do something, answers some time later. The session keeps
+/// reading the port meanwhile, so polling must not block.
+pub trait Operator {
+    /// Asks (`message` says what to do); `now` is the link's time.
+    fn ask(&mut self, message: &str, now: Duration);
+    /// The answer, once there is one.
+    fn reply(&mut self, now: Duration) -> Option<Reply>;
+}
+
+/// `--yes`: a scripted rig mounts by itself; every prompt is answered at once.
+pub struct AssumeYes;
+
+impl Operator for AssumeYes {
+    fn ask(&mut self, message: &str, _now: Duration) {
+        eprintln!("{message}");
     }
-    eprint!("Press Enter when ready (Ctrl-C to abort) ");
-    let mut line = String::new();
-    std::io::stdin().lock().read_line(&mut line).context("reading the operator's answer")?;
-    Ok(())
+    fn reply(&mut self, _now: Duration) -> Option<Reply> {
+        Some(Reply::Ready)
+    }
+}
+
+/// A person at the terminal: standard input read line by line on a thread of its own, so the
+/// session can drain the port and notice Ctrl-C while waiting.
+pub struct Terminal {
+    lines: mpsc::Receiver<Reply>,
+}
+
+impl Terminal {
+    /// Starts reading standard input.
+    pub fn new() -> Self {
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut stdin = std::io::stdin().lock();
+            loop {
+                let mut line = String::new();
+                let reply = match stdin.read_line(&mut line) {
+                    Ok(0) | Err(_) => Reply::EndOfInput,
+                    Ok(_) => Reply::Ready,
+                };
+                if tx.send(reply).is_err() || reply == Reply::EndOfInput {
+                    return;
+                }
+            }
+        });
+        Self { lines }
+    }
+}
+
+impl Default for Terminal {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Operator for Terminal {
+    fn ask(&mut self, message: &str, _now: Duration) {
+        // A line typed before the question is not an answer to it.
+        while self.lines.try_recv() == Ok(Reply::Ready) {}
+        eprintln!("{message}");
+        eprint!("Press Enter when ready (Ctrl-C to abort) ");
+        let _ = std::io::stderr().flush();
+    }
+    fn reply(&mut self, _now: Duration) -> Option<Reply> {
+        match self.lines.try_recv() {
+            Ok(r) => Some(r),
+            Err(mpsc::TryRecvError::Empty) => None,
+            Err(mpsc::TryRecvError::Disconnected) => Some(Reply::EndOfInput),
+        }
+    }
+}
+
+/// Asks the operator and waits for the answer, reading the port all the while so the rig's
+/// queue never fills (its idle stream is ≈ 18 kB/s), and reporting any fault the rig raises
+/// meanwhile. Ctrl-C (or SIGTERM/SIGHUP) aborts within one port timeout, after a `Stop`.
+pub fn prompt<P: Read + Write>(
+    link: &mut Link<P>,
+    message: &str,
+    operator: &mut dyn Operator,
+    interrupted: &AtomicBool,
+) -> Result<()> {
+    operator.ask(message, link.now());
+    loop {
+        if interrupted.load(Ordering::SeqCst) {
+            // The motor is off between runs, but a Stop costs nothing and covers a rig that
+            // disagrees.
+            let _ = link.send(&Command::Stop);
+            eprintln!();
+            bail!("interrupted at the prompt; the rig was sent Stop");
+        }
+        let mut faults = Vec::new();
+        link.poll(|m| {
+            if let RigMsg::Fault(f) = m {
+                faults.push(f.fault)
+            }
+        })?;
+        for f in faults {
+            eprintln!("warning: the rig on {} reported {f:?} while idle", link.name());
+        }
+        match operator.reply(link.now()) {
+            None => {}
+            Some(Reply::Ready) => return Ok(()),
+            Some(Reply::EndOfInput) => {
+                eprintln!();
+                bail!("standard input ended at the prompt: nobody confirmed the mounting (use --yes for a rig that mounts by itself)")
+            }
+        }
+    }
 }
 
 /// How the operator mounts a pose (EXCITER.md, eq. 8-10).
@@ -115,7 +257,8 @@ pub fn create_capture(path: &Path) -> Result<File> {
 }
 
 /// Records one run into `path` (created; an existing file is never overwritten). Every byte the
-/// rig sends from the Identify on is written and flushed before it is decoded.
+/// rig sends from the Identify on is written and flushed before it is decoded. On any failure
+/// or interrupt the rig is sent `Stop` and what arrives in the next moments is still recorded.
 pub fn record_run<P: Read + Write>(
     link: &mut Link<P>,
     run: &RunPlan,
@@ -128,8 +271,8 @@ pub fn record_run<P: Read + Write>(
     if outcome.is_err() {
         // Best effort: the motor must not keep spinning because the host gave up.
         let _ = link.send(&Command::Stop);
-        let deadline = Instant::now() + Duration::from_millis(500);
-        while Instant::now() < deadline {
+        let until = link.now() + INTERRUPT_DRAIN;
+        while link.now() < until {
             if link.poll(|_| {}).is_err() {
                 break;
             }
@@ -149,14 +292,25 @@ fn stream_run<P: Read + Write>(
     let where_ = format!("{} (capture kept in {})", run_label(run), path.display());
     let hello = identify(link)?;
     let target_cps = f64::from(run.start().rate_mdps) / 1000.0 / 360.0 * f64::from(hello.encoder_counts_per_rev);
-    link.command(&Command::Start(run.start()), |_| {})?;
+    let tag = run.start().run_tag;
+    let mut started = false;
+    let answer = link.request(&Command::Start(run.start()), |m| {
+        started |= matches!(m, RigMsg::RunStarted(r) if r.run_tag == tag)
+            || matches!(m, RigMsg::Motor(ms) if ms.run_tag == tag);
+    })?;
+    match answer.result {
+        CmdResult::Ok => {}
+        // The first attempt started the run and its Ack was lost.
+        CmdResult::Busy if answer.attempts > 1 && started => {}
+        r => bail!("the rig on {} refused Start: {r:?} during {where_}", link.name()),
+    }
     progress.set_style(bar_style());
     progress.set_length((run.duration_s * 10.0).round() as u64);
     progress.set_position(0);
     progress.set_message(format!("{}: spinning up", run_label(run)));
 
-    let started = Instant::now();
-    let mut last_sample = Instant::now();
+    let t_start = link.now();
+    let mut last_sample = link.now();
     let mut clock = RigClock::default();
     let mut at_speed_since_us: Option<i64> = None;
     let mut now_us = 0i64;
@@ -167,10 +321,11 @@ fn stream_run<P: Read + Write>(
             bail!("interrupted during {where_}");
         }
         link.keep_alive()?;
+        let mut sampled = false;
         link.poll(|m| match m {
             RigMsg::Sample(s) => {
                 now_us = clock.unwrap(s.t_us);
-                last_sample = Instant::now();
+                sampled = true;
             }
             RigMsg::Motor(ms) => {
                 let t = clock.unwrap(ms.t_us);
@@ -185,21 +340,24 @@ fn stream_run<P: Read + Write>(
             RigMsg::RunStopped(_) => stopped_early = true,
             _ => {}
         })?;
+        if sampled {
+            last_sample = link.now();
+        }
         if let Some(f) = fault {
-            bail!("the rig reported {f:?} during {where_}");
+            bail!("the rig reported {} during {where_}", describe_fault(f));
         }
         if stopped_early {
             bail!("the rig stopped the run by itself during {where_}");
         }
-        if last_sample.elapsed() > SAMPLE_TIMEOUT {
+        if link.now().saturating_sub(last_sample) > SAMPLE_TIMEOUT {
             bail!(
-                "the gyro does not answer: no sample from {} for {} s during {where_}",
+                "the gyro does not answer: the rig on {} sends frames but no sample for {} s during {where_}",
                 link.name(),
-                SAMPLE_TIMEOUT.as_secs()
+                SAMPLE_TIMEOUT.as_secs_f64()
             );
         }
         match at_speed_since_us {
-            None if started.elapsed() > SPIN_UP_TIMEOUT => {
+            None if link.now().saturating_sub(t_start) > SPIN_UP_TIMEOUT => {
                 bail!("the table did not reach speed within {} s during {where_}", SPIN_UP_TIMEOUT.as_secs())
             }
             None => {}
@@ -213,17 +371,43 @@ fn stream_run<P: Read + Write>(
             }
         }
     }
-    let mut stopped = false;
-    link.command(&Command::Stop, |m| stopped |= matches!(m, RigMsg::RunStopped(_)))?;
-    let deadline = Instant::now() + STOP_TIMEOUT;
-    while !stopped {
-        if Instant::now() > deadline {
-            bail!("the rig did not confirm the stop within {} s during {where_}", STOP_TIMEOUT.as_secs());
-        }
-        link.poll(|m| stopped |= matches!(m, RigMsg::RunStopped(_)))?;
-    }
+    progress.set_message(format!("{}: stopping", run_label(run)));
+    stop_run(link, tag, interrupted).with_context(|| format!("stopping {where_}"))?;
     progress.finish_with_message(format!("{}: done", run_label(run)));
     Ok(())
+}
+
+/// Sends `Stop` and waits for the motor to stop, heartbeating all along: the ramp-down lasts up
+/// to 4 s, longer than the rig's 2 s link timeout. The stop is confirmed by `RunStopped`, or, if
+/// that frame was lost, by a `Motor` status that no longer carries the run's tag. A fault during
+/// the ramp-down (a `HostLinkLost` trip included) is an error, not a clean stop.
+fn stop_run<P: Read + Write>(link: &mut Link<P>, tag: u8, interrupted: &AtomicBool) -> Result<()> {
+    let stopped = std::cell::Cell::new(false);
+    let fault = std::cell::Cell::new(None);
+    let watch = |m: &RigMsg| match m {
+        RigMsg::RunStopped(r) if r.run_tag == tag => stopped.set(true),
+        RigMsg::Motor(ms) if ms.run_tag == 0 => stopped.set(true),
+        RigMsg::Fault(f) => fault.set(Some(f.fault)),
+        _ => {}
+    };
+    link.command(&Command::Stop, watch)?;
+    let deadline = link.now() + STOP_TIMEOUT;
+    loop {
+        if let Some(f) = fault.get() {
+            bail!("the rig reported {} while ramping down", describe_fault(f));
+        }
+        if stopped.get() {
+            return Ok(());
+        }
+        if interrupted.load(Ordering::SeqCst) {
+            bail!("interrupted while the table ramps down");
+        }
+        if link.now() > deadline {
+            bail!("the rig did not confirm the stop within {} s", STOP_TIMEOUT.as_secs());
+        }
+        link.keep_alive()?;
+        link.poll(watch)?;
+    }
 }
 
 fn run_label(run: &RunPlan) -> String {
@@ -268,7 +452,7 @@ pub fn record_session<P: Read + Write>(
     link: &mut Link<P>,
     runs: &[RunPlan],
     dir: &Path,
-    assume_yes: bool,
+    operator: &mut dyn Operator,
     interrupted: &AtomicBool,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -279,7 +463,7 @@ pub fn record_session<P: Read + Write>(
     let mut mounted = None;
     for (run, path) in runs.iter().zip(&paths) {
         if mounted != Some(run.pose) {
-            prompt(mounting_instructions(run.pose), assume_yes)?;
+            prompt(link, mounting_instructions(run.pose), operator, interrupted)?;
             mounted = Some(run.pose);
         }
         // indicatif draws on stderr only when it is a terminal.

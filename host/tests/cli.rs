@@ -122,3 +122,53 @@ fn an_unknown_effect_is_refused_with_the_list() {
         stderr(&o)
     );
 }
+
+/// F10: a duration or rate that is not a finite number is a usage error (exit 2) naming it:
+/// `nan` seconds would record forever, `nan` °/s would send 0.
+#[test]
+fn non_finite_durations_and_rates_are_usage_errors() {
+    for args in [
+        &["calibrate", "--port", "/dev/null", "--duration", "nan"][..],
+        &["calibrate", "--port", "/dev/null", "--duration", "inf"],
+        &["calibrate", "--port", "/dev/null", "--duration=-3"],
+        &["calibrate", "--port", "/dev/null", "--rates-dps", "180,nan"],
+        &["calibrate", "--port", "/dev/null", "--rates-dps", "0"],
+        &["calibrate", "--port", "/dev/null", "--rates-dps", "400"],
+        &["record", "--port", "/dev/null", "--out", "/nonexistent/x.cap", "--rate-dps", "nan"],
+        &["record", "--port", "/dev/null", "--out", "/nonexistent/x.cap", "--duration", "NaN"],
+    ] {
+        let o = host(args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.starts_with("error: invalid value"), "{args:?}: {err}");
+        assert!(err.contains("is not a duration") || err.contains("is not a rate"), "{args:?}: {err}");
+    }
+}
+
+/// F7: the same capture given twice (here once under another name) is refused, naming both:
+/// counted twice it would shrink every σ by √2.
+#[test]
+fn duplicate_runs_are_refused_naming_both() {
+    let dir = std::env::temp_dir().join(format!("host-cli-dup-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let a = dir.join("a.cap");
+    let o = host(&["simulate", "--out", a.to_str().unwrap(), "--duration", "6", "--seed", "5"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let b = dir.join("b.cap");
+    std::fs::copy(&a, &b).unwrap();
+    let out = dir.join("out");
+    let o =
+        host(&["calibrate", "--replay", a.to_str().unwrap(), b.to_str().unwrap(), "--out-dir", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    let last = err.lines().last().unwrap();
+    assert_eq!(
+        last,
+        format!(
+            "error: run 1 of {} (pose 1, +180.0 °/s) is the same data as run 1 of {}: give each capture once",
+            b.display(),
+            a.display()
+        )
+    );
+}

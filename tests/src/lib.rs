@@ -11,42 +11,152 @@ pub const Z_1D: f64 = 3.0;
 /// a direction has two tilt components.
 pub const Z_2D: f64 = 3.44;
 
-/// The virtual rig's device under test (`virtual_rig` without `--ideal-gyro`): sensitivities
-/// 0.97, 1.02, 1.05; axes tilted by ≈ 1-2° from the package axes. Row i is k_i s_iᵀ
-/// (EXCITER.md eq. 6).
-pub const VIRTUAL_GYRO_KS: [[f64; 3]; 3] =
-    [[0.969_8, 0.017_0, -0.005_1], [-0.012_2, 1.019_7, 0.026_7], [0.018_3, -0.009_2, 1.049_8]];
+/// The virtual rig's device under test and offsets (`host::virtual_rig`, one place).
+pub use host::virtual_rig::{VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS};
 
-/// The virtual rig's zero-rate offsets, °/s.
-pub const VIRTUAL_GYRO_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
+/// Simulated time per lockstep step: 5 ms, like a host polling its port every few milliseconds.
+pub const LOCKSTEP_STEP_NS: u64 = 5_000_000;
 
-/// The firmware's virtual rig (the `virtual_rig` binary) serving a pseudo-terminal; killed when
-/// dropped.
-pub struct VirtualRigProcess {
+/// The firmware's virtual rig on a pty in lockstep (`virtual_rig --lockstep`): simulated time
+/// advances only when this end reads, so a loaded machine slows the test down but never changes
+/// what happens in it. Reading and writing it is reading and writing the pty; [`Self::clock`]
+/// is the rig's simulated time. Killed when dropped.
+pub struct LockstepRig {
     child: std::process::Child,
-    /// The pty device to open, e.g. `/dev/pts/3`.
+    stdin: std::process::ChildStdin,
+    stdout: std::io::BufReader<std::process::ChildStdout>,
+    /// The pty device, e.g. `/dev/pts/3`.
     pub path: String,
+    pty: Box<dyn serialport::SerialPort>,
+    /// Bytes written to the pty, in total.
+    sent: u64,
+    /// Bytes read from the pty, in total.
+    received: u64,
+    /// Read from the pty, not yet returned.
+    pending: std::collections::VecDeque<u8>,
+    now_ns: std::rc::Rc<std::cell::Cell<u64>>,
+    /// Simulated time per step.
+    pub step_ns: u64,
 }
 
-impl VirtualRigProcess {
-    /// Starts `exe` (pass `env!("CARGO_BIN_EXE_virtual_rig")`) and reads the pty path it prints.
-    pub fn spawn(exe: &str, speedup: f64) -> Self {
+/// The simulated clock of a [`LockstepRig`], for `host::link::Link::with_clock`.
+#[derive(Clone)]
+pub struct SimClock(std::rc::Rc<std::cell::Cell<u64>>);
+
+impl host::link::Clock for SimClock {
+    fn now(&self) -> std::time::Duration {
+        std::time::Duration::from_nanos(self.0.get())
+    }
+}
+
+impl LockstepRig {
+    /// Starts `exe` (pass `env!("CARGO_BIN_EXE_virtual_rig")`) with `--lockstep` and `args`,
+    /// and opens its pty.
+    pub fn spawn(exe: &str, args: &[&str]) -> Self {
         use std::io::BufRead;
         let mut child = std::process::Command::new(exe)
-            .args(["--speedup", &speedup.to_string()])
+            .arg("--lockstep")
+            .args(args)
+            .stdin(std::process::Stdio::piped())
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::inherit())
             .spawn()
             .expect("spawn virtual_rig");
+        let stdin = child.stdin.take().expect("stdin");
+        let mut stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
         let mut line = String::new();
-        std::io::BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("pty path");
+        stdout.read_line(&mut line).expect("pty path");
         let path = line.trim().to_string();
         assert!(path.starts_with("/dev/"), "unexpected first line {path:?}");
-        Self { child, path }
+        let pty = serialport::new(&path, 115_200)
+            .timeout(std::time::Duration::from_millis(50))
+            .open()
+            .expect("open the virtual rig's pty");
+        Self {
+            child,
+            stdin,
+            stdout,
+            path,
+            pty,
+            sent: 0,
+            received: 0,
+            pending: Default::default(),
+            now_ns: Default::default(),
+            step_ns: LOCKSTEP_STEP_NS,
+        }
+    }
+
+    /// The rig's simulated time.
+    pub fn clock(&self) -> SimClock {
+        SimClock(self.now_ns.clone())
+    }
+
+    /// Simulated time now, ns.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns.get()
+    }
+
+    /// Advances the rig by `ns` after it has received everything written so far, and reads all
+    /// it sent meanwhile.
+    pub fn step(&mut self, ns: u64) {
+        use std::io::{BufRead, Read, Write};
+        writeln!(self.stdin, "step {ns} {}", self.sent).and_then(|()| self.stdin.flush()).expect("virtual_rig stdin");
+        let mut line = String::new();
+        self.stdout.read_line(&mut line).expect("virtual_rig answers");
+        let mut words = line.split_whitespace();
+        let (Some("at"), Some(now), Some(total)) = (words.next(), words.next(), words.next()) else {
+            panic!("virtual_rig answered {line:?}");
+        };
+        self.now_ns.set(now.parse().expect("time"));
+        let total: u64 = total.parse().expect("byte count");
+        let mut buf = [0u8; 4096];
+        let since = std::time::Instant::now();
+        while self.received < total {
+            // Only a dead rig takes this long: not a timing assumption, a hang guard.
+            assert!(since.elapsed() < std::time::Duration::from_secs(60), "the pty never delivered the rig's bytes");
+            match self.pty.read(&mut buf) {
+                Ok(n) => {
+                    self.pending.extend(&buf[..n]);
+                    self.received += n as u64;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => panic!("pty read: {e}"),
+            }
+        }
     }
 }
 
-impl Drop for VirtualRigProcess {
+impl std::io::Read for LockstepRig {
+    /// Returns what the rig has sent; when nothing is waiting, first runs one step of simulated
+    /// time, and times out (`ErrorKind::TimedOut`) if the rig said nothing in it.
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.pending.is_empty() {
+            self.step(self.step_ns);
+        }
+        if self.pending.is_empty() {
+            return Err(std::io::ErrorKind::TimedOut.into());
+        }
+        let n = buf.len().min(self.pending.len());
+        for (d, s) in buf.iter_mut().zip(self.pending.drain(..n)) {
+            *d = s;
+        }
+        Ok(n)
+    }
+}
+
+impl std::io::Write for LockstepRig {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.pty.write(buf)?;
+        self.sent += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.pty.flush()
+    }
+}
+
+impl Drop for LockstepRig {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();

@@ -130,3 +130,57 @@ fn a_lost_run_start_is_recovered_from_the_motor_status() {
     assert!(cap.loss.orphan_samples > 0 && cap.loss.orphan_samples <= 81, "{}", cap.loss.orphan_samples);
     calibrates_to_truth(&bytes, "lost RunStarted");
 }
+
+/// F5: one flipped bit in each `Hello` no longer makes the capture unusable: the runs open with
+/// the protocol's rig constants and their own `RunStarted` gyro settings, the loss report says
+/// so, and the calibration is still right.
+#[test]
+fn a_lost_hello_leaves_the_runs_usable() {
+    let (clean, _) = committed("demo");
+    let mut bytes = clean.clone();
+    let mut hit = 0;
+    let mut scratch = [0u8; protocol::MAX_FRAME_LEN];
+    for (start, len) in frames(&clean) {
+        if let Ok((_, RigMsg::Hello(_))) =
+            protocol::frame::decode_frame::<RigMsg>(&clean[start..start + len], &mut scratch)
+        {
+            let i = start + len / 2;
+            bytes[i] ^= if bytes[i] == 0x01 { 0x02 } else { 0x01 };
+            hit += 1;
+        }
+    }
+    assert!(hit >= 1);
+    let cap = decode(&bytes);
+    assert!(cap.hello.is_none() && cap.loss.hello_assumed);
+    assert_eq!(cap.runs.len(), decode(&clean).runs.len());
+    assert_eq!(cap.loss.errors.len(), hit);
+    let text = host::inspect::inspect("demo.cap", &cap).to_string();
+    assert!(text.contains("the Hello was lost"), "{text}");
+    calibrates_to_truth(&bytes, "demo with its Hello lost");
+}
+
+/// F8: garbage costs bounded memory: the first `MAX_LOSS_RECORDS` bad stretches are listed,
+/// the rest only counted, and every byte is still accounted for.
+#[test]
+fn garbage_is_summarised_beyond_the_cap() {
+    use host::capture::MAX_LOSS_RECORDS;
+    // 4 MiB of xorshift noise: ≈ 16 000 zero bytes, so ≈ 16 000 bad stretches.
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let noise: Vec<u8> = (0..4 << 20)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect();
+    let cap = host::capture::decode_reader(&noise[..]).unwrap();
+    let l = &cap.loss;
+    assert_eq!(l.errors.len(), MAX_LOSS_RECORDS);
+    assert!(l.error_count() > 10 * MAX_LOSS_RECORDS as u64, "{} stretches", l.error_count());
+    // Every byte but the 0x00 delimiters is skipped.
+    let zeros = noise.iter().filter(|&&b| b == 0).count() as u64;
+    assert_eq!((l.bytes_skipped() + zeros, l.frames_ok), (noise.len() as u64, 0));
+    let json = serde_json::to_string(&host::inspect::inspect("noise", &cap)).unwrap();
+    assert!(json.len() < 200_000, "inspect --json is {} bytes", json.len());
+}

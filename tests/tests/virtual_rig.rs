@@ -1,22 +1,19 @@
-//! The virtual rig on a real pseudo-terminal: protocol commands in, valid frames out.
+//! The virtual rig on a real pseudo-terminal: protocol commands in, valid frames out. The rig runs
+//! in lockstep with this test (`virtual_rig --lockstep`): simulated time, not the wall clock, so
+//! a loaded machine only makes the test slower.
 
-use e2e::VirtualRigProcess;
+use e2e::LockstepRig;
 use protocol::{
     encode_frame, Ack, CmdResult, Command, Direction, Edge, Event, GyroConfig, RigMsg, SeqTracker, StartRun,
     StreamDecoder, MAX_FRAME_LEN,
 };
-use serialport::SerialPort;
 use std::io::{Read, Write};
-use std::time::{Duration, Instant};
 
-/// Simulated seconds per wall second: 10 keeps the test short while the 2 s link timeout is
-/// still 200 ms of wall time, well above the 100 ms heartbeat spacing used here.
-const SPEEDUP: f64 = 10.0;
+/// Heartbeat spacing, simulated ns: well inside the rig's 2 s link timeout.
+const HEARTBEAT_NS: u64 = 100_000_000;
 
 struct Rig {
-    /// Killed on drop.
-    _process: VirtualRigProcess,
-    port: Box<dyn SerialPort>,
+    port: LockstepRig,
     decoder: StreamDecoder,
     seq: SeqTracker,
     next_cmd: u16,
@@ -27,11 +24,8 @@ struct Rig {
 
 impl Rig {
     fn spawn() -> Rig {
-        let process = VirtualRigProcess::spawn(env!("CARGO_BIN_EXE_virtual_rig"), SPEEDUP);
-        let port = serialport::new(&process.path, 115_200).timeout(Duration::from_millis(20)).open().expect("open pty");
         Rig {
-            _process: process,
-            port,
+            port: LockstepRig::spawn(env!("CARGO_BIN_EXE_virtual_rig"), &[]),
             decoder: StreamDecoder::new(),
             seq: SeqTracker::new(),
             next_cmd: 1,
@@ -50,15 +44,15 @@ impl Rig {
         seq
     }
 
-    /// Reads for `sim_s` simulated seconds, heartbeating every 100 ms of wall time.
+    /// Reads for `sim_s` simulated seconds, heartbeating every 100 ms of simulated time.
     fn pump(&mut self, sim_s: f64) {
-        let until = Instant::now() + Duration::from_secs_f64(sim_s / SPEEDUP);
-        let mut beat = Instant::now();
+        let until = self.port.now_ns() + (sim_s * 1e9) as u64;
+        let mut beat = self.port.now_ns();
         let mut buf = [0u8; 4096];
-        while Instant::now() < until {
-            if beat.elapsed() > Duration::from_millis(100) {
+        while self.port.now_ns() < until {
+            if self.port.now_ns() >= beat + HEARTBEAT_NS {
                 self.send(Command::Heartbeat);
-                beat = Instant::now();
+                beat = self.port.now_ns();
             }
             match self.port.read(&mut buf) {
                 Ok(n) => {

@@ -3,19 +3,14 @@
 //! `host::capture::decode`, `host::calib::calibrate`; see host/src/main.rs), and the result held
 //! against the imperfect gyro the virtual rig simulates.
 
-use e2e::{VirtualRigProcess, VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS, Z_1D, Z_2D};
+use e2e::{LockstepRig, VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS, Z_1D, Z_2D};
 use host::calib::{self, derived::mahalanobis2, CalOptions};
 use host::capture;
 use host::geometry::Pose;
-use host::link::{self, Link};
+use host::link::Link;
 use host::session;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
-
-/// Simulated seconds per wall second. The host heartbeats every 250 ms of wall time
-/// (`host::link::HEARTBEAT_INTERVAL`) and the rig stops a run after 2 s of its own time without
-/// one, so the speedup must stay below 8; 4 leaves 2× margin.
-const SPEEDUP: f64 = 4.0;
 
 /// Seconds recorded at speed per pose: two turns of the table at 0.5 Hz.
 const DURATION_S: f64 = 4.0;
@@ -29,16 +24,19 @@ const DPS_PER_COUNT: f64 = 17.5e-3;
 
 #[test]
 fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
-    let rig = VirtualRigProcess::spawn(env!("CARGO_BIN_EXE_virtual_rig"), SPEEDUP);
+    // The rig in lockstep: the host's clock is the rig's simulated time, so its heartbeats and
+    // timeouts hold however loaded the machine is.
+    let rig = LockstepRig::spawn(env!("CARGO_BIN_EXE_virtual_rig"), &[]);
     let port = rig.path.clone();
+    let clock = rig.clock();
 
     // `host calibrate --port <pty> --yes --duration 4 --out-dir <dir>`, step by step.
     let out_dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("virtual-rig-calibrate");
     let _ = std::fs::remove_dir_all(&out_dir); // captures are never overwritten
-    let mut link = Link::new(link::open_port(&port, link::DEFAULT_BAUD).expect("open pty"), port.as_str());
+    let mut link = Link::with_clock(rig, port.as_str(), Box::new(clock));
     let plan = session::plan(&Pose::ALL, &RATES_DPS, DURATION_S);
-    let files =
-        session::record_session(&mut link, &plan, &out_dir, true, &AtomicBool::new(false)).expect("live session");
+    let files = session::record_session(&mut link, &plan, &out_dir, &mut session::AssumeYes, &AtomicBool::new(false))
+        .expect("live session");
 
     let mut runs = Vec::new();
     for (file, run) in files.iter().zip(&plan) {

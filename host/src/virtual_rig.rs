@@ -1,0 +1,393 @@
+//! `host virtual-rig`: the firmware's portable core (`firmware::rig`) driving the simulated
+//! exciter (`firmware::plant`), on a pseudo-terminal, so the live session can be tried, and
+//! tested, without hardware.
+//!
+//! ```text
+//! host virtual-rig [--speedup N | --lockstep] [--ideal-gyro] [--duration SECONDS]
+//!                  [--loss P] [--garbage-every S] [--drop KIND:N]... [--seed N] [--watchdog-reset]
+//! ```
+//!
+//! A hostile line, for the host to survive: `--loss P` drops each byte, both ways, with
+//! probability P; `--garbage-every S` sends a burst of 8-64 random bytes every S seconds of
+//! simulated time (between frames); `--drop KIND:N` drops the Nth frame (from 1) of a kind the
+//! rig sends (`Hello`, `Ack`, `RunStarted`, `RunStopped`, `Sample`, `Motor`, `Index`,
+//! `Counters`, `Temperature`, `Fault`), repeatable. `--seed` fixes the randomness (default 1).
+//! `--watchdog-reset` starts the rig as after a watchdog reset (it reports `WatchdogReset`).
+//!
+//! `--lockstep` hands the clock to the client (tests): simulated time only advances when a line
+//! `step <ns> <bytes>` arrives on standard input; the rig first waits until it has received
+//! `<bytes>` bytes from the host in total (everything the client wrote before asking), runs `<ns>`
+//! of simulated time, then answers `at <now_ns> <bytes>` on standard output, `<bytes>` being
+//! the total it has queued to the pty so far. A client that reads the pty up to that total has
+//! seen exactly what the rig said until then, however loaded the machine: no wall-clock race.
+//!
+//! Prints the pty's device path (e.g. `/dev/pts/7`) as the first line on stdout, then serves
+//! until killed (or until `--duration` seconds of simulated time). Simulated time runs `N` times
+//! faster than the wall clock (default 1). The gyro is mounted in the pose named by each run's
+//! tag (1 or 2, the host's encoding): the "automatic mount" of `host calibrate --yes`. Unless
+//! `--ideal-gyro`, the simulated gyro carries the imperfection printed on stderr, for the host
+//! to find.
+
+use anyhow::{bail, Context, Result};
+use firmware::plant::l3g4200d_model::L3g4200dModel;
+use firmware::plant::{Plant, Pose};
+use firmware::virtual_rig::{VirtualRig, Wire};
+use protocol::frame::decode_frame;
+use protocol::{RigMsg, MAX_FRAME_LEN};
+use serialport::{SerialPort, TTYPort};
+use std::io::{BufRead, ErrorKind, Read, Write};
+use std::time::{Duration, Instant};
+
+/// Simulated time per exchange with the pty: one USB-like poll every 2 ms.
+const CHUNK_NS: u64 = 2_000_000;
+/// Bytes the rig may have waiting for a host that is not reading before they are dropped,
+/// like a CDC endpoint nobody polls.
+const PTY_BACKLOG: usize = 64 * 1024;
+/// Lockstep: how long the bytes a client announced may take to come through the pty (only a
+/// broken client waits this long).
+const LOCKSTEP_RX_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The bench's options.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Options {
+    /// Simulated seconds per wall second.
+    #[arg(long, default_value_t = 1.0, value_parser = positive)]
+    pub speedup: f64,
+    /// Simulated time on the client's command (`step <ns> <bytes>` lines on standard input).
+    #[arg(long, conflicts_with = "speedup")]
+    pub lockstep: bool,
+    /// A perfect gyro instead of the imperfect device under test.
+    #[arg(long)]
+    pub ideal_gyro: bool,
+    /// Stop after this many seconds of simulated time.
+    #[arg(long, value_parser = positive)]
+    pub duration: Option<f64>,
+    /// Drop each byte, both ways, with this probability.
+    #[arg(long, default_value_t = 0.0, value_parser = probability)]
+    pub loss: f64,
+    /// A burst of 8-64 random bytes every this many seconds of simulated time.
+    #[arg(long, value_parser = positive)]
+    pub garbage_every: Option<f64>,
+    /// Drop the Nth frame (from 1) of a kind the rig sends, KIND:N, e.g. Ack:2 (repeatable).
+    #[arg(long = "drop", value_parser = parse_drop)]
+    pub drops: Vec<(String, u32)>,
+    /// Seed of the line's randomness.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Start as after a watchdog reset (the rig reports WatchdogReset).
+    #[arg(long)]
+    pub watchdog_reset: bool,
+}
+
+fn positive(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a positive number")),
+    }
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?} is not a probability in [0, 1)")),
+    }
+}
+
+fn parse_drop(spec: &str) -> Result<(String, u32), String> {
+    let (kind, n) = spec.split_once(':').ok_or(format!("{spec:?}: expected KIND:N"))?;
+    let n: u32 = n.parse().ok().filter(|n| *n > 0).ok_or(format!("{spec:?}: N counts from 1"))?;
+    if !KINDS.contains(&kind) {
+        return Err(format!("{spec:?}: unknown kind {kind:?} (one of {})", KINDS.join(", ")));
+    }
+    Ok((kind.to_string(), n))
+}
+
+/// The virtual rig's device under test (unless `--ideal-gyro`): sensitivities 0.97, 1.02, 1.05;
+/// axes tilted by ≈ 1-2° from the package axes. Row i is k_i s_iᵀ (EXCITER.md eq. 6).
+pub const VIRTUAL_GYRO_KS: [[f64; 3]; 3] =
+    [[0.969_8, 0.017_0, -0.005_1], [-0.012_2, 1.019_7, 0.026_7], [0.018_3, -0.009_2, 1.049_8]];
+
+/// The virtual rig's zero-rate offsets, °/s.
+pub const VIRTUAL_GYRO_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
+
+/// Serves the virtual rig on a new pty until killed, `--duration` is over, or (lockstep)
+/// standard input ends. Prints the pty path as the first line of standard output.
+pub fn serve(opts: &Options) -> Result<()> {
+    let (mut master, slave) = TTYPort::pair().context("cannot allocate a pseudo-terminal")?;
+    let path = slave.name().context("the pty has no device name")?;
+    master.set_timeout(Duration::from_millis(0)).ok();
+
+    let mut plant = Plant::prototype();
+    if !opts.ideal_gyro {
+        plant.sensor_ks = VIRTUAL_GYRO_KS;
+        plant.sensor_offset_dps = VIRTUAL_GYRO_OFFSET_DPS;
+        eprintln!("virtual gyro: K S = {VIRTUAL_GYRO_KS:?}, offset = {VIRTUAL_GYRO_OFFSET_DPS:?} °/s");
+    }
+    let vr = VirtualRig::restarted(plant, L3g4200dModel::new(), 0, opts.watchdog_reset);
+    println!("{path}");
+    std::io::stdout().flush().ok();
+    let line = LineFaults {
+        loss: opts.loss,
+        garbage_every_ns: opts.garbage_every.map(|s| (s * 1e9) as u64),
+        drops: opts.drops.clone(),
+        seed: opts.seed,
+    };
+
+    // Keep the slave open: when the host closes its end, reads on the master then see no
+    // hang-up, and the host can reopen.
+    let _slave = slave;
+    let mut server = Server {
+        vr,
+        master,
+        wire: Wire::default(),
+        backlog: Vec::new(),
+        dropped: 0,
+        received: 0,
+        queued: 0,
+        mounted_tag: None,
+        line: Line::new(line),
+    };
+    if opts.lockstep {
+        lockstep(&mut server)?;
+    } else {
+        let start = Instant::now();
+        let end_ns = opts.duration.map(|s| (s * 1e9) as u64);
+        loop {
+            server.read_host()?;
+            server.run_chunk(u64::MAX);
+            server.write_host()?;
+            if end_ns.is_some_and(|end| server.vr.now_ns() >= end) {
+                break;
+            }
+            // Pace simulated time against the wall clock.
+            let due = Duration::from_secs_f64(server.vr.now_ns() as f64 * 1e-9 / opts.speedup);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+    }
+    let c = server.vr.rig.counters(server.vr.timer_us(server.vr.now_ns()));
+    eprintln!("virtual rig done: {c:?}, {} bytes dropped at the pty", server.dropped);
+    Ok(())
+}
+
+/// The rig and its end of the pty.
+struct Server {
+    vr: VirtualRig,
+    master: TTYPort,
+    wire: Wire,
+    /// Bytes for the host not yet taken by the pty.
+    backlog: Vec<u8>,
+    dropped: u64,
+    /// Bytes received from the host, in total.
+    received: u64,
+    /// Bytes queued for the host (not dropped), in total.
+    queued: u64,
+    mounted_tag: Option<u8>,
+    line: Line,
+}
+
+impl Server {
+    fn read_host(&mut self) -> Result<()> {
+        let mut rx = [0u8; 4096];
+        loop {
+            match self.master.read(&mut rx) {
+                Ok(0) => return Ok(()),
+                Ok(n) => {
+                    self.received += n as u64;
+                    let line = &mut self.line;
+                    self.wire.to_rig.extend(rx[..n].iter().filter(|_| !line.lose()));
+                }
+                Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => return Ok(()),
+                Err(e) if e.raw_os_error() == Some(5) => return Ok(()), // EIO: no host has the pty open
+                Err(e) => return Err(e).context("reading the pty"),
+            }
+        }
+    }
+
+    /// Runs one USB-like poll period of simulated time, or up to `limit_ns` if sooner.
+    fn run_chunk(&mut self, limit_ns: u64) {
+        let next = (self.vr.now_ns() + CHUNK_NS).min(limit_ns);
+        self.vr.run_until(next, &mut self.wire, |_| {});
+        let tag = self.vr.rig.run_tag();
+        if tag != self.mounted_tag {
+            if let Some(pose) = tag.and_then(Pose::from_run_tag) {
+                self.vr.plant.pose = pose;
+            }
+            self.mounted_tag = tag;
+        }
+        let before = self.backlog.len();
+        self.line.pass(self.vr.now_ns(), &self.wire.from_rig, &mut self.backlog);
+        self.wire.from_rig.clear();
+        self.queued += (self.backlog.len() - before) as u64;
+        if self.backlog.len() > PTY_BACKLOG {
+            let excess = self.backlog.len() - PTY_BACKLOG;
+            self.dropped += excess as u64;
+            self.queued -= excess as u64;
+            self.backlog.truncate(PTY_BACKLOG);
+        }
+    }
+
+    fn write_host(&mut self) -> Result<()> {
+        while !self.backlog.is_empty() {
+            match self.master.write(&self.backlog) {
+                Ok(n) if n > 0 => {
+                    self.backlog.drain(..n);
+                }
+                Ok(_) => return Ok(()),
+                Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => return Ok(()),
+                Err(e) if e.raw_os_error() == Some(5) => return Ok(()),
+                Err(e) => return Err(e).context("writing the pty"),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Simulated time on the client's command (module documentation).
+fn lockstep(server: &mut Server) -> Result<()> {
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lock().lines() {
+            let Ok(line) = line else { return };
+            if tx.send(line).is_err() {
+                return;
+            }
+        }
+    });
+    let mut out = std::io::stdout().lock();
+    loop {
+        server.read_host()?;
+        server.write_host()?;
+        let line = match rx.recv_timeout(Duration::from_micros(200)) {
+            Ok(line) => line,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => continue,
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+        };
+        let mut words = line.split_whitespace();
+        let (Some("step"), Some(Ok(ns)), Some(Ok(bytes)), None) =
+            (words.next(), words.next().map(str::parse::<u64>), words.next().map(str::parse::<u64>), words.next())
+        else {
+            bail!("expected `step <ns> <bytes>` on standard input, got {line:?}");
+        };
+        // The client wrote `bytes` in total before asking: wait until the pty delivered them.
+        let waiting_since = Instant::now();
+        while server.received < bytes {
+            server.write_host()?;
+            server.read_host()?;
+            if waiting_since.elapsed() > LOCKSTEP_RX_TIMEOUT {
+                bail!("the client said it sent {bytes} bytes, the pty delivered {}", server.received);
+            }
+            std::thread::sleep(Duration::from_micros(100));
+        }
+        let end = server.vr.now_ns() + ns;
+        while server.vr.now_ns() < end {
+            server.run_chunk(end);
+            server.write_host()?;
+        }
+        if writeln!(out, "at {} {}", server.vr.now_ns(), server.queued).and_then(|()| out.flush()).is_err() {
+            return Ok(());
+        }
+    }
+}
+
+/// Frame kinds `--drop` knows, as the rig's messages are named.
+const KINDS: [&str; 10] =
+    ["Hello", "Ack", "RunStarted", "RunStopped", "Sample", "Motor", "Index", "Counters", "Temperature", "Fault"];
+
+fn kind(msg: &RigMsg) -> &'static str {
+    match msg {
+        RigMsg::Hello(_) => "Hello",
+        RigMsg::Ack(_) => "Ack",
+        RigMsg::RunStarted(_) => "RunStarted",
+        RigMsg::RunStopped(_) => "RunStopped",
+        RigMsg::Sample(_) => "Sample",
+        RigMsg::Motor(_) => "Motor",
+        RigMsg::Index(_) => "Index",
+        RigMsg::Counters(_) => "Counters",
+        RigMsg::Temperature(_) => "Temperature",
+        RigMsg::Fault(_) => "Fault",
+    }
+}
+
+/// What makes the line hostile (module documentation).
+#[derive(Debug, Clone)]
+struct LineFaults {
+    loss: f64,
+    garbage_every_ns: Option<u64>,
+    drops: Vec<(String, u32)>,
+    seed: u64,
+}
+
+impl Default for LineFaults {
+    fn default() -> Self {
+        Self { loss: 0.0, garbage_every_ns: None, drops: Vec::new(), seed: 1 }
+    }
+}
+
+/// The line between rig and host.
+struct Line {
+    faults: LineFaults,
+    rng: u64,
+    /// Bytes of the rig's frame in progress.
+    frame: Vec<u8>,
+    /// Frames seen per kind.
+    seen: std::collections::HashMap<&'static str, u32>,
+    next_garbage_ns: u64,
+}
+
+impl Line {
+    fn new(faults: LineFaults) -> Self {
+        let rng = faults.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let next_garbage_ns = faults.garbage_every_ns.unwrap_or(u64::MAX);
+        Self { faults, rng, frame: Vec::new(), seen: Default::default(), next_garbage_ns }
+    }
+
+    /// xorshift64*: deterministic for a seed, good enough to scatter losses.
+    fn next(&mut self) -> u64 {
+        self.rng ^= self.rng >> 12;
+        self.rng ^= self.rng << 25;
+        self.rng ^= self.rng >> 27;
+        self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Whether to lose the next byte.
+    fn lose(&mut self) -> bool {
+        self.faults.loss > 0.0 && (self.next() >> 11) as f64 * (1.0 / (1u64 << 53) as f64) < self.faults.loss
+    }
+
+    /// Passes what the rig sent at `now_ns` to `out`, through the line's faults.
+    fn pass(&mut self, now_ns: u64, bytes: &[u8], out: &mut Vec<u8>) {
+        for &b in bytes {
+            self.frame.push(b);
+            if b != 0 {
+                continue;
+            }
+            let frame = std::mem::take(&mut self.frame);
+            let mut scratch = [0u8; MAX_FRAME_LEN];
+            if let Ok((_, msg)) = decode_frame::<RigMsg>(&frame[..frame.len() - 1], &mut scratch) {
+                let k = kind(&msg);
+                let n = self.seen.entry(k).or_insert(0);
+                *n += 1;
+                let n = *n;
+                if self.faults.drops.iter().any(|(dk, dn)| dk == k && *dn == n) {
+                    eprintln!("virtual rig: dropped {k} #{n}");
+                    continue;
+                }
+            }
+            for &b in &frame {
+                if !self.lose() {
+                    out.push(b);
+                }
+            }
+            if now_ns >= self.next_garbage_ns {
+                self.next_garbage_ns = now_ns + self.faults.garbage_every_ns.unwrap_or(u64::MAX);
+                let len = 8 + (self.next() % 57) as usize;
+                for _ in 0..len {
+                    let byte = self.next() as u8;
+                    out.push(byte);
+                }
+            }
+        }
+    }
+}
