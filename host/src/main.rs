@@ -8,8 +8,11 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use host::calib;
 use host::capture::{self, Capture};
+use host::export;
 use host::geometry::Pose;
 use host::link::{self, Link};
+use host::provenance::{self, Identity, Provenance, SessionManifest};
+use host::records;
 use host::session;
 use host::sim;
 use std::fs;
@@ -71,6 +74,20 @@ enum Cmd {
         /// `x.cap`, if present).
         #[arg(long, requires = "replay")]
         truth: Option<PathBuf>,
+        /// Serial number of the gyro under calibration. Required live (the operator confirms
+        /// it); on replay it defaults to the session manifest beside the captures.
+        #[arg(long, required_unless_present = "replay")]
+        sensor: Option<String>,
+        /// Who runs the session.
+        #[arg(long)]
+        operator: Option<String>,
+        /// Which rig runs it.
+        #[arg(long)]
+        rig: Option<String>,
+        /// Records database the result is stored in after its files are written: sqlite:PATH or
+        /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
+        #[arg(long)]
+        db: Option<String>,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -89,6 +106,40 @@ enum Cmd {
         /// A capture: prints t_s,pose,x_dps,y_dps,z_dps for every sample as CSV.
         #[arg(long)]
         capture: Option<PathBuf>,
+    },
+    /// Export a calibration for a firmware or a toolchain: C header, Rust const, Kalibr YAML, JSON, CSV.
+    Export {
+        /// The calibration.json written by `calibrate`.
+        #[arg(long)]
+        cal: PathBuf,
+        /// Output format.
+        #[arg(long, value_enum)]
+        format: export::Format,
+        /// File to write (default: standard output).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Noise figures of a capture's static stretch (motor at rest): overlapping Allan deviation
+    /// per axis, angle random walk, bias instability, rate random walk.
+    Noise {
+        /// Capture holding a static stretch (e.g. `host record --pose 1 --rate-dps 0`).
+        #[arg(long)]
+        capture: PathBuf,
+        /// Calibration to turn counts into rates (default: the datasheet sensitivity).
+        #[arg(long)]
+        cal: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The records database: every calibration stored, listed, compared, summarised.
+    Records {
+        /// sqlite:PATH or postgres://… (default: $GYROCAL_DB, else
+        /// sqlite:~/.local/share/gyrocal/records.sqlite).
+        #[arg(long)]
+        db: Option<String>,
+        #[command(subcommand)]
+        command: RecordsCmd,
     },
     /// Simulate a session on the virtual exciter: a capture and, beside it, the truth.
     Simulate {
@@ -130,6 +181,30 @@ enum Cmd {
     },
 }
 
+#[derive(Subcommand)]
+enum RecordsCmd {
+    /// One line per calibration, oldest first.
+    List {
+        /// Only this sensor's calibrations.
+        #[arg(long)]
+        sensor: Option<String>,
+    },
+    /// One calibration in full.
+    Show {
+        /// Record id (from `list`).
+        id: i64,
+    },
+    /// Every parameter's change from record A to record B, in units of their combined σ.
+    Compare {
+        /// Earlier record.
+        a: i64,
+        /// Later record.
+        b: i64,
+    },
+    /// Distributions across sensors (latest calibration of each), outliers named.
+    Summary,
+}
+
 fn parse_pose(s: &str) -> Result<Pose, String> {
     match s {
         "1" => Ok(Pose::One),
@@ -169,17 +244,60 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Record { port, out, pose, rate_dps, duration, baud } => {
             record(&port, &out, pose, rate_dps, duration, baud)
         }
-        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, yes, baud } => {
-            let files = match port {
+        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, sensor, operator, rig, db, yes, baud } => {
+            // Resolved first: a wrong --db must not cost a session.
+            let db = records::DbSpec::resolve(db.as_deref())?;
+            let identity = Identity { sensor_serial: sensor, operator, rig };
+            let (files, identity, started) = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
+                    let serial = identity.sensor_serial.as_deref().unwrap_or_default();
+                    session::prompt(
+                        &format!("Sensor under calibration: {serial}. Check it against the part's label."),
+                        yes,
+                    )?;
+                    let mut manifest = start_manifest(&out_dir, identity)?;
                     let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
                     let plan = session::plan(&Pose::ALL, &rates_dps, duration);
-                    session::record_session(&mut link, &plan, &out_dir, yes, &interrupted)?
+                    let files = session::record_session(&mut link, &plan, &out_dir, yes, &interrupted)?;
+                    manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
+                    manifest.write(&out_dir)?;
+                    (files, manifest.identity, Some(manifest.started_utc))
                 }
-                None => replay,
+                None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
+                    Some(m) => (replay, identity.or(m.identity), Some(m.started_utc)),
+                    None => (replay, identity, None),
+                },
             };
-            calibrate(&files, &out_dir, truth.as_deref())
+            calibrate(&files, &out_dir, truth.as_deref(), identity, started, &db)
+        }
+        Cmd::Noise { capture, cal, json } => {
+            let cap = read_capture(&capture)?;
+            let cal = cal.as_deref().map(load_calibration).transpose()?;
+            let report = host::allan::capture_noise(&cap, cal.as_ref())
+                .map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{report}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Records { db, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, command),
+        Cmd::Export { cal, format, out } => {
+            let text =
+                fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
+            let e =
+                export::Export::from_json(&text).with_context(|| format!("{} is not a calibration", cal.display()))?;
+            let rendered = e.render(format);
+            match out {
+                Some(path) => {
+                    fs::write(&path, rendered).with_context(|| format!("cannot write {}", path.display()))?;
+                    eprintln!("wrote {}", path.display());
+                }
+                None => print!("{rendered}"),
+            }
+            Ok(ExitCode::SUCCESS)
         }
         Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
             let cfg = match config {
@@ -225,6 +343,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
+    use records::{store, views};
+    let mut c = spec.open()?;
+    let get = |c: &mut dyn records::db::Conn, id: i64| -> Result<records::Record> {
+        store::get(c, id)?.with_context(|| format!("no record {id} in {spec}"))
+    };
+    let text = match cmd {
+        RecordsCmd::List { sensor } => views::list(&store::list(c.as_mut(), sensor.as_deref())?),
+        RecordsCmd::Show { id } => views::show(&get(c.as_mut(), id)?),
+        RecordsCmd::Compare { a, b } => views::compare(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?),
+        RecordsCmd::Summary => views::summary(&store::latest_per_sensor(c.as_mut())?),
+    };
+    print!("{text}");
+    Ok(ExitCode::SUCCESS)
+}
+
 /// Reads and decodes a capture file.
 fn read_capture(path: &Path) -> Result<Capture> {
     let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
@@ -265,11 +399,34 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
     Ok(ExitCode::SUCCESS)
 }
 
+/// Writes the manifest of a live session before its first capture, so even an interrupted
+/// session names its sensor; an existing one means the directory holds another session.
+fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest> {
+    fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    if out_dir.join(provenance::MANIFEST_FILE).exists() {
+        bail!(
+            "{} already holds a session ({}): choose another --out-dir",
+            out_dir.display(),
+            provenance::MANIFEST_FILE
+        );
+    }
+    let manifest = SessionManifest::start(identity);
+    manifest.write(out_dir)?;
+    Ok(manifest)
+}
+
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
-/// effect models), writes `calibration.json`, `loop.json` and `report.html`; the exit status
-/// carries the verdict.
-fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Result<ExitCode> {
-    let mut runs = Vec::new();
+/// effect models), writes `calibration.json` (with its provenance), `loop.json` and
+/// `report.html`; the exit status carries the verdict.
+fn calibrate(
+    files: &[PathBuf],
+    out_dir: &Path,
+    truth_path: Option<&Path>,
+    identity: Identity,
+    session_started: Option<String>,
+    db: &records::DbSpec,
+) -> Result<ExitCode> {
+    let mut caps = Vec::new();
     for f in files {
         let cap = read_capture(f)?;
         let l = &cap.loss;
@@ -292,21 +449,33 @@ fn calibrate(files: &[PathBuf], out_dir: &Path, truth_path: Option<&Path>) -> Re
         if cap.runs.is_empty() {
             bail!("{} holds no run (no RunStarted frame and no motor status naming one)", f.display());
         }
-        runs.extend(cap.runs);
+        caps.push((f.clone(), cap));
     }
+    let refs: Vec<(PathBuf, &Capture)> = caps.iter().map(|(f, c)| (f.clone(), c)).collect();
+    let prov = Provenance::gather(identity, session_started, &refs)?;
+    let runs: Vec<_> = caps.into_iter().flat_map(|(_, c)| c.runs).collect();
     let truth = load_truth(files, truth_path)?;
     let lr = calib::close_loop(&runs, &calib::LoopOptions::default(), truth.as_ref()).context("calibration failed")?;
-    print!("{}", lr.summary());
+    print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let json = out_dir.join("calibration.json");
-    fs::write(&json, serde_json::to_string_pretty(lr.final_report())?)
-        .with_context(|| format!("cannot write {}", json.display()))?;
+    let json_text = serde_json::to_string_pretty(&prov.attach(serde_json::to_value(lr.final_report())?))?;
+    fs::write(&json, &json_text).with_context(|| format!("cannot write {}", json.display()))?;
     let loop_json = out_dir.join("loop.json");
     fs::write(&loop_json, serde_json::to_string(&lr)?)
         .with_context(|| format!("cannot write {}", loop_json.display()))?;
     let html = calib::write_report(out_dir, &lr)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
     eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
+    let verdict = match lr.verdict() {
+        calib::Verdict::AtNoiseFloor => "at noise floor",
+        calib::Verdict::UnexplainedStructure => "unexplained structure",
+    };
+    let rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
+    match records::store_record(db, &rec) {
+        Ok(id) => eprintln!("recorded as {id} in {db}"),
+        Err(e) => bail!("the calibration is saved in {} but was not recorded in {db}: {e:#}", out_dir.display()),
+    }
     Ok(match lr.verdict() {
         calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
         calib::Verdict::UnexplainedStructure => ExitCode::from(3),

@@ -61,7 +61,23 @@ fn decode(path: &Path) -> capture::Capture {
 fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
     let rig = VirtualRig::start(SimConfig::standard(11, 1.0));
     let dir = scratch("calibrate");
-    let o = host(&["calibrate", "--port", &rig.path, "--duration", "8", "--yes", "--out-dir", dir.to_str().unwrap()]);
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let o = host(&[
+        "calibrate",
+        "--port",
+        &rig.path,
+        "--duration",
+        "8",
+        "--yes",
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--sensor",
+        "G-LIVE-11",
+        "--operator",
+        "ci",
+        "--db",
+        &db,
+    ]);
     let rig = rig.stop();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.code() == Some(0) || o.status.code() == Some(3), "{err}");
@@ -84,6 +100,25 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
         let k_true = truth.k_counts_per_dps[i];
         assert!((k - k_true).abs() < 4.0 * sigma, "axis {i}: k {k} ± {sigma} vs truth {k_true}");
     }
+    // Provenance: the manifest beside the captures names the sensor and fingerprints each
+    // capture; the result carries the same, plus the rig's firmware from its Hello.
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("session.json")).unwrap()).unwrap();
+    assert_eq!(manifest["sensor_serial"], "G-LIVE-11");
+    assert_eq!(manifest["captures"].as_array().unwrap().len(), 4, "2 poses × 2 default rates");
+    let prov = &report["provenance"];
+    assert_eq!(prov["sensor_serial"], "G-LIVE-11");
+    assert_eq!(prov["operator"], "ci");
+    assert_eq!(prov["rig_firmware"], "0.1.0");
+    assert_eq!(prov["captures"], manifest["captures"]);
+    assert!(err.contains("recorded as 1 in sqlite:"), "{err}");
+}
+
+#[test]
+fn live_calibration_needs_a_sensor_serial() {
+    let o = host(&["calibrate", "--port", "/dev/null", "--yes"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--sensor <SENSOR>"), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]
@@ -126,7 +161,21 @@ fn a_rig_that_does_not_answer_is_one_line_and_exit_1() {
     let (_master, slave) = TTYPort::pair().expect("pty pair");
     let path = slave.name().unwrap();
     let dir = scratch("silent");
-    let o = host(&["calibrate", "--port", &path, "--duration", "1", "--yes", "--out-dir", dir.to_str().unwrap()]);
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let o = host(&[
+        "calibrate",
+        "--port",
+        &path,
+        "--duration",
+        "1",
+        "--yes",
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--sensor",
+        "G-1",
+        "--db",
+        &db,
+    ]);
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     let last = err.lines().last().unwrap();
