@@ -191,8 +191,9 @@ pub fn axis_noise(axis: char, rate: &[f64], tau0_s: f64) -> AxisNoise {
 }
 
 /// The longest stretch of samples taken with the table at rest: the latest `MotorStatus`
-/// before each sample reports zero speed and zero setpoint. A run commanded at 0 °/s (`host
-/// record --rate-dps 0`, `host simulate --rates-dps 0`) is one such stretch from end to end.
+/// before each sample reports zero speed and zero setpoint. A simulated run at 0 °/s (`host
+/// simulate --rates-dps 0`) is one such stretch from end to end. (The firmware refuses a 0 °/s
+/// run and sends no samples between runs, so live captures have none yet.)
 pub fn static_stretch(cap: &Capture) -> Option<(&Run, std::ops::Range<usize>)> {
     let mut best: Option<(&Run, std::ops::Range<usize>)> = None;
     for run in &cap.runs {
@@ -248,8 +249,9 @@ pub struct NoiseReport {
 /// it, through the datasheet sensitivity (sensor axes).
 pub fn capture_noise(cap: &Capture, cal: Option<&Calibration>) -> Result<NoiseReport, String> {
     let (run, range) = static_stretch(cap).ok_or(
-        "the capture holds no static stretch (no sample with the motor reporting zero speed and setpoint); \
-         record one with `host record --pose 1 --rate-dps 0 --duration 600 --out static.cap`",
+        "the capture holds no static stretch (no sample with the motor reporting zero speed and setpoint). \
+         The rig's firmware streams samples only during runs and refuses 0 °/s, so for now static \
+         captures come from the simulator: `host simulate --poses 1 --rates-dps 0 --duration 600 --out static.cap`",
     )?;
     let samples = &run.samples[range.clone()];
     if samples.len() < MIN_STATIC_SAMPLES {

@@ -122,7 +122,8 @@ enum Cmd {
     /// Noise figures of a capture's static stretch (motor at rest): overlapping Allan deviation
     /// per axis, angle random walk, bias instability, rate random walk.
     Noise {
-        /// Capture holding a static stretch (e.g. `host record --pose 1 --rate-dps 0`).
+        /// Capture holding a static stretch (for now from the simulator: `host simulate --poses 1
+        /// --rates-dps 0`; the firmware refuses 0 °/s runs).
         #[arg(long)]
         capture: PathBuf,
         /// Calibration to turn counts into rates (default: the datasheet sensitivity).
@@ -399,6 +400,14 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
     Ok(ExitCode::SUCCESS)
 }
 
+/// Noise figures of the longest static stretch among the captures, through the calibration.
+fn static_noise(caps: &[(PathBuf, Capture)], cal: &calib::Calibration) -> Option<host::allan::NoiseReport> {
+    caps.iter()
+        .filter_map(|(_, c)| host::allan::static_stretch(c).map(|(_, r)| (r.len(), c)))
+        .max_by_key(|(n, _)| *n)
+        .and_then(|(_, c)| host::allan::capture_noise(c, Some(cal)).ok())
+}
+
 /// Writes the manifest of a live session before its first capture, so even an interrupted
 /// session names its sensor; an existing one means the directory holds another session.
 fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest> {
@@ -453,25 +462,44 @@ fn calibrate(
     }
     let refs: Vec<(PathBuf, &Capture)> = caps.iter().map(|(f, c)| (f.clone(), c)).collect();
     let prov = Provenance::gather(identity, session_started, &refs)?;
-    let runs: Vec<_> = caps.into_iter().flat_map(|(_, c)| c.runs).collect();
+    // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
+    let mut runs = Vec::new();
+    for (_, cap) in &mut caps {
+        let (still, moving): (Vec<_>, Vec<_>) =
+            std::mem::take(&mut cap.runs).into_iter().partition(|r| r.rate_mdps == 0);
+        cap.runs = still;
+        runs.extend(moving);
+    }
     let truth = load_truth(files, truth_path)?;
     let lr = calib::close_loop(&runs, &calib::LoopOptions::default(), truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let noise = static_noise(&caps, &lr.final_report().calibration());
+    if let Some(n) = &noise {
+        let mut text = n.to_string();
+        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
+        print!("\nNoise figures:\n{text}");
+    }
     let json = out_dir.join("calibration.json");
-    let json_text = serde_json::to_string_pretty(&prov.attach(serde_json::to_value(lr.final_report())?))?;
+    let mut value = prov.attach(serde_json::to_value(lr.final_report())?);
+    if let (Some(n), Some(obj)) = (&noise, value.as_object_mut()) {
+        obj.insert("noise".into(), serde_json::to_value(n)?);
+    }
+    let json_text = serde_json::to_string_pretty(&value)?;
     fs::write(&json, &json_text).with_context(|| format!("cannot write {}", json.display()))?;
     let loop_json = out_dir.join("loop.json");
     fs::write(&loop_json, serde_json::to_string(&lr)?)
         .with_context(|| format!("cannot write {}", loop_json.display()))?;
     let html = calib::write_report(out_dir, &lr)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
+    prov.insert_into_report(&html)?;
     eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",
         calib::Verdict::UnexplainedStructure => "unexplained structure",
     };
-    let rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
+    let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
+    rec.noise = noise.iter().flat_map(|n| &n.axes).map(records::NoiseRow::from).collect();
     match records::store_record(db, &rec) {
         Ok(id) => eprintln!("recorded as {id} in {db}"),
         Err(e) => bail!("the calibration is saved in {} but was not recorded in {db}: {e:#}", out_dir.display()),

@@ -219,6 +219,63 @@ impl fmt::Display for Provenance {
     }
 }
 
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+impl Provenance {
+    /// The certificate block of the HTML report: who, what, when, from which bytes.
+    pub fn html_section(&self) -> String {
+        let id = &self.identity;
+        let mut rows = vec![
+            ("Sensor serial", or_unknown(&id.sensor_serial).to_string()),
+            ("Operator", or_unknown(&id.operator).to_string()),
+            ("Rig", or_unknown(&id.rig).to_string()),
+            ("Calibrated (UTC)", self.calibrated_utc.clone()),
+            ("Session recorded (UTC)", self.session_started_utc.clone().unwrap_or_else(|| "(no manifest)".into())),
+            ("Host version", self.host_version.clone()),
+            ("Rig firmware", or_unknown(&self.rig_firmware).to_string()),
+            (
+                "Gyro",
+                self.gyro.map_or("(no Hello)".into(), |g| {
+                    format!("±{} °/s, {} Hz, bandwidth {:?}", g.full_scale.range_dps(), g.odr.hz(), g.bandwidth)
+                }),
+            ),
+            (
+                "Die temperature",
+                self.die_temperature.map_or("(no reading)".into(), |t| {
+                    format!(
+                        "span {:.0} °C over {} readings (OUT_TEMP {}..{} LSB)",
+                        t.span_c, t.readings, t.out_temp_min_lsb, t.out_temp_max_lsb
+                    )
+                }),
+            ),
+        ];
+        for c in &self.captures {
+            rows.push(("Capture", format!("{} ({} bytes), SHA-256 {}", c.file, c.bytes, c.sha256)));
+        }
+        let mut o = String::from("<section class=\"certificate\">\n<h2>Calibration certificate</h2>\n<table>\n");
+        for (k, v) in rows {
+            o.push_str(&format!(
+                "<tr><th scope=\"row\">{}</th><td style=\"overflow-wrap:anywhere\">{}</td></tr>\n",
+                html_escape(k),
+                html_escape(&v)
+            ));
+        }
+        o.push_str("</table>\n</section>\n");
+        o
+    }
+
+    /// Puts [`Provenance::html_section`] right under the report's title.
+    pub fn insert_into_report(&self, html_path: &Path) -> Result<()> {
+        let html =
+            std::fs::read_to_string(html_path).with_context(|| format!("cannot read {}", html_path.display()))?;
+        let at = html.find("</h1>").map_or(0, |i| i + "</h1>".len());
+        let out = format!("{}\n{}{}", &html[..at], self.html_section(), &html[at..]);
+        std::fs::write(html_path, out).with_context(|| format!("cannot write {}", html_path.display()))
+    }
+}
+
 /// SHA-256 of a file, streamed in 1 MiB chunks (hour-long captures are 160 MB).
 pub fn digest_file(path: &Path) -> Result<CaptureDigest> {
     let mut file = std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -280,5 +337,12 @@ mod tests {
         let text = p.to_string();
         assert!(text.contains("Sensor: G-0042   operator: ada   rig: (not given)"), "{text}");
         assert!(text.contains("span 3 °C over 9 readings"), "{text}");
+        let html = p.html_section();
+        assert!(
+            html.contains(
+                "<tr><th scope=\"row\">Sensor serial</th><td style=\"overflow-wrap:anywhere\">G-0042</td></tr>"
+            ),
+            "{html}"
+        );
     }
 }

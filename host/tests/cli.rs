@@ -119,6 +119,57 @@ fn simulate_inspect_calibrate_apply() {
         &db,
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // A third session with a static capture beside the moving one: noise figures in the result,
+    // the record and the Kalibr export (ARW 60 ρ/√2 = 1.27 °/√h, see allan.rs).
+    let still = dir.join("still.cap");
+    let o = host(&[
+        "simulate",
+        "--out",
+        still.to_str().unwrap(),
+        "--seed",
+        "5",
+        "--poses",
+        "1",
+        "--rates-dps",
+        "0",
+        "--duration",
+        "20",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let third = dir.join("cal3");
+    let o = host(&[
+        "calibrate",
+        "--replay",
+        cap.to_str().unwrap(),
+        still.to_str().unwrap(),
+        "--out-dir",
+        third.to_str().unwrap(),
+        "--sensor",
+        "SIM-5",
+        "--db",
+        &db,
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("\nNoise figures:\n"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let r3: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(third.join("calibration.json")).unwrap()).unwrap();
+    let arw = r3["noise"]["axes"][2]["arw_deg_per_sqrt_h"].as_f64().unwrap();
+    assert!((arw / 1.2728 - 1.0).abs() < 0.1, "{arw}");
+    let show3 = String::from_utf8_lossy(&host(&["records", "--db", &db, "show", "3"]).stdout).into_owned();
+    assert!(show3.contains("axis  ARW [°/√h]"), "{show3}");
+    let o = host(&["export", "--cal", third.join("calibration.json").to_str().unwrap(), "--format", "kalibr"]);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("  gyroscope_noise_density: "),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let html = std::fs::read_to_string(third.join("report.html")).unwrap();
+    assert!(html.contains("<h2>Calibration certificate</h2>") && html.contains("SIM-5"));
+
     let o = host(&["records", "--db", &db, "compare", "1", "2"]);
     let cmp = String::from_utf8_lossy(&o.stdout);
     assert!(cmp.contains("0 of 33 parameters changed by more than 3 σ"), "{cmp}");
@@ -227,7 +278,7 @@ fn noise_of_a_simulated_static_run() {
     assert_eq!(host(&["simulate", "--out", moving.to_str().unwrap(), "--duration", "3"]).status.code(), Some(0));
     let o = host(&["noise", "--capture", moving.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("host record --pose 1 --rate-dps 0"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("host simulate --poses 1 --rates-dps 0"), "{}", stderr(&o));
 }
 
 #[test]

@@ -13,8 +13,9 @@
 //! What does not map: the offsets `v_off` (Kalibr has no fixed bias, it estimates `b` online;
 //! they are given as a comment), `gyroscopes.A` (this rig does not excite linear acceleration
 //! against rate, so it is written as zero, meaning "not measured"), every accelerometer field,
-//! `rostopic` (a placeholder to edit), and the noise densities, which come from an Allan
-//! analysis (`host noise`), not from this calibration: they are left as commented placeholders.
+//! `rostopic` (a placeholder to edit). The gyro noise densities come from the Allan analysis when
+//! the calibration had a static stretch (the largest axis, as Kalibr takes one value for all
+//! three), and are otherwise left as commented placeholders.
 
 use super::{sanitise, Export};
 use nalgebra::Matrix3;
@@ -74,14 +75,26 @@ pub fn render(e: &Export) -> String {
     }
     let _ = writeln!(o, "  model: scale-misalignment");
     let _ = writeln!(o, "  time_offset: 0.0");
-    let _ = writeln!(
-        o,
-        "  # gyroscope_noise_density: from `host noise` ARW: rad/s/sqrt(Hz) = ARW[deg/sqrt(h)] * pi/180 / 60"
-    );
-    let _ = writeln!(
-        o,
-        "  # gyroscope_random_walk: from `host noise` RRW: rad/s^2/sqrt(Hz) = RRW[deg/h/sqrt(h)] * pi/180 / 3600 / 60"
-    );
+    match &e.noise {
+        Some(n) => {
+            let max = |f: fn(&crate::allan::AxisNoise) -> f64| n.axes.iter().map(f).fold(0.0, f64::max);
+            // ARW °/√h → °/√s (÷ 60) = °/s/√Hz, then rad; RRW °/h/√h → °/s/√s (÷ 3600·60), then rad.
+            let nd = max(|a| a.arw_deg_per_sqrt_h) / 60.0 * std::f64::consts::PI / 180.0;
+            let rw = max(|a| a.rrw_deg_per_h_per_sqrt_h) / 216_000.0 * std::f64::consts::PI / 180.0;
+            let _ = writeln!(
+                o,
+                "  gyroscope_noise_density: {nd:.6e}  # rad/s/sqrt(Hz), largest axis ARW of the static stretch"
+            );
+            let _ = writeln!(o, "  gyroscope_random_walk: {rw:.6e}  # rad/s^2/sqrt(Hz), largest axis RRW");
+        }
+        None => {
+            let _ = writeln!(
+                o,
+                "  # gyroscope_noise_density: from `host noise` ARW: rad/s/sqrt(Hz) = ARW[deg/sqrt(h)] * pi/180 / 60"
+            );
+            let _ = writeln!(o, "  # gyroscope_random_walk: from `host noise` RRW: rad/s^2/sqrt(Hz) = RRW[deg/h/sqrt(h)] * pi/180 / 216000");
+        }
+    }
     let _ = writeln!(o, "  T_i_b:");
     for i in 0..4 {
         let row: Vec<&str> = (0..4).map(|j| if i == j { "1.0" } else { "0.0" }).collect();

@@ -41,6 +41,8 @@ pub struct Export {
     pub sigma: Option<Sigmas>,
     /// Sensor, date, captures, when the file carries them.
     pub provenance: Option<Provenance>,
+    /// Noise figures, when the calibration had a static stretch.
+    pub noise: Option<crate::allan::NoiseReport>,
 }
 
 /// 1-σ uncertainties from the report's covariance diagonal.
@@ -56,6 +58,9 @@ impl Export {
     /// Reads `calibrate`'s JSON (full report, with or without provenance) or a bare calibration.
     pub fn from_json(text: &str) -> Result<Self> {
         let provenance = Provenance::from_calibration_json(text);
+        let noise = serde_json::from_str::<serde_json::Value>(text)
+            .ok()
+            .and_then(|v| serde_json::from_value(v.get("noise")?.clone()).ok());
         let (calibration, gyro, sigma) = match serde_json::from_str::<CalReport>(text) {
             Ok(report) => {
                 // cov is in param_names order: m_x (3), b_x, m_y (3), b_y, m_z (3), b_z.
@@ -85,6 +90,7 @@ impl Export {
             gyro,
             sigma,
             provenance,
+            noise,
         })
     }
 

@@ -125,6 +125,18 @@ pub struct NoiseRow {
     pub rrw_deg_per_h_per_sqrt_h: Option<f64>,
 }
 
+impl From<&crate::allan::AxisNoise> for NoiseRow {
+    fn from(a: &crate::allan::AxisNoise) -> Self {
+        let f = |v: f64| v.is_finite().then_some(v);
+        NoiseRow {
+            axis: a.axis,
+            arw_deg_per_sqrt_h: f(a.arw_deg_per_sqrt_h),
+            bias_instability_deg_per_h: f(a.bias_instability_deg_per_h),
+            rrw_deg_per_h_per_sqrt_h: f(a.rrw_deg_per_h_per_sqrt_h),
+        }
+    }
+}
+
 /// A stored calibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Record {
