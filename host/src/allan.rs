@@ -287,6 +287,55 @@ pub fn capture_noise(cap: &Capture, cal: Option<&Calibration>) -> Result<NoiseRe
     })
 }
 
+impl NoiseReport {
+    /// The log-log Allan deviation plot of the three axes, as SVG. The plot helpers have no log
+    /// x axis, so x is log₁₀ τ.
+    pub fn adev_svg(&self) -> Result<String, crate::report::plots::PlotError> {
+        use crate::report::plots::{line_plot, PlotSpec, Series};
+        let series: Vec<Series> = self
+            .axes
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                Series::line(
+                    format!("{} axis", a.axis),
+                    a.curve.iter().map(|p| (p.tau_s.log10(), p.adev_dps)).collect(),
+                    i,
+                )
+            })
+            .collect();
+        let spec =
+            PlotSpec::new("Overlapping Allan deviation (static stretch)", "log₁₀ τ [s]", "σ(τ) [°/s]").with_log_y();
+        line_plot(&spec, &series)
+    }
+
+    /// An HTML block with the figures table and the plot, for the report.
+    pub fn html_section(&self) -> String {
+        let mut o = String::from("<section class=\"noise\">\n<h2>Noise figures</h2>\n<table>\n");
+        o.push_str("<tr><th>axis</th><th>ARW [°/√h]</th><th>bias instability [°/h]</th><th>RRW [°/h/√h]</th><th>σ min [°/s]</th><th>at τ [s]</th></tr>\n");
+        for a in &self.axes {
+            o.push_str(&format!(
+                "<tr><td>{}</td><td>{:.4}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3e}</td><td>{:.2}</td></tr>\n",
+                a.axis,
+                a.arw_deg_per_sqrt_h,
+                a.bias_instability_deg_per_h,
+                a.rrw_deg_per_h_per_sqrt_h,
+                a.adev_min_dps,
+                a.tau_at_min_s
+            ));
+        }
+        o.push_str(&format!(
+            "</table>\n<p>Run {}, {} samples over {:.1} s; rates through the {}.</p>\n",
+            self.run, self.samples, self.duration_s, self.scaling
+        ));
+        if let Ok(svg) = self.adev_svg() {
+            o.push_str(&svg);
+        }
+        o.push_str("\n</section>\n");
+        o
+    }
+}
+
 impl std::fmt::Display for NoiseReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(

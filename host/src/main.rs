@@ -492,7 +492,7 @@ fn calibrate(
         .with_context(|| format!("cannot write {}", loop_json.display()))?;
     let html = calib::write_report(out_dir, &lr)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
-    prov.insert_into_report(&html)?;
+    prov.insert_into_report(&html, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())?;
     eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",

@@ -266,12 +266,13 @@ impl Provenance {
         o
     }
 
-    /// Puts [`Provenance::html_section`] right under the report's title.
-    pub fn insert_into_report(&self, html_path: &Path) -> Result<()> {
+    /// Puts [`Provenance::html_section`], then `extra` (e.g. the noise figures), right under
+    /// the report's title.
+    pub fn insert_into_report(&self, html_path: &Path, extra: &str) -> Result<()> {
         let html =
             std::fs::read_to_string(html_path).with_context(|| format!("cannot read {}", html_path.display()))?;
         let at = html.find("</h1>").map_or(0, |i| i + "</h1>".len());
-        let out = format!("{}\n{}{}", &html[..at], self.html_section(), &html[at..]);
+        let out = format!("{}\n{}{extra}{}", &html[..at], self.html_section(), &html[at..]);
         std::fs::write(html_path, out).with_context(|| format!("cannot write {}", html_path.display()))
     }
 }

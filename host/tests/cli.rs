@@ -169,6 +169,7 @@ fn simulate_inspect_calibrate_apply() {
     );
     let html = std::fs::read_to_string(third.join("report.html")).unwrap();
     assert!(html.contains("<h2>Calibration certificate</h2>") && html.contains("SIM-5"));
+    assert!(html.contains("<h2>Noise figures</h2>") && html.contains("Overlapping Allan deviation"));
 
     let o = host(&["records", "--db", &db, "compare", "1", "2"]);
     let cmp = String::from_utf8_lossy(&o.stdout);
