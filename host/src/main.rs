@@ -203,7 +203,11 @@ enum RecordsCmd {
         b: i64,
     },
     /// Distributions across sensors (latest calibration of each), outliers named.
-    Summary,
+    Summary {
+        /// Also write an HTML page with a histogram of each parameter.
+        #[arg(long)]
+        html: Option<PathBuf>,
+    },
 }
 
 fn parse_pose(s: &str) -> Result<Pose, String> {
@@ -354,7 +358,15 @@ fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
         RecordsCmd::List { sensor } => views::list(&store::list(c.as_mut(), sensor.as_deref())?),
         RecordsCmd::Show { id } => views::show(&get(c.as_mut(), id)?),
         RecordsCmd::Compare { a, b } => views::compare(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?),
-        RecordsCmd::Summary => views::summary(&store::latest_per_sensor(c.as_mut())?),
+        RecordsCmd::Summary { html } => {
+            let latest = store::latest_per_sensor(c.as_mut())?;
+            if let Some(path) = html {
+                fs::write(&path, views::summary_html(&latest))
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+                eprintln!("wrote {}", path.display());
+            }
+            views::summary(&latest)
+        }
     };
     print!("{text}");
     Ok(ExitCode::SUCCESS)

@@ -209,6 +209,13 @@ fn summary_names_the_outlier_among_twenty_sensors() {
     assert!((t.outliers[0].2 - (3.0 - 1.10) / (1.4826 * 0.05)).abs() < 1e-6, "{:?}", t.outliers);
     let text = views::summary(&recs);
     assert!(text.contains("G-BAD: tilt_x = +3.0000 deg"), "{text}");
+    // Histogram: 10 bins from 1.00 to 3.00 (0.2 wide): the 20 good sensors in the first, G-BAD in
+    // the last.
+    let h = views::histogram(&t.values);
+    assert_eq!(h.iter().map(|b| b.1).collect::<Vec<_>>(), vec![20, 0, 0, 0, 0, 0, 0, 0, 0, 1]);
+    assert!((h[0].0 - 1.1).abs() < 1e-12 && (h[9].0 - 2.9).abs() < 1e-12);
+    let html = views::summary_html(&recs);
+    assert!(html.contains("G-BAD: tilt_x = +3.0000 deg (z +25.6)") && html.contains("<svg"), "{html}");
 }
 
 #[test]

@@ -270,3 +270,69 @@ pub fn summary(latest: &[Record]) -> String {
     }
     o
 }
+
+/// Bins of each summary histogram: √n rounded for the 20-100 sensors of a production batch
+/// gives 4-10; 10 keeps the figures comparable across batches.
+const HISTOGRAM_BINS: usize = 10;
+
+/// Counts in `HISTOGRAM_BINS` equal bins from min to max, with each bin's centre.
+pub fn histogram(values: &[f64]) -> Vec<(f64, usize)> {
+    let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let width = if hi > lo { (hi - lo) / HISTOGRAM_BINS as f64 } else { 1.0 };
+    let mut counts = vec![0usize; HISTOGRAM_BINS];
+    for &v in values {
+        counts[(((v - lo) / width) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+    }
+    counts.into_iter().enumerate().map(|(i, c)| (lo + (i as f64 + 0.5) * width, c)).collect()
+}
+
+/// The production summary as an HTML page: the table, one histogram per parameter, outliers.
+pub fn summary_html(latest: &[Record]) -> String {
+    use crate::report::plots::{bar_chart, BarSeries, PlotSpec};
+    let mut doc = crate::report::Document::new(format!("Calibration records: {} sensors", latest.len()));
+    let dists = distributions(latest);
+    doc.paragraph("Latest calibration of each sensor. Outliers: robust z = (x − median)/(1.4826·MAD) beyond ±3.5.");
+    doc.table(
+        "Distributions across sensors",
+        &["parameter", "unit", "n", "mean", "sd", "min", "median", "max"],
+        dists
+            .iter()
+            .map(|d| {
+                vec![
+                    d.name.clone(),
+                    d.unit.clone(),
+                    d.n.to_string(),
+                    format!("{:+.4}", d.mean),
+                    format!("{:.4}", d.sd),
+                    format!("{:+.4}", d.min),
+                    format!("{:+.4}", d.median),
+                    format!("{:+.4}", d.max),
+                ]
+            })
+            .collect(),
+    );
+    let outliers: Vec<String> = dists
+        .iter()
+        .flat_map(|d| {
+            d.outliers.iter().map(move |(s, v, z)| format!("{s}: {} = {v:+.4} {} (z {z:+.1})", d.name, d.unit))
+        })
+        .collect();
+    if outliers.is_empty() {
+        doc.findings(["No outlier."]);
+    } else {
+        doc.findings(outliers);
+    }
+    for d in &dists {
+        let h = histogram(&d.values);
+        let spec = PlotSpec::new(format!("{} across sensors", d.name), format!("{} [{}]", d.name, d.unit), "sensors")
+            .with_size(800, 300);
+        let cats: Vec<String> = h.iter().map(|(c, _)| format!("{c:+.3}")).collect();
+        let series = [BarSeries {
+            label: "sensors per bin".into(),
+            values: h.iter().map(|(_, n)| *n as f64).collect(),
+            colour: 0,
+        }];
+        doc.figure_result(bar_chart(&spec, &cats, &series, None), format!("{}: histogram, bin centres", d.name));
+    }
+    doc.render()
+}
