@@ -1,6 +1,6 @@
 //! Exports a calibration into forms a user's firmware or toolchain embeds: a C99 header, a Rust
 //! `const`, Kalibr's IMU YAML, flat JSON and CSV. Every export holds the same correction,
-//! `ω = (K S)⁻¹ (v − v_off)` (docs/EXCITER.md eq. 7), and the sensor's identity where known.
+//! `ω = (K S)⁻¹ (v − v_off)` (the correction of `calib::apply`), and the sensor's identity where known.
 
 mod c;
 mod kalibr;
