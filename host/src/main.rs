@@ -256,6 +256,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let (files, identity, started) = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
+                    // Checked now so the operator hears of it before the runs; the record is
+                    // still attempted (and the files kept) at the end.
+                    if let Err(e) = db.open() {
+                        eprintln!("warning: the records database is not usable now ({e:#}); the session runs anyway");
+                    }
                     let serial = identity.sensor_serial.as_deref().unwrap_or_default();
                     session::prompt(
                         &format!("Sensor under calibration: {serial}. Check it against the part's label."),
@@ -270,7 +275,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     (files, manifest.identity, Some(manifest.started_utc))
                 }
                 None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
-                    Some(m) => (replay, identity.or(m.identity), Some(m.started_utc)),
+                    Some(m) => {
+                        for w in m.verify(&replay)? {
+                            eprintln!("warning: {w}");
+                        }
+                        (replay, identity.or(m.identity), Some(m.started_utc))
+                    }
                     None => (replay, identity, None),
                 },
             };

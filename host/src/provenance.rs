@@ -80,6 +80,31 @@ impl SessionManifest {
         Ok(path)
     }
 
+    /// Compares `files` with the captures this manifest fingerprinted (matched by file name):
+    /// one message per file whose bytes changed since it was recorded.
+    pub fn verify(&self, files: &[PathBuf]) -> Result<Vec<String>> {
+        let mut out = Vec::new();
+        for f in files {
+            let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+            let recorded = self
+                .captures
+                .iter()
+                .find(|c| Path::new(&c.file).file_name().map(|n| n.to_string_lossy().into_owned()) == name);
+            if let Some(r) = recorded {
+                let now = digest_file(f)?;
+                if now.sha256 != r.sha256 {
+                    out.push(format!(
+                        "{} is not the capture recorded in {MANIFEST_FILE} (SHA-256 {} then, {} now)",
+                        f.display(),
+                        r.sha256,
+                        now.sha256
+                    ));
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// Reads `dir/session.json` if there is one.
     pub fn read_beside(capture: &Path) -> Result<Option<Self>> {
         let path = capture.parent().unwrap_or(Path::new(".")).join(MANIFEST_FILE);
@@ -313,6 +338,23 @@ mod tests {
         std::fs::remove_file(&p).unwrap();
         assert_eq!(d.sha256, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
         assert_eq!(d.bytes, 3);
+    }
+
+    #[test]
+    fn a_capture_changed_since_the_session_is_named() {
+        let dir = std::env::temp_dir().join(format!("prov-verify-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.cap"), dir.join("b.cap"));
+        std::fs::write(&a, b"abc").unwrap();
+        std::fs::write(&b, b"xyz").unwrap();
+        let mut m = SessionManifest::start(Identity::default());
+        m.captures = vec![digest_file(&a).unwrap(), digest_file(&b).unwrap()];
+        assert!(m.verify(&[a.clone(), b.clone()]).unwrap().is_empty());
+        std::fs::write(&b, b"xyZ").unwrap();
+        let w = m.verify(&[a, b.clone()]).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(w.len(), 1);
+        assert!(w[0].starts_with(&format!("{} is not the capture recorded in session.json", b.display())), "{w:?}");
     }
 
     #[test]

@@ -112,6 +112,24 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
     assert_eq!(prov["rig_firmware"], "0.1.0");
     assert_eq!(prov["captures"], manifest["captures"]);
     assert!(err.contains("recorded as 1 in sqlite:"), "{err}");
+
+    // Replayed later without --sensor: the manifest beside the captures names the sensor, and
+    // the captures are checked against its fingerprints.
+    let caps: Vec<String> = ["pose1-p180dps.cap", "pose1-p90dps.cap", "pose2-p180dps.cap", "pose2-p90dps.cap"]
+        .iter()
+        .map(|f| dir.join(f).display().to_string())
+        .collect();
+    let again = dir.join("again");
+    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--replay"];
+    args.extend(caps.iter().map(String::as_str));
+    let o = host(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(0) || o.status.code() == Some(3), "{err}");
+    assert!(!err.contains("warning:"), "{err}");
+    let replayed: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(again.join("calibration.json")).unwrap()).unwrap();
+    assert_eq!(replayed["provenance"]["sensor_serial"], "G-LIVE-11");
+    assert_eq!(replayed["provenance"]["session_started_utc"], manifest["started_utc"]);
 }
 
 #[test]
