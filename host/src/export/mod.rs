@@ -102,6 +102,14 @@ impl Export {
         (inv * Vector3::from(self.calibration.offset_counts)).into()
     }
 
+    /// The split of each row of `(K S)⁻¹` and of `(K S)⁻¹ v_off` that lets single precision
+    /// reproduce the double-precision correction to the rounding of the result alone.
+    pub fn split(&self) -> SplitRows {
+        let b = self.offset_rate_dps();
+        let rows = std::array::from_fn(|i| split_row(self.m_inv_dps_per_count[i], b[i]));
+        SplitRows { rows }
+    }
+
     /// Sensor serial, or `unknown`.
     pub fn serial(&self) -> &str {
         self.provenance.as_ref().and_then(|p| p.identity.sensor_serial.as_deref()).unwrap_or("unknown")
@@ -122,6 +130,46 @@ impl Export {
             Format::Csv => table::render_csv(self),
         }
     }
+}
+
+/// One row of the correction split in two: `hi` holds at most 7 significant bits on a grid of
+/// quantum `2^q` shared by the row, so that with raw counts (|v| ≤ 2¹⁵) every product
+/// `hi_j · v_j` and every partial sum `Σ hi_j v_j − b_hi` is a multiple of the quantum below
+/// 2²⁴ quanta: exact in `f32`, whatever the compiler's contraction or order. `lo` is the
+/// remainder (≤ half a quantum, 2⁻⁸ of the largest coefficient), whose rounding errors are 2⁻⁸
+/// smaller again. The sum of the two parts is then rounded once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplitRow {
+    /// High parts of the row of `(K S)⁻¹`, °/s per count (exact in f32).
+    pub m_hi: [f64; 3],
+    /// Low parts, °/s per count.
+    pub m_lo: [f64; 3],
+    /// High part of `(K S)⁻¹ v_off`, °/s (exact in f32).
+    pub b_hi: f64,
+    /// Low part, °/s.
+    pub b_lo: f64,
+}
+
+/// The three rows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SplitRows {
+    /// Row i gives axis i.
+    pub rows: [SplitRow; 3],
+}
+
+/// Significant bits of the high parts: 7 bits × 15-bit counts = 22 bits per product, three of
+/// them and the offset stay below f32's 24-bit significand.
+const HI_BITS: i32 = 7;
+
+fn split_row(m: [f64; 3], b: f64) -> SplitRow {
+    let largest = m.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let e = largest.log2().ceil() as i32;
+    let quantum = 2f64.powi(e - HI_BITS);
+    let hi = |v: f64| (v / quantum).round() * quantum;
+    let m_hi = m.map(hi);
+    // b is bounded by the offsets (|v_off| ≪ 2¹⁵ counts), so b_hi stays well below 2²⁴ quanta.
+    let b_hi = hi(b);
+    SplitRow { m_hi, m_lo: std::array::from_fn(|j| m[j] - m_hi[j]), b_hi, b_lo: b - b_hi }
 }
 
 /// An `f32` literal that reads back as exactly the `f32` nearest to `v` (Rust's shortest

@@ -1,6 +1,6 @@
 //! Rust source: the correction as a `const` item with an `apply` method, `no_std` and free of
 //! dependencies, to `include!` or copy into a firmware crate. `f32` for the same reason as the C
-//! header (single-precision FPU on Cortex-M4F).
+//! header (single-precision FPU on Cortex-M4F), with the same split coefficients.
 
 use super::{f32_literal, sanitise, Export};
 use std::fmt::Write as _;
@@ -31,6 +31,7 @@ pub fn render(e: &Export) -> String {
     let m = &e.m_inv_dps_per_count;
     let off = e.calibration.offset_counts;
     let b = e.offset_rate_dps();
+    let sp = e.split();
     let _ = writeln!(
         o,
         r#"
@@ -53,18 +54,30 @@ pub struct GyroCal {{
     pub offset_counts: [f32; 3],
     /// (K S)⁻¹ times the offsets, °/s.
     pub offset_rate_dps: [f32; 3],
+    /// `m_inv_dps_per_count` split: at most 7 significant bits per row on a shared grid, so
+    /// every product with a raw count and every partial sum is exact in f32…
+    pub m_inv_hi: [[f32; 3]; 3],
+    /// …and the remainder.
+    pub m_inv_lo: [[f32; 3]; 3],
+    /// `offset_rate_dps` split on the same grids.
+    pub offset_rate_hi: [f32; 3],
+    /// The remainder.
+    pub offset_rate_lo: [f32; 3],
 }}
 
 impl GyroCal {{
-    /// Rate vector in the package frame, °/s, from one raw reading (counts).
+    /// Rate vector in the package frame, °/s, from one raw reading (counts): the exact
+    /// high-part sum plus the small low-part sum, rounded once.
     #[inline]
     pub fn apply(&self, raw: [i16; 3]) -> [f32; 3] {{
         let v = [raw[0] as f32, raw[1] as f32, raw[2] as f32];
         let mut out = [0.0f32; 3];
         let mut i = 0;
         while i < 3 {{
-            let m = &self.m_inv_dps_per_count[i];
-            out[i] = (m[0] * v[0] + m[1] * v[1] + m[2] * v[2]) - self.offset_rate_dps[i];
+            let (h, l) = (&self.m_inv_hi[i], &self.m_inv_lo[i]);
+            let exact = h[0] * v[0] + h[1] * v[1] + h[2] * v[2] - self.offset_rate_hi[i];
+            let small = l[0] * v[0] + l[1] * v[1] + l[2] * v[2] - self.offset_rate_lo[i];
+            out[i] = exact + small;
             i += 1;
         }}
         out
@@ -81,6 +94,10 @@ pub const GYROCAL: GyroCal = GyroCal {{
     m_inv_dps_per_count: [{r0}, {r1}, {r2}],
     offset_counts: {off},
     offset_rate_dps: {b},
+    m_inv_hi: [{h0}, {h1}, {h2}],
+    m_inv_lo: [{l0}, {l1}, {l2}],
+    offset_rate_hi: {bh},
+    offset_rate_lo: {bl},
 }};"#,
         fs = e.calibration.full_scale.range_dps(),
         r0 = row(m[0]),
@@ -88,6 +105,14 @@ pub const GYROCAL: GyroCal = GyroCal {{
         r2 = row(m[2]),
         off = row(off),
         b = row(b),
+        h0 = row(sp.rows[0].m_hi),
+        h1 = row(sp.rows[1].m_hi),
+        h2 = row(sp.rows[2].m_hi),
+        l0 = row(sp.rows[0].m_lo),
+        l1 = row(sp.rows[1].m_lo),
+        l2 = row(sp.rows[2].m_lo),
+        bh = row([sp.rows[0].b_hi, sp.rows[1].b_hi, sp.rows[2].b_hi]),
+        bl = row([sp.rows[0].b_lo, sp.rows[1].b_lo, sp.rows[2].b_lo]),
     );
     o
 }
