@@ -1,7 +1,11 @@
 //! Kalibr IMU YAML, in the layout of Kalibr's `imu0` block for its `scale-misalignment` IMU model
 //! (`kalibr_calibrate_imu_camera --imu-models scale-misalignment`), where the gyro measures
 //! `ω_m = M C_gyro_i ω + A a + b` with `M` lower-triangular (scale and misalignment), `C_gyro_i`
-//! a rotation, `A` the g-sensitivity and `b` a bias Kalibr estimates online as a random walk.
+//! a rotation, `A` the g-sensitivity and `b` a bias Kalibr estimates online as a random walk
+//! (source: Kalibr's `IccSensors.py`, `IccScaledMisalignedImu`: `M_gyro_Dv` has the pattern
+//! [[1,0,0],[1,1,0],[1,1,1]], and `addGyroscopeErrorTerms` predicts
+//! `M (C_gyro_i C_i_b ω_b) + A (C_gyro_i C_i_b a_b)`; `setIntrisicsMatrices` writes the keys
+//! `gyroscopes: {M, A, C_gyro_i}` used here).
 //!
 //! Mapping (Kalibr works in rad/s from a driver that divides counts by the datasheet
 //! sensitivity, so our `K S` enters divided by that sensitivity):
