@@ -52,9 +52,10 @@ enum Cmd {
         baud: u32,
     },
     /// Calibrate: live against the rig (--port) or from recorded captures (--replay).
+    #[command(group(clap::ArgGroup::new("source").required(true).args(["port", "replay"])))]
     Calibrate {
         /// Serial port of the rig: runs the guided live session.
-        #[arg(long, conflicts_with = "replay", required_unless_present = "replay")]
+        #[arg(long, conflicts_with = "replay", requires = "sensor")]
         port: Option<String>,
         /// Capture files to compute from instead (each says which pose it holds).
         #[arg(long, num_args = 1..)]
@@ -76,7 +77,7 @@ enum Cmd {
         truth: Option<PathBuf>,
         /// Serial number of the gyro under calibration. Required live (the operator confirms
         /// it); on replay it defaults to the session manifest beside the captures.
-        #[arg(long, required_unless_present = "replay")]
+        #[arg(long)]
         sensor: Option<String>,
         /// Who runs the session.
         #[arg(long)]

@@ -37,6 +37,10 @@ fn a_wrong_option_is_a_usage_error() {
     assert!(stderr(&o).contains("pose must be 1 or 2, not \"3\""), "{}", stderr(&o));
     let o = host(&["calibrat"]);
     assert_eq!(o.status.code(), Some(2));
+    // Without a source, both sources are named.
+    let o = host(&["calibrate"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("<--port <PORT>|--replay <REPLAY>...>"), "{}", stderr(&o));
 }
 
 fn scratch(name: &str) -> std::path::PathBuf {
