@@ -224,6 +224,12 @@ pub fn static_stretch(cap: &Capture) -> Option<(&Run, std::ops::Range<usize>)> {
     best.filter(|(_, r)| !r.is_empty())
 }
 
+/// Stretch below which bias instability and RRW are flagged as indicative, s: an hour gives
+/// σ(τ) to τ = 20 min, past the tens to hundreds of seconds where a MEMS gyro's Allan minimum
+/// typically lies (assumed, not from a datasheet: the L3G4200D's gives no Allan figures; the
+/// part's own curve decides).
+pub const SHORT_STRETCH_S: f64 = 3600.0;
+
 /// Fewest samples an analysis accepts: 1000 gives clusters up to ~330 samples, two decades.
 pub const MIN_STATIC_SAMPLES: usize = 1000;
 
@@ -348,6 +354,14 @@ impl std::fmt::Display for NoiseReport {
             self.scaling
         )?;
         writeln!(f, "axis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]  ADEV min [°/s] at τ [s]")?;
+        if self.duration_s < SHORT_STRETCH_S {
+            writeln!(
+                f,
+                "(a {:.0} s stretch measures σ(τ) up to τ = {:.0} s only: ARW is firm, bias instability and RRW are indicative)",
+                self.duration_s,
+                self.duration_s * MAX_CLUSTER_FRACTION
+            )?;
+        }
         for a in &self.axes {
             writeln!(
                 f,

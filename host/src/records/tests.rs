@@ -200,7 +200,12 @@ fn summary_names_the_outlier_among_twenty_sensors() {
         .collect();
     recs.push(record("bad", "G-BAD", &[("tilt_x", 3.0, Some(0.01))]));
     let d = views::distributions(&recs);
-    assert_eq!(d.len(), 1);
+    // tilt_x, and from each record's noise row for x: ARW 1.8 and RRW 0.5 (no bias instability).
+    let names: Vec<&str> = d.iter().map(|d| d.name.as_str()).collect();
+    assert_eq!(names, ["tilt_x", "arw_x", "rrw_x"]);
+    assert_eq!((d[1].n, d[1].median), (21, 1.8));
+    assert!(d[1].sd < 1e-15, "{}", d[1].sd);
+    assert!(d[1].outliers.is_empty(), "MAD 0: nobody is an outlier");
     let t = &d[0];
     assert_eq!(t.n, 21);
     assert!((t.median - 1.10).abs() < 1e-12);

@@ -1,7 +1,7 @@
 //! What `host records` prints: a list, one record, two records compared in units of their
 //! combined σ, and a production summary across sensors with outliers named.
 
-use super::store::{Param, Record};
+use super::store::Record;
 use std::fmt::Write as _;
 
 /// One line per record.
@@ -166,8 +166,8 @@ pub struct Distribution {
     pub values: Vec<f64>,
 }
 
-/// Parameters in the production summary, by name prefix: sensitivity departures, offsets,
-/// tilts, non-orthogonality (the list).
+/// Parameters in the production summary: sensitivity departures, offsets, tilts,
+/// non-orthogonality (then the noise figures where recorded).
 const SUMMARY_PARAMS: &[&str] = &[
     "k_x_vs_nominal",
     "k_y_vs_nominal",
@@ -187,38 +187,60 @@ const SUMMARY_PARAMS: &[&str] = &[
 pub fn distributions(latest: &[Record]) -> Vec<Distribution> {
     let mut out = Vec::new();
     for name in SUMMARY_PARAMS {
-        let vals: Vec<(String, &Param)> = latest
+        let vals: Vec<(String, f64)> = latest
             .iter()
-            .filter_map(|r| Some((r.sensor_serial.clone()?, r.params.iter().find(|p| p.name == *name)?)))
+            .filter_map(|r| Some((r.sensor_serial.clone()?, r.params.iter().find(|p| p.name == *name)?.value)))
             .collect();
-        if vals.is_empty() {
-            continue;
+        let unit = latest.iter().flat_map(|r| &r.params).find(|p| p.name == *name).map(|p| p.unit.clone());
+        out.extend(distribution(name, &unit.unwrap_or_default(), &vals));
+    }
+    // Noise figures, for the sensors whose latest session had a static stretch.
+    type Figure = fn(&super::NoiseRow) -> Option<f64>;
+    let figures: [(&str, &str, Figure); 3] = [
+        ("arw", "deg/sqrt(h)", |n| n.arw_deg_per_sqrt_h),
+        ("bias_instability", "deg/h", |n| n.bias_instability_deg_per_h),
+        ("rrw", "deg/h/sqrt(h)", |n| n.rrw_deg_per_h_per_sqrt_h),
+    ];
+    for (name, unit, f) in figures {
+        for axis in ['x', 'y', 'z'] {
+            let vals: Vec<(String, f64)> = latest
+                .iter()
+                .filter_map(|r| Some((r.sensor_serial.clone()?, f(r.noise.iter().find(|n| n.axis == axis)?)?)))
+                .collect();
+            out.extend(distribution(&format!("{name}_{axis}"), unit, &vals));
         }
-        let v: Vec<f64> = vals.iter().map(|(_, p)| p.value).collect();
-        let n = v.len();
-        let mean = v.iter().sum::<f64>() / n as f64;
-        let sd = if n > 1 { (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt() } else { 0.0 };
-        let (med, rs) = median_and_robust_sigma(&v);
-        let outliers = vals
-            .iter()
-            .filter(|_| rs > 0.0)
-            .map(|(s, p)| (s.clone(), p.value, (p.value - med) / rs))
-            .filter(|(_, _, z)| z.abs() > OUTLIER_Z)
-            .collect();
-        out.push(Distribution {
-            name: name.to_string(),
-            unit: vals[0].1.unit.clone(),
-            n,
-            mean,
-            sd,
-            min: v.iter().copied().fold(f64::INFINITY, f64::min),
-            median: med,
-            max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            outliers,
-            values: v,
-        });
     }
     out
+}
+
+/// Statistics of (sensor, value) pairs; None without any.
+fn distribution(name: &str, unit: &str, vals: &[(String, f64)]) -> Option<Distribution> {
+    if vals.is_empty() {
+        return None;
+    }
+    let v: Vec<f64> = vals.iter().map(|(_, x)| *x).collect();
+    let n = v.len();
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let sd = if n > 1 { (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt() } else { 0.0 };
+    let (med, rs) = median_and_robust_sigma(&v);
+    let outliers = vals
+        .iter()
+        .filter(|_| rs > 0.0)
+        .map(|(s, x)| (s.clone(), *x, (x - med) / rs))
+        .filter(|(_, _, z)| z.abs() > OUTLIER_Z)
+        .collect();
+    Some(Distribution {
+        name: name.to_string(),
+        unit: unit.to_string(),
+        n,
+        mean,
+        sd,
+        min: v.iter().copied().fold(f64::INFINITY, f64::min),
+        median: med,
+        max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        outliers,
+        values: v,
+    })
 }
 
 /// A one-line histogram, `width` bins from min to max, heights as ` ▁▂▃▄▅▆▇█`.
@@ -240,13 +262,13 @@ pub fn summary(latest: &[Record]) -> String {
     let _ = writeln!(o, "{} sensors (latest calibration of each)\n", latest.len());
     let _ = writeln!(
         o,
-        "parameter              unit         mean        sd         min      median         max  histogram (min..max)"
+        "parameter              unit                 mean        sd         min      median         max  histogram (min..max)"
     );
     let dists = distributions(latest);
     for d in &dists {
         let _ = writeln!(
             o,
-            "{:22} {:6} {:>+11.4} {:>9.4} {:>+11.4} {:>+11.4} {:>+11.4}  |{}|",
+            "{:22} {:13} {:>+11.4} {:>9.4} {:>+11.4} {:>+11.4} {:>+11.4}  |{}|",
             d.name,
             d.unit,
             d.mean,
