@@ -1,9 +1,13 @@
 //! Host side of the gyro calibration rig.
+pub mod allan;
 pub mod calib;
 pub mod capture;
+pub mod export;
 pub mod geometry;
 pub mod inspect;
 pub mod link;
+pub mod provenance;
+pub mod records;
 pub mod report;
 pub mod session;
 pub mod sim;

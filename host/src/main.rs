@@ -8,8 +8,11 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use host::calib;
 use host::capture::{self, Capture};
+use host::export;
 use host::geometry::Pose;
 use host::link::{self, Link};
+use host::provenance::{self, Identity, Provenance, SessionManifest};
+use host::records;
 use host::session;
 use host::sim;
 use std::fs;
@@ -49,9 +52,10 @@ enum Cmd {
         baud: u32,
     },
     /// Calibrate: live against the rig (--port) or from recorded captures (--replay).
+    #[command(group(clap::ArgGroup::new("source").required(true).args(["port", "replay"])))]
     Calibrate {
         /// Serial port of the rig: runs the guided live session.
-        #[arg(long, conflicts_with = "replay", required_unless_present = "replay")]
+        #[arg(long, conflicts_with = "replay", requires = "sensor")]
         port: Option<String>,
         /// Capture files to compute from instead (each says which pose it holds).
         #[arg(long, num_args = 1..)]
@@ -71,6 +75,20 @@ enum Cmd {
         /// `x.cap`, if present).
         #[arg(long, requires = "replay")]
         truth: Option<PathBuf>,
+        /// Serial number of the gyro under calibration. Required live (the operator confirms
+        /// it); on replay it defaults to the session manifest beside the captures.
+        #[arg(long)]
+        sensor: Option<String>,
+        /// Who runs the session.
+        #[arg(long)]
+        operator: Option<String>,
+        /// Which rig runs it.
+        #[arg(long)]
+        rig: Option<String>,
+        /// Records database the result is stored in after its files are written: sqlite:PATH or
+        /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
+        #[arg(long)]
+        db: Option<String>,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -93,6 +111,41 @@ enum Cmd {
         /// A capture: prints t_s,pose,x_dps,y_dps,z_dps for every sample as CSV.
         #[arg(long)]
         capture: Option<PathBuf>,
+    },
+    /// Export a calibration for a firmware or a toolchain: C header, Rust const, Kalibr YAML, JSON, CSV.
+    Export {
+        /// The calibration.json written by `calibrate`.
+        #[arg(long)]
+        cal: PathBuf,
+        /// Output format.
+        #[arg(long, value_enum)]
+        format: export::Format,
+        /// File to write (default: standard output).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Noise figures of a capture's static stretch (motor at rest): overlapping Allan deviation
+    /// per axis, angle random walk, bias instability, rate random walk.
+    Noise {
+        /// Capture holding a static stretch (for now from the simulator: `host simulate --poses 1
+        /// --rates-dps 0`; the firmware refuses 0 °/s runs).
+        #[arg(long)]
+        capture: PathBuf,
+        /// Calibration to turn counts into rates (default: the datasheet sensitivity).
+        #[arg(long)]
+        cal: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The records database: every calibration stored, listed, compared, summarised.
+    Records {
+        /// sqlite:PATH or postgres://… (default: $GYROCAL_DB, else
+        /// sqlite:~/.local/share/gyrocal/records.sqlite).
+        #[arg(long)]
+        db: Option<String>,
+        #[command(subcommand)]
+        command: RecordsCmd,
     },
     /// Simulate a session on the virtual exciter: a capture and, beside it, the truth.
     Simulate {
@@ -142,6 +195,34 @@ fn parse_latitude(s: &str) -> Result<f64, String> {
         Ok(v) if (-90.0..=90.0).contains(&v) => Ok(v),
         _ => Err(format!("latitude must be a number of degrees within ±90, not {s:?}")),
     }
+}
+
+#[derive(Subcommand)]
+enum RecordsCmd {
+    /// One line per calibration, oldest first.
+    List {
+        /// Only this sensor's calibrations.
+        #[arg(long)]
+        sensor: Option<String>,
+    },
+    /// One calibration in full.
+    Show {
+        /// Record id (from `list`).
+        id: i64,
+    },
+    /// Every parameter's change from record A to record B, in units of their combined σ.
+    Compare {
+        /// Earlier record.
+        a: i64,
+        /// Later record.
+        b: i64,
+    },
+    /// Distributions across sensors (latest calibration of each), outliers named.
+    Summary {
+        /// Also write an HTML page with a histogram of each parameter.
+        #[arg(long)]
+        html: Option<PathBuf>,
+    },
 }
 
 fn parse_pose(s: &str) -> Result<Pose, String> {
@@ -203,21 +284,90 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Record { port, out, pose, rate_dps, duration, baud } => {
             record(&port, &out, pose, rate_dps, duration, baud)
         }
-        Cmd::Calibrate { port, replay, out_dir, duration, rates_dps, truth, yes, latitude_deg, baud } => {
-            let files = match port {
+        Cmd::Calibrate {
+            port,
+            replay,
+            out_dir,
+            duration,
+            rates_dps,
+            truth,
+            sensor,
+            operator,
+            rig,
+            db,
+            yes,
+            latitude_deg,
+            baud,
+        } => {
+            // Resolved first: a wrong --db must not cost a session.
+            let db = records::DbSpec::resolve(db.as_deref())?;
+            let identity = Identity { sensor_serial: sensor, operator, rig };
+            let (files, identity, started) = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
+                    // Checked now so the operator hears of it before the runs; the record is
+                    // still attempted (and the files kept) at the end.
+                    if let Err(e) = db.open() {
+                        eprintln!("warning: the records database is not usable now ({e:#}); the session runs anyway");
+                    }
+                    let serial = identity.sensor_serial.clone().unwrap_or_default();
+                    let mut manifest = start_manifest(&out_dir, identity)?;
                     let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
                     link.watch_interrupt(interrupted.clone());
-                    let plan = session::plan(&Pose::ALL, &rates_dps, duration);
                     let mut operator: Box<dyn session::Operator> =
                         if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
-                    session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?
+                    session::prompt(
+                        &mut link,
+                        &format!("Sensor under calibration: {serial}. Check it against the part's label."),
+                        operator.as_mut(),
+                        &interrupted,
+                    )?;
+                    let plan = session::plan(&Pose::ALL, &rates_dps, duration);
+                    let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
+                    manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
+                    manifest.write(&out_dir)?;
+                    (files, manifest.identity, Some(manifest.started_utc))
                 }
-                None => replay,
+                None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
+                    Some(m) => {
+                        for w in m.verify(&replay)? {
+                            eprintln!("warning: {w}");
+                        }
+                        (replay, identity.or(m.identity), Some(m.started_utc))
+                    }
+                    None => (replay, identity, None),
+                },
             };
             let opts = calib::LoopOptions { latitude_deg, ..calib::LoopOptions::default() };
-            calibrate(&files, &out_dir, truth.as_deref(), &opts)
+            calibrate(&files, &out_dir, truth.as_deref(), identity, started, &db, &opts)
+        }
+        Cmd::Noise { capture, cal, json } => {
+            let cap = read_capture(&capture)?;
+            let cal = cal.as_deref().map(load_calibration).transpose()?;
+            let report = host::allan::capture_noise(&cap, cal.as_ref())
+                .map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{report}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Cmd::Records { db, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, command),
+        Cmd::Export { cal, format, out } => {
+            let text =
+                fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
+            let e =
+                export::Export::from_json(&text).with_context(|| format!("{} is not a calibration", cal.display()))?;
+            let rendered = e.render(format);
+            match out {
+                Some(path) => {
+                    fs::write(&path, rendered).with_context(|| format!("cannot write {}", path.display()))?;
+                    eprintln!("wrote {}", path.display());
+                }
+                None => print!("{rendered}"),
+            }
+            Ok(ExitCode::SUCCESS)
         }
         Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
             let cfg = match config {
@@ -264,6 +414,30 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
+    use records::{store, views};
+    let mut c = spec.open()?;
+    let get = |c: &mut dyn records::db::Conn, id: i64| -> Result<records::Record> {
+        store::get(c, id)?.with_context(|| format!("no record {id} in {spec}"))
+    };
+    let text = match cmd {
+        RecordsCmd::List { sensor } => views::list(&store::list(c.as_mut(), sensor.as_deref())?),
+        RecordsCmd::Show { id } => views::show(&get(c.as_mut(), id)?),
+        RecordsCmd::Compare { a, b } => views::compare(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?),
+        RecordsCmd::Summary { html } => {
+            let latest = store::latest_per_sensor(c.as_mut())?;
+            if let Some(path) = html {
+                fs::write(&path, views::summary_html(&latest))
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+                eprintln!("wrote {}", path.display());
+            }
+            views::summary(&latest)
+        }
+    };
+    print!("{text}");
+    Ok(ExitCode::SUCCESS)
+}
+
 /// Reads and decodes a capture file.
 fn read_capture(path: &Path) -> Result<Capture> {
     let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
@@ -306,16 +480,43 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
     Ok(ExitCode::SUCCESS)
 }
 
+/// Noise figures of the longest static stretch among the captures, through the calibration.
+fn static_noise(caps: &[(PathBuf, Capture)], cal: &calib::Calibration) -> Option<host::allan::NoiseReport> {
+    caps.iter()
+        .filter_map(|(_, c)| host::allan::static_stretch(c).map(|(_, r)| (r.len(), c)))
+        .max_by_key(|(n, _)| *n)
+        .and_then(|(_, c)| host::allan::capture_noise(c, Some(cal)).ok())
+}
+
+/// Writes the manifest of a live session before its first capture, so even an interrupted
+/// session names its sensor; an existing one means the directory holds another session.
+fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest> {
+    fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    if out_dir.join(provenance::MANIFEST_FILE).exists() {
+        bail!(
+            "{} already holds a session ({}): choose another --out-dir",
+            out_dir.display(),
+            provenance::MANIFEST_FILE
+        );
+    }
+    let manifest = SessionManifest::start(identity);
+    manifest.write(out_dir)?;
+    Ok(manifest)
+}
+
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
-/// effect models), writes `calibration.json`, `loop.json` and `report.html`; the exit status
-/// carries the verdict.
+/// effect models), writes `calibration.json` (with its provenance), `loop.json` and
+/// `report.html`; the exit status carries the verdict.
 fn calibrate(
     files: &[PathBuf],
     out_dir: &Path,
     truth_path: Option<&Path>,
+    identity: Identity,
+    session_started: Option<String>,
+    db: &records::DbSpec,
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
-    let mut runs = Vec::new();
+    let mut caps = Vec::new();
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
     for f in files {
@@ -366,21 +567,52 @@ fn calibrate(
                 *t as f64 * 1e-6
             );
         }
-        runs.extend(cap.runs);
+        caps.push((f.clone(), cap));
+    }
+    let refs: Vec<(PathBuf, &Capture)> = caps.iter().map(|(f, c)| (f.clone(), c)).collect();
+    let prov = Provenance::gather(identity, session_started, &refs)?;
+    // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
+    let mut runs = Vec::new();
+    for (_, cap) in &mut caps {
+        let (still, moving): (Vec<_>, Vec<_>) =
+            std::mem::take(&mut cap.runs).into_iter().partition(|r| r.rate_mdps == 0);
+        cap.runs = still;
+        runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
     let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
-    print!("{}", lr.summary());
+    print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let noise = static_noise(&caps, &lr.final_report().calibration());
+    if let Some(n) = &noise {
+        let mut text = n.to_string();
+        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
+        print!("\nNoise figures:\n{text}");
+    }
     let json = out_dir.join("calibration.json");
-    fs::write(&json, serde_json::to_string_pretty(lr.final_report())?)
-        .with_context(|| format!("cannot write {}", json.display()))?;
+    let mut value = prov.attach(serde_json::to_value(lr.final_report())?);
+    if let (Some(n), Some(obj)) = (&noise, value.as_object_mut()) {
+        obj.insert("noise".into(), serde_json::to_value(n)?);
+    }
+    let json_text = serde_json::to_string_pretty(&value)?;
+    fs::write(&json, &json_text).with_context(|| format!("cannot write {}", json.display()))?;
     let loop_json = out_dir.join("loop.json");
     fs::write(&loop_json, serde_json::to_string(&lr)?)
         .with_context(|| format!("cannot write {}", loop_json.display()))?;
     let html = calib::write_report(out_dir, &lr)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
+    prov.insert_into_report(&html, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())?;
     eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
+    let verdict = match lr.verdict() {
+        calib::Verdict::AtNoiseFloor => "at noise floor",
+        calib::Verdict::UnexplainedStructure => "unexplained structure",
+    };
+    let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
+    rec.noise = noise.iter().flat_map(|n| &n.axes).map(records::NoiseRow::from).collect();
+    match records::store_record(db, &rec) {
+        Ok(id) => eprintln!("recorded as {id} in {db}"),
+        Err(e) => bail!("the calibration is saved in {} but was not recorded in {db}: {e:#}", out_dir.display()),
+    }
     Ok(match lr.verdict() {
         calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
         calib::Verdict::UnexplainedStructure => ExitCode::from(3),

@@ -64,7 +64,23 @@ fn decode(path: &Path) -> capture::Capture {
 fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
     let rig = VirtualRig::start(SimConfig::standard(11, 1.0));
     let dir = scratch("calibrate");
-    let o = host(&["calibrate", "--port", &rig.path, "--duration", "8", "--yes", "--out-dir", dir.to_str().unwrap()]);
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let o = host(&[
+        "calibrate",
+        "--port",
+        &rig.path,
+        "--duration",
+        "8",
+        "--yes",
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--sensor",
+        "G-LIVE-11",
+        "--operator",
+        "ci",
+        "--db",
+        &db,
+    ]);
     let rig = rig.stop();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.code() == Some(0) || o.status.code() == Some(3), "{err}");
@@ -87,6 +103,43 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
         let k_true = truth.k_counts_per_dps[i];
         assert!((k - k_true).abs() < 4.0 * sigma, "axis {i}: k {k} ± {sigma} vs truth {k_true}");
     }
+    // Provenance: the manifest beside the captures names the sensor and fingerprints each
+    // capture; the result carries the same, plus the rig's firmware from its Hello.
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("session.json")).unwrap()).unwrap();
+    assert_eq!(manifest["sensor_serial"], "G-LIVE-11");
+    assert_eq!(manifest["captures"].as_array().unwrap().len(), 4, "2 poses × 2 default rates");
+    let prov = &report["provenance"];
+    assert_eq!(prov["sensor_serial"], "G-LIVE-11");
+    assert_eq!(prov["operator"], "ci");
+    assert_eq!(prov["rig_firmware"], "0.1.0");
+    assert_eq!(prov["captures"], manifest["captures"]);
+    assert!(err.contains("recorded as 1 in sqlite:"), "{err}");
+
+    // Replayed later without --sensor: the manifest beside the captures names the sensor, and
+    // the captures are checked against its fingerprints.
+    let caps: Vec<String> = ["pose1-p180dps.cap", "pose1-p90dps.cap", "pose2-p180dps.cap", "pose2-p90dps.cap"]
+        .iter()
+        .map(|f| dir.join(f).display().to_string())
+        .collect();
+    let again = dir.join("again");
+    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--replay"];
+    args.extend(caps.iter().map(String::as_str));
+    let o = host(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(0) || o.status.code() == Some(3), "{err}");
+    assert!(!err.contains("warning:"), "{err}");
+    let replayed: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(again.join("calibration.json")).unwrap()).unwrap();
+    assert_eq!(replayed["provenance"]["sensor_serial"], "G-LIVE-11");
+    assert_eq!(replayed["provenance"]["session_started_utc"], manifest["started_utc"]);
+}
+
+#[test]
+fn live_calibration_needs_a_sensor_serial() {
+    let o = host(&["calibrate", "--port", "/dev/null", "--yes"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--sensor <SENSOR>"), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]
@@ -129,7 +182,21 @@ fn a_rig_that_does_not_answer_is_one_line_and_exit_1() {
     let (_master, slave) = TTYPort::pair().expect("pty pair");
     let path = slave.name().unwrap();
     let dir = scratch("silent");
-    let o = host(&["calibrate", "--port", &path, "--duration", "1", "--yes", "--out-dir", dir.to_str().unwrap()]);
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let o = host(&[
+        "calibrate",
+        "--port",
+        &path,
+        "--duration",
+        "1",
+        "--yes",
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--sensor",
+        "G-1",
+        "--db",
+        &db,
+    ]);
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     let last = err.lines().last().unwrap();
@@ -228,7 +295,17 @@ fn a_signal_at_the_prompt_aborts_the_session() {
         let rig = VirtualRig::start(SimConfig::standard(13, 1.0));
         let dir = scratch(&format!("prompt-{sig}"));
         let mut host = Running::start(
-            &["calibrate", "--port", &rig.path, "--duration", "1", "--out-dir", dir.to_str().unwrap()],
+            &[
+                "calibrate",
+                "--port",
+                &rig.path,
+                "--sensor",
+                "SN-1",
+                "--duration",
+                "1",
+                "--out-dir",
+                dir.to_str().unwrap(),
+            ],
             std::process::Stdio::piped(), // open, and nobody types
         );
         host.wait_for("Press Enter when ready");
@@ -283,7 +360,7 @@ fn end_of_input_at_the_prompt_is_an_abort() {
     let rig = VirtualRig::start(SimConfig::standard(15, 1.0));
     let dir = scratch("eof");
     let host = Running::start(
-        &["calibrate", "--port", &rig.path, "--duration", "1", "--out-dir", dir.to_str().unwrap()],
+        &["calibrate", "--port", &rig.path, "--sensor", "SN-1", "--duration", "1", "--out-dir", dir.to_str().unwrap()],
         std::process::Stdio::null(),
     );
     let (status, err, _) = host.finish();
@@ -352,10 +429,25 @@ fn calibrate_against_host_virtual_rig_with_an_operator_at_the_keyboard() {
     let path = line.trim().to_string();
     let dir = scratch("keyboard");
     let mut host = Running::start(
-        &["calibrate", "--port", &path, "--duration", "4", "--rates-dps", "180", "--out-dir", dir.to_str().unwrap()],
+        &[
+            "calibrate",
+            "--port",
+            &path,
+            "--sensor",
+            "SN-1",
+            "--duration",
+            "4",
+            "--rates-dps",
+            "180",
+            "--out-dir",
+            dir.to_str().unwrap(),
+        ],
         std::process::Stdio::piped(),
     );
     let mut stdin = host.child.stdin.take().unwrap();
+    // The operator first confirms the sensor's serial, then mounts each pose.
+    host.wait_for("Sensor under calibration: SN-1");
+    writeln!(stdin).unwrap();
     host.wait_for("POSE 1");
     host.wait_for("Press Enter when ready");
     writeln!(stdin).unwrap();

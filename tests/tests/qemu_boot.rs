@@ -181,6 +181,10 @@ fn last_sample_us(stream: &Stream) -> u32 {
 }
 
 #[test]
+#[cfg_attr(
+    not(has_qemu),
+    ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target (.ci/run installs both)"
+)]
 fn qemu_image_boots_and_speaks_the_protocol() {
     if let Some(missing) = missing_prerequisite() {
         // CI (`.ci/run`, which runs with CI=true) installs both, so there a missing one is a

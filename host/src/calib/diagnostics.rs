@@ -5,7 +5,7 @@
 //! how strong and what it suggests. Also the binned residual and spectrum the report plots.
 
 use super::blocking::Blocking;
-use super::extended::{Evaluator, LoopData, Model};
+use super::extended::{harmonics_of, Evaluator, LoopData, Model};
 use super::lsq::{is_clipped, AXES};
 use super::spectrum::{AmplitudeSpectrum, Periodogram};
 use super::stats::{chi2_to_sigma, chi2_upper_quantile};
@@ -507,6 +507,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             thetas.push(p.theta2_rad);
             devs.push(dev * 100.0);
             let mut row = [f64::NAN; 3];
+            let harmonics = harmonics_of(p.theta2_rad);
             for a in 0..3 {
                 abs_rates[a].push(ev.axis_rate(&p, a).abs());
                 if is_clipped(s.rate_counts[a]) {
@@ -519,7 +520,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                 row[a] = ea;
                 e[a].push(ea);
                 for (nn, o) in orders[a].iter_mut().enumerate() {
-                    let (sn, cn) = p.harmonics[nn];
+                    let (sn, cn) = harmonics[nn];
                     o.ss += sn * sn;
                     o.cc += cn * cn;
                     o.sc += sn * cn;

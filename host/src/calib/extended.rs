@@ -338,8 +338,6 @@ pub struct Point {
     pub d_filter: [f64; 3],
     /// θ1', rad/s.
     pub theta1_rate_rad_s: f64,
-    /// sin and cos of n·θ2 for n = 0..=MAX_HARMONIC_ORDER.
-    pub harmonics: [(f64, f64); MAX_HARMONIC_ORDER + 1],
 }
 
 /// Values derived from a model once per pass.
@@ -467,12 +465,6 @@ impl<'a> Evaluator<'a> {
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
-        let (s1, c1) = th.sin_cos();
-        let mut harmonics = [(0.0, 1.0); MAX_HARMONIC_ORDER + 1];
-        for n in 1..=MAX_HARMONIC_ORDER {
-            let (sp, cp) = harmonics[n - 1];
-            harmonics[n] = (sp * c1 + cp * s1, cp * c1 - sp * s1);
-        }
         // The transmission error is a function of the base's angle against the ground (the
         // gear mesh), from the encoder; the index offset does not move it.
         let theta1_rate_rad_s = rate1.to_radians();
@@ -530,7 +522,6 @@ impl<'a> Evaluator<'a> {
             d_earth,
             d_filter,
             theta1_rate_rad_s,
-            harmonics,
         }
     }
 
@@ -629,6 +620,19 @@ fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
     let (s1, c1) = theta1_rad.sin_cos();
     let (s2, c2) = theta2_rad.sin_cos();
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
+}
+
+/// sin and cos of n·θ for n = 0..=MAX_HARMONIC_ORDER, by the angle-addition recurrence (one
+/// sin_cos; the rounding grows by an ulp per order, 1e-14 at 32×). Only the diagnostics need all
+/// of them, so the fit's passes do not pay for them.
+pub fn harmonics_of(theta_rad: f64) -> [(f64, f64); MAX_HARMONIC_ORDER + 1] {
+    let (s1, c1) = theta_rad.sin_cos();
+    let mut h = [(0.0, 1.0); MAX_HARMONIC_ORDER + 1];
+    for n in 1..=MAX_HARMONIC_ORDER {
+        let (sp, cp) = h[n - 1];
+        h[n] = (sp * c1 + cp * s1, cp * c1 - sp * s1);
+    }
+    h
 }
 
 #[inline]

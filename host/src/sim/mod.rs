@@ -131,8 +131,8 @@ impl SimConfig {
         )?;
         for (i, r) in self.runs.iter().enumerate() {
             check(
-                r.rate_dps.is_finite() && r.rate_dps != 0.0 && r.rate_dps.abs() <= 1e4,
-                &format!("runs[{i}].rate_dps must be non-zero and within ±10 000 °/s"),
+                r.rate_dps.is_finite() && r.rate_dps.abs() <= 1e4,
+                &format!("runs[{i}].rate_dps must be within ±10 000 °/s (0: a static run, for noise figures)"),
             )?;
             check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s must be > 0"))?;
         }

@@ -1,0 +1,177 @@
+//! A record of every calibration: an embedded SQLite file by default, PostgreSQL when a line of
+//! rigs shares one store. One schema with versioned migrations ([`store`]), one code path for
+//! both ([`db::Conn`]), and the production views: list, show, compare, summary ([`views`]).
+
+pub mod db;
+pub mod store;
+pub mod views;
+
+#[cfg(test)]
+mod tests;
+
+use crate::calib::CalReport;
+use crate::provenance::Provenance;
+use anyhow::{Context, Result};
+use db::Conn;
+use std::path::PathBuf;
+pub use store::{NoiseRow, Param, Record};
+
+/// Environment variable naming the database when `--db` is not given.
+pub const DB_ENV: &str = "GYROCAL_DB";
+
+/// Where the records live.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DbSpec {
+    /// An SQLite file.
+    Sqlite(PathBuf),
+    /// A PostgreSQL URL, `postgres://user@host/db` or `postgresql://…`.
+    Postgres(String),
+}
+
+impl DbSpec {
+    /// Parses `sqlite:PATH` or `postgres://…` / `postgresql://…`.
+    pub fn parse(s: &str) -> Result<Self> {
+        if let Some(p) = s.strip_prefix("sqlite:") {
+            anyhow::ensure!(!p.is_empty(), "--db sqlite: needs a path, e.g. sqlite:records.sqlite");
+            return Ok(DbSpec::Sqlite(PathBuf::from(p)));
+        }
+        if s.starts_with("postgres://") || s.starts_with("postgresql://") {
+            return Ok(DbSpec::Postgres(s.to_string()));
+        }
+        anyhow::bail!("database {s:?} is neither sqlite:PATH nor postgres://…")
+    }
+
+    /// `--db` if given, else `$GYROCAL_DB`, else the per-user default
+    /// `sqlite:$XDG_DATA_HOME/gyrocal/records.sqlite` (XDG_DATA_HOME defaults to
+    /// `~/.local/share`, per the XDG Base Directory specification).
+    pub fn resolve(arg: Option<&str>) -> Result<Self> {
+        if let Some(a) = arg {
+            return Self::parse(a);
+        }
+        if let Ok(e) = std::env::var(DB_ENV) {
+            return Self::parse(&e).with_context(|| format!("${DB_ENV}"));
+        }
+        let data = match std::env::var_os("XDG_DATA_HOME").filter(|v| !v.is_empty()) {
+            Some(d) => PathBuf::from(d),
+            None => PathBuf::from(std::env::var_os("HOME").context("neither --db, $GYROCAL_DB nor $HOME is set")?)
+                .join(".local/share"),
+        };
+        Ok(DbSpec::Sqlite(data.join("gyrocal/records.sqlite")))
+    }
+
+    /// Opens a connection and brings the schema up to date.
+    pub fn open(&self) -> Result<Box<dyn Conn>> {
+        self.open_in_schema(None)
+    }
+
+    /// As [`DbSpec::open`], inside a PostgreSQL schema (ignored for SQLite); for tests.
+    pub fn open_in_schema(&self, schema: Option<&str>) -> Result<Box<dyn Conn>> {
+        let mut c: Box<dyn Conn> = match self {
+            DbSpec::Sqlite(p) => Box::new(
+                db::Sqlite::open(p).with_context(|| format!("cannot open the records database {}", p.display()))?,
+            ),
+            DbSpec::Postgres(url) => Box::new(
+                db::Postgres::connect(url, schema).with_context(|| format!("cannot connect to {}", redact(url)))?,
+            ),
+        };
+        store::migrate_to(c.as_mut(), store::SCHEMA_VERSION).context("cannot bring the records schema up to date")?;
+        Ok(c)
+    }
+}
+
+impl std::fmt::Display for DbSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DbSpec::Sqlite(p) => write!(f, "sqlite:{}", p.display()),
+            DbSpec::Postgres(u) => write!(f, "{}", redact(u)),
+        }
+    }
+}
+
+/// A URL with its password replaced by `***`, for messages.
+pub fn redact(url: &str) -> String {
+    match (url.find("://"), url.find('@')) {
+        (Some(s), Some(at)) if at > s => {
+            let creds = &url[s + 3..at];
+            match creds.find(':') {
+                Some(c) => format!("{}{}:***{}", &url[..s + 3], &creds[..c], &url[at..]),
+                None => url.to_string(),
+            }
+        }
+        _ => url.to_string(),
+    }
+}
+
+/// A fresh record uid: 128 random bits, hex.
+pub fn new_uid() -> String {
+    format!("{:032x}", rand::random::<u128>())
+}
+
+/// The parameters a production view compares, each with its 1-σ from the report.
+pub fn params_from_report(r: &CalReport) -> Vec<Param> {
+    let p = |name: String, value: f64, sigma: Option<f64>, unit: &str| Param { name, value, sigma, unit: unit.into() };
+    let mut out = Vec::new();
+    let axes = ['x', 'y', 'z'];
+    for (i, a) in r.axes.iter().enumerate() {
+        let ax = axes[i];
+        out.push(p(format!("k_{ax}"), a.k_counts_per_dps, Some(a.k_sigma), "counts/(deg/s)"));
+        out.push(p(
+            format!("k_{ax}_vs_nominal"),
+            a.k_vs_nominal_percent,
+            Some(a.k_sigma / r.nominal_counts_per_dps * 100.0),
+            "%",
+        ));
+        out.push(p(format!("offset_{ax}"), a.offset_counts, Some(a.offset_sigma_counts), "counts"));
+        out.push(p(format!("tilt_{ax}"), a.tilt_deg, Some(a.tilt_sigma_deg), "deg"));
+        for k in 0..2 {
+            out.push(p(
+                format!("tilt_{ax}_to_{}", a.tilt_component_axes[k]),
+                a.tilt_components_deg[k],
+                Some(a.tilt_components_cov_deg2[k][k].max(0.0).sqrt()),
+                "deg",
+            ));
+        }
+        for (j, col) in axes.iter().enumerate() {
+            let s = r.cov.get(4 * i + j).and_then(|row| row.get(4 * i + j)).map(|v| v.max(0.0).sqrt());
+            out.push(p(format!("m_{ax}{col}"), r.m_counts_per_dps[i][j], s, "counts/(deg/s)"));
+        }
+    }
+    for ia in &r.inter_axis {
+        out.push(p(
+            format!("non_orthogonality_{}{}", ia.axes[0], ia.axes[1]),
+            ia.non_orthogonality_deg,
+            Some(ia.sigma_deg),
+            "deg",
+        ));
+    }
+    for res in &r.residuals {
+        out.push(p(format!("residual_over_floor_{}", res.axis), res.rms_over_floor, None, "1"));
+    }
+    out
+}
+
+/// The record of a calibration just written: report, provenance, verdict and the JSON file.
+pub fn record_from(report: &CalReport, prov: &Provenance, verdict: &str, result_json: String) -> Record {
+    Record {
+        id: None,
+        uid: new_uid(),
+        sensor_serial: prov.identity.sensor_serial.clone(),
+        operator: prov.identity.operator.clone(),
+        rig: prov.identity.rig.clone(),
+        calibrated_utc: prov.calibrated_utc.clone(),
+        host_version: prov.host_version.clone(),
+        rig_firmware: prov.rig_firmware.clone(),
+        full_scale_dps: i64::from(report.gyro.full_scale.range_dps()),
+        captures_sha256: prov.captures.iter().map(|c| c.sha256.as_str()).collect::<Vec<_>>().join(","),
+        verdict: verdict.into(),
+        result_json,
+        params: params_from_report(report),
+        noise: Vec::new(),
+    }
+}
+
+/// Opens the database and stores `rec`; returns its id.
+pub fn store_record(spec: &DbSpec, rec: &Record) -> Result<i64> {
+    let mut c = spec.open()?;
+    Ok(store::insert(c.as_mut(), rec).with_context(|| format!("{spec} refused the record"))?.0)
+}

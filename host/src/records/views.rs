@@ -1,0 +1,360 @@
+//! What `host records` prints: a list, one record, two records compared in units of their
+//! combined σ, and a production summary across sensors with outliers named.
+
+use super::store::Record;
+use std::fmt::Write as _;
+
+/// One line per record.
+pub fn list(records: &[Record]) -> String {
+    let mut o = String::from("   id  sensor            calibrated (UTC)      operator      rig           verdict\n");
+    for r in records {
+        let _ = writeln!(
+            o,
+            "{:5}  {:16}  {:20}  {:12}  {:12}  {}",
+            r.id.unwrap_or(0),
+            r.sensor_serial.as_deref().unwrap_or("-"),
+            r.calibrated_utc,
+            r.operator.as_deref().unwrap_or("-"),
+            r.rig.as_deref().unwrap_or("-"),
+            r.verdict
+        );
+    }
+    o
+}
+
+/// One record in full (without the stored JSON).
+pub fn show(r: &Record) -> String {
+    let mut o = String::new();
+    let s = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
+    let _ = writeln!(o, "record {}  ({})", r.id.unwrap_or(0), r.uid);
+    let _ = writeln!(o, "sensor {}  operator {}  rig {}", s(&r.sensor_serial), s(&r.operator), s(&r.rig));
+    let _ = writeln!(
+        o,
+        "calibrated {} by host {}; rig firmware {}; ±{} °/s",
+        r.calibrated_utc,
+        r.host_version,
+        s(&r.rig_firmware),
+        r.full_scale_dps
+    );
+    let _ = writeln!(o, "verdict: {}", r.verdict);
+    for (i, h) in r.captures_sha256.split(',').filter(|h| !h.is_empty()).enumerate() {
+        let _ = writeln!(o, "capture {} sha256 {h}", i + 1);
+    }
+    let _ = writeln!(o, "\nparameter                      value            1-σ  unit");
+    for p in &r.params {
+        let sigma = p.sigma.map_or("-".to_string(), |s| format!("{s:.3e}"));
+        let _ = writeln!(o, "{:28} {:>+14.6}  {:>11}  {}", p.name, p.value, sigma, p.unit);
+    }
+    if !r.noise.is_empty() {
+        let _ = writeln!(o, "\naxis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]");
+        for n in &r.noise {
+            let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+            let _ = writeln!(
+                o,
+                "  {}   {:>9}  {:>22}  {:>12}",
+                n.axis,
+                f(n.arw_deg_per_sqrt_h),
+                f(n.bias_instability_deg_per_h),
+                f(n.rrw_deg_per_h_per_sqrt_h)
+            );
+        }
+    }
+    o
+}
+
+/// One parameter of two records: the change and its size in combined σ.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Change {
+    /// Parameter name.
+    pub name: String,
+    /// Unit.
+    pub unit: String,
+    /// Value in the first record.
+    pub a: f64,
+    /// Value in the second.
+    pub b: f64,
+    /// (b − a) / √(σa² + σb²), when both σ are known and not both zero.
+    pub z: Option<f64>,
+}
+
+/// Change beyond which a parameter is flagged as changed, in combined σ: 3σ, two-sided 0.27 %
+/// false-alarm rate per parameter under Gaussian errors.
+pub const CHANGED_Z: f64 = 3.0;
+
+/// Every parameter present in both, in the first record's order.
+pub fn changes(a: &Record, b: &Record) -> Vec<Change> {
+    a.params
+        .iter()
+        .filter_map(|pa| {
+            let pb = b.params.iter().find(|p| p.name == pa.name)?;
+            let z = match (pa.sigma, pb.sigma) {
+                (Some(sa), Some(sb)) if sa.hypot(sb) > 0.0 => Some((pb.value - pa.value) / sa.hypot(sb)),
+                _ => None,
+            };
+            Some(Change { name: pa.name.clone(), unit: pa.unit.clone(), a: pa.value, b: pb.value, z })
+        })
+        .collect()
+}
+
+/// The comparison table.
+pub fn compare(a: &Record, b: &Record) -> String {
+    let mut o = String::new();
+    let s = |v: &Option<String>| v.clone().unwrap_or_else(|| "-".into());
+    let _ = writeln!(o, "A: record {} of {}, {}", a.id.unwrap_or(0), s(&a.sensor_serial), a.calibrated_utc);
+    let _ = writeln!(o, "B: record {} of {}, {}", b.id.unwrap_or(0), s(&b.sensor_serial), b.calibrated_utc);
+    if a.sensor_serial != b.sensor_serial {
+        let _ = writeln!(o, "note: different sensors");
+    }
+    let _ =
+        writeln!(o, "\nparameter                           A               B           B − A     z = (B−A)/σ  unit");
+    let ch = changes(a, b);
+    for c in &ch {
+        let z = c.z.map_or("      -".to_string(), |z| format!("{z:+8.2}"));
+        let flag = if c.z.is_some_and(|z| z.abs() > CHANGED_Z) { "  changed" } else { "" };
+        let _ =
+            writeln!(o, "{:28} {:>+14.6}  {:>+14.6}  {:>+12.3e}  {z}  {}{flag}", c.name, c.a, c.b, c.b - c.a, c.unit);
+    }
+    let n = ch.iter().filter(|c| c.z.is_some_and(|z| z.abs() > CHANGED_Z)).count();
+    let _ = writeln!(o, "\n{n} of {} parameters changed by more than {CHANGED_Z} σ", ch.len());
+    o
+}
+
+/// Robust spread: median and MAD-based σ (1.4826 · MAD, the σ of a Gaussian with that MAD).
+pub fn median_and_robust_sigma(values: &[f64]) -> (f64, f64) {
+    let med = median(values);
+    let dev: Vec<f64> = values.iter().map(|v| (v - med).abs()).collect();
+    (med, 1.4826 * median(&dev))
+}
+
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    match n {
+        0 => f64::NAN,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// Robust z beyond which a sensor is named an outlier: 3.5, the modified z-score threshold of
+/// Iglewicz and Hoaglin ("How to Detect and Handle Outliers", ASQC 1993).
+pub const OUTLIER_Z: f64 = 3.5;
+
+/// Distribution of one parameter across sensors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Distribution {
+    /// Parameter.
+    pub name: String,
+    /// Unit.
+    pub unit: String,
+    /// Sensors with a value.
+    pub n: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Sample standard deviation.
+    pub sd: f64,
+    /// Minimum, median, maximum.
+    pub min: f64,
+    /// Median.
+    pub median: f64,
+    /// Maximum.
+    pub max: f64,
+    /// Outliers: (sensor, value, robust z).
+    pub outliers: Vec<(String, f64, f64)>,
+    /// Values, for the histogram.
+    pub values: Vec<f64>,
+}
+
+/// Parameters in the production summary: sensitivity departures, offsets, tilts,
+/// non-orthogonality (then the noise figures where recorded).
+const SUMMARY_PARAMS: &[&str] = &[
+    "k_x_vs_nominal",
+    "k_y_vs_nominal",
+    "k_z_vs_nominal",
+    "offset_x",
+    "offset_y",
+    "offset_z",
+    "tilt_x",
+    "tilt_y",
+    "tilt_z",
+    "non_orthogonality_xy",
+    "non_orthogonality_xz",
+    "non_orthogonality_yz",
+];
+
+/// Distributions over the latest record of each sensor.
+pub fn distributions(latest: &[Record]) -> Vec<Distribution> {
+    let mut out = Vec::new();
+    for name in SUMMARY_PARAMS {
+        let vals: Vec<(String, f64)> = latest
+            .iter()
+            .filter_map(|r| Some((r.sensor_serial.clone()?, r.params.iter().find(|p| p.name == *name)?.value)))
+            .collect();
+        let unit = latest.iter().flat_map(|r| &r.params).find(|p| p.name == *name).map(|p| p.unit.clone());
+        out.extend(distribution(name, &unit.unwrap_or_default(), &vals));
+    }
+    // Noise figures, for the sensors whose latest session had a static stretch.
+    type Figure = fn(&super::NoiseRow) -> Option<f64>;
+    let figures: [(&str, &str, Figure); 3] = [
+        ("arw", "deg/sqrt(h)", |n| n.arw_deg_per_sqrt_h),
+        ("bias_instability", "deg/h", |n| n.bias_instability_deg_per_h),
+        ("rrw", "deg/h/sqrt(h)", |n| n.rrw_deg_per_h_per_sqrt_h),
+    ];
+    for (name, unit, f) in figures {
+        for axis in ['x', 'y', 'z'] {
+            let vals: Vec<(String, f64)> = latest
+                .iter()
+                .filter_map(|r| Some((r.sensor_serial.clone()?, f(r.noise.iter().find(|n| n.axis == axis)?)?)))
+                .collect();
+            out.extend(distribution(&format!("{name}_{axis}"), unit, &vals));
+        }
+    }
+    out
+}
+
+/// Statistics of (sensor, value) pairs; None without any.
+fn distribution(name: &str, unit: &str, vals: &[(String, f64)]) -> Option<Distribution> {
+    if vals.is_empty() {
+        return None;
+    }
+    let v: Vec<f64> = vals.iter().map(|(_, x)| *x).collect();
+    let n = v.len();
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let sd = if n > 1 { (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt() } else { 0.0 };
+    let (med, rs) = median_and_robust_sigma(&v);
+    let outliers = vals
+        .iter()
+        .filter(|_| rs > 0.0)
+        .map(|(s, x)| (s.clone(), *x, (x - med) / rs))
+        .filter(|(_, _, z)| z.abs() > OUTLIER_Z)
+        .collect();
+    Some(Distribution {
+        name: name.to_string(),
+        unit: unit.to_string(),
+        n,
+        mean,
+        sd,
+        min: v.iter().copied().fold(f64::INFINITY, f64::min),
+        median: med,
+        max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        outliers,
+        values: v,
+    })
+}
+
+/// A one-line histogram, `width` bins from min to max, heights as ` ▁▂▃▄▅▆▇█`.
+pub fn sparkline(values: &[f64], width: usize) -> String {
+    const BARS: [char; 9] = [' ', '▁', '▂', '▃', '▄', '▅', '▆', '▇', '█'];
+    let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let mut bins = vec![0usize; width];
+    for &v in values {
+        let i = if hi > lo { (((v - lo) / (hi - lo)) * width as f64) as usize } else { width / 2 };
+        bins[i.min(width - 1)] += 1;
+    }
+    let top = *bins.iter().max().unwrap_or(&1);
+    bins.iter().map(|&b| BARS[(b * 8).div_ceil(top).min(8)]).collect()
+}
+
+/// The production summary.
+pub fn summary(latest: &[Record]) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "{} sensors (latest calibration of each)\n", latest.len());
+    let _ = writeln!(
+        o,
+        "parameter              unit                 mean        sd         min      median         max  histogram (min..max)"
+    );
+    let dists = distributions(latest);
+    for d in &dists {
+        let _ = writeln!(
+            o,
+            "{:22} {:13} {:>+11.4} {:>9.4} {:>+11.4} {:>+11.4} {:>+11.4}  |{}|",
+            d.name,
+            d.unit,
+            d.mean,
+            d.sd,
+            d.min,
+            d.median,
+            d.max,
+            sparkline(&d.values, 24)
+        );
+    }
+    let _ = writeln!(o, "\nOutliers (robust z = (x − median)/(1.4826·MAD) beyond ±{OUTLIER_Z}):");
+    let mut any = false;
+    for d in &dists {
+        for (s, v, z) in &d.outliers {
+            any = true;
+            let _ = writeln!(o, "  {s}: {} = {v:+.4} {} (z {z:+.1})", d.name, d.unit);
+        }
+    }
+    if !any {
+        let _ = writeln!(o, "  none");
+    }
+    o
+}
+
+/// Bins of each summary histogram: √n rounded for the 20-100 sensors of a production batch
+/// gives 4-10; 10 keeps the figures comparable across batches.
+const HISTOGRAM_BINS: usize = 10;
+
+/// Counts in `HISTOGRAM_BINS` equal bins from min to max, with each bin's centre.
+pub fn histogram(values: &[f64]) -> Vec<(f64, usize)> {
+    let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let width = if hi > lo { (hi - lo) / HISTOGRAM_BINS as f64 } else { 1.0 };
+    let mut counts = vec![0usize; HISTOGRAM_BINS];
+    for &v in values {
+        counts[(((v - lo) / width) as usize).min(HISTOGRAM_BINS - 1)] += 1;
+    }
+    counts.into_iter().enumerate().map(|(i, c)| (lo + (i as f64 + 0.5) * width, c)).collect()
+}
+
+/// The production summary as an HTML page: the table, one histogram per parameter, outliers.
+pub fn summary_html(latest: &[Record]) -> String {
+    use crate::report::plots::{bar_chart, BarSeries, PlotSpec};
+    let mut doc = crate::report::Document::new(format!("Calibration records: {} sensors", latest.len()));
+    let dists = distributions(latest);
+    doc.paragraph("Latest calibration of each sensor. Outliers: robust z = (x − median)/(1.4826·MAD) beyond ±3.5.");
+    doc.table(
+        "Distributions across sensors",
+        &["parameter", "unit", "n", "mean", "sd", "min", "median", "max"],
+        dists
+            .iter()
+            .map(|d| {
+                vec![
+                    d.name.clone(),
+                    d.unit.clone(),
+                    d.n.to_string(),
+                    format!("{:+.4}", d.mean),
+                    format!("{:.4}", d.sd),
+                    format!("{:+.4}", d.min),
+                    format!("{:+.4}", d.median),
+                    format!("{:+.4}", d.max),
+                ]
+            })
+            .collect(),
+    );
+    let outliers: Vec<String> = dists
+        .iter()
+        .flat_map(|d| {
+            d.outliers.iter().map(move |(s, v, z)| format!("{s}: {} = {v:+.4} {} (z {z:+.1})", d.name, d.unit))
+        })
+        .collect();
+    if outliers.is_empty() {
+        doc.findings(["No outlier."]);
+    } else {
+        doc.findings(outliers);
+    }
+    for d in &dists {
+        let h = histogram(&d.values);
+        let spec = PlotSpec::new(format!("{} across sensors", d.name), format!("{} [{}]", d.name, d.unit), "sensors")
+            .with_size(800, 300);
+        let cats: Vec<String> = h.iter().map(|(c, _)| format!("{c:+.3}")).collect();
+        let series = [BarSeries {
+            label: "sensors per bin".into(),
+            values: h.iter().map(|(_, n)| *n as f64).collect(),
+            colour: 0,
+        }];
+        doc.figure_result(bar_chart(&spec, &cats, &series, None), format!("{}: histogram, bin centres", d.name));
+    }
+    doc.render()
+}
