@@ -52,6 +52,13 @@ pub enum Effect {
     /// axis adds to θ1' (a scale error that shrinks with speed), its horizontal component turns
     /// with the base. Three components, °/s.
     EarthRotation,
+    /// g-sensitivity: a bias in proportion to the specific force, here gravity, which turns in the
+    /// sensor frame with θ2 at the table's own frequency (so it bends directions), three
+    /// coefficients per axis, °/s per g.
+    GSensitivity,
+    /// The sensor-table axis z2 not perpendicular to the base axis z1 by ε: θ1' then has a part
+    /// θ1'·sin ε along z2, which adds to θ2' in proportion to speed.
+    TableTilt,
     /// Earth's rotation with its vertical part known from the latitude the user gave: only the
     /// two horizontal components (the heading) are fitted.
     EarthRotationAtLatitude,
@@ -72,6 +79,8 @@ impl Effect {
             Effect::DriftTemperature => "offset drift: linear in temperature".into(),
             Effect::RateScale => "rate-dependent scale (non-linearity, asymmetry)".into(),
             Effect::EarthRotation => "Earth rotation".into(),
+            Effect::GSensitivity => "g-sensitivity (bias from gravity)".into(),
+            Effect::TableTilt => "sensor-table axis not perpendicular to the base axis".into(),
             Effect::EarthRotationAtLatitude => "Earth rotation (vertical from the latitude)".into(),
             Effect::FilterGain => "gyro low-pass gain at the table frequency".into(),
             Effect::GearLag => "magnetic-gear lag growing with speed".into(),
@@ -94,6 +103,8 @@ impl Effect {
             Effect::DriftTemperature => "drift_temperature".into(),
             Effect::RateScale => "rate_scale".into(),
             Effect::EarthRotation => "earth_rotation".into(),
+            Effect::GSensitivity => "g_sensitivity".into(),
+            Effect::TableTilt => "table_tilt".into(),
             Effect::EarthRotationAtLatitude => "earth_rotation_at_latitude".into(),
             Effect::FilterGain => "filter_gain".into(),
             Effect::GearLag => "gear_lag".into(),
@@ -118,6 +129,12 @@ impl Effect {
             Effect::DriftPolynomial => "the zero-rate level wanders slowly",
             Effect::DriftTemperature => "the zero-rate level follows the die temperature",
             Effect::RateScale => "the sense chain is not linear, or its gain differs with the sign of the rate",
+            Effect::GSensitivity => {
+                "the MEMS proof masses feel gravity as a rate bias (typically 0.02-0.1 °/s/g); gravity turns with θ2 in the sensor frame"
+            }
+            Effect::TableTilt => {
+                "the sensor table's axis is built a fraction of a degree off 90° to the base axis (0.1-0.5° is typical of such a rig)"
+            }
             Effect::GearLag => {
                 "the sensor table trails the base by an angle that grows with speed, so the gears' pole-pass error reaches it later than the base angle says"
             }
@@ -144,6 +161,12 @@ impl Effect {
                 "its slow change within and between runs; runs in both directions separate the offset from the constant θ2' term without relying on it"
             }
             Effect::RateScale => "the harmonics it makes in proportion to each axis's own rate",
+            Effect::GSensitivity => {
+                "runs at two speeds: the bias does not scale with θ1', a direction or sensitivity does"
+            }
+            Effect::TableTilt => {
+                "runs at two speeds or directions: its part of θ2' scales with θ1', an offset does not"
+            }
             Effect::GearLag => {
                 "a transmission error seen at two speeds: its phase against the base angle shifts with speed, the gyro delay's does not"
             }

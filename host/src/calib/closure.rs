@@ -253,6 +253,7 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             SharedPar::Phase => ("phase δ − θ2'·τ".to_string(), 180.0 / std::f64::consts::PI, "°"),
             SharedPar::DriftTau => ("warm-up time constant T".to_string(), 1.0, "s"),
             SharedPar::GearLag => ("gear lag per unit of speed".to_string(), 1e3, "ms"),
+            SharedPar::TableTilt => ("sensor-table axis tilt ε".to_string(), 180.0 / std::f64::consts::PI, "°"),
             SharedPar::FilterCurvature => ("filter curvature κ (gain 1 − κω²)".to_string(), 1e6, "ms²"),
             SharedPar::EarthVertical => ("Earth rate, vertical".to_string(), 3600.0, "°/h"),
             SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at encoder zero".to_string(), 3600.0, "°/h"),
@@ -271,6 +272,9 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             LinCol::DriftTemp => ("offset vs temperature", 1.0, "°/s per °C"),
             LinCol::RateAbs => ("scale asymmetry (|r| term)", 1e6, "ppm of |r|"),
             LinCol::RateSq => ("odd quadratic (r·|r|) at full scale", 100.0 * full_scale_dps, "% of full scale"),
+            LinCol::Gravity(0) => ("g-sensitivity along package x", 1.0, "°/s per g"),
+            LinCol::Gravity(1) => ("g-sensitivity along package y", 1.0, "°/s per g"),
+            LinCol::Gravity(2) => ("g-sensitivity along package z", 1.0, "°/s per g"),
             _ => continue,
         };
         for (a, &ka) in k.iter().enumerate() {

@@ -66,6 +66,9 @@ pub enum LinCol {
     RateAbs,
     /// r·|r|, (°/s)².
     RateSq,
+    /// Component k of the specific force from gravity in the package frame, g: gravity holds
+    /// the lab's −z1, so a table at rest feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2.
+    Gravity(usize),
 }
 
 /// A parameter shared by all axes.
@@ -79,6 +82,8 @@ pub enum SharedPar {
     Phase,
     /// Warm-up time constant T, s.
     DriftTau,
+    /// Tilt ε of the sensor-table axis from perpendicular to the base axis, rad.
+    TableTilt,
     /// Lag of the sensor table behind the base per unit of speed, s: the transmission error's
     /// argument is θ1 + θ1'·c (`Effect::GearLag`).
     GearLag,
@@ -120,6 +125,8 @@ pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
         Effect::DriftPolynomial => (vec![LinCol::DriftT1, LinCol::DriftT2], vec![]),
         Effect::DriftTemperature => (vec![LinCol::DriftTemp], vec![]),
         Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
+        Effect::GSensitivity => (vec![LinCol::Gravity(0), LinCol::Gravity(1), LinCol::Gravity(2)], vec![]),
+        Effect::TableTilt => (vec![], vec![SharedPar::TableTilt]),
         Effect::FilterGain => (vec![], vec![SharedPar::FilterCurvature]),
         Effect::GearLag => (vec![], vec![SharedPar::GearLag]),
         Effect::EarthRotation => {
@@ -338,6 +345,8 @@ pub struct Point {
     pub d_filter: [f64; 3],
     /// θ1', rad/s.
     pub theta1_rate_rad_s: f64,
+    /// θ1', °/s.
+    pub theta1_rate_dps: f64,
 }
 
 /// Values derived from a model once per pass.
@@ -352,6 +361,8 @@ struct Shifts {
     filter_s2: f64,
     /// Gear lag c, s.
     gear_lag_s: f64,
+    /// Table tilt ε, rad.
+    table_tilt_rad: f64,
     /// (n, a, b) of each ripple harmonic.
     ripple: Vec<(u32, f64, f64)>,
 }
@@ -382,6 +393,7 @@ impl Shifts {
             drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
             filter_s2: m.theta_of(SharedPar::FilterCurvature).unwrap_or(0.0),
             gear_lag_s: m.theta_of(SharedPar::GearLag).unwrap_or(0.0),
+            table_tilt_rad: m.theta_of(SharedPar::TableTilt).unwrap_or(0.0),
             earth_dps: [
                 m.theta_of(SharedPar::EarthVertical).unwrap_or(m.earth_vertical_known_dps),
                 m.theta_of(SharedPar::EarthNorthAtZero).unwrap_or(0.0),
@@ -483,7 +495,9 @@ impl<'a> Evaluator<'a> {
         let rt = &self.rot_t[r];
         // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame by R_qᵀ.
         let (se, ce) = th_eff.sin_cos();
-        let w2 = [rate1 * se, rate1 * ce, rate2_eff];
+        // A table axis tilted by ε from perpendicular puts θ1'·sin ε along z2 (and scales the
+        // in-plane part by cos ε, 1 − ε²/2: second order, left out).
+        let w2 = [rate1 * se, rate1 * ce, rate2_eff + rate1 * sh.table_tilt_rad.sin()];
         let dw2 = [rate1 * ce, -rate1 * se];
         let to_package =
             |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
@@ -522,6 +536,7 @@ impl<'a> Evaluator<'a> {
             d_earth,
             d_filter,
             theta1_rate_rad_s,
+            theta1_rate_dps: rate1,
         }
     }
 
@@ -547,6 +562,8 @@ impl<'a> Evaluator<'a> {
                 let r = self.axis_rate(p, a);
                 r * r.abs()
             }
+            // z1 in the package frame is the vertical column of Earth's basis.
+            LinCol::Gravity(k) => p.d_earth[0][k],
         }
     }
 
@@ -580,6 +597,7 @@ impl<'a> Evaluator<'a> {
                     Col::Shared(SharedPar::IndexOffset) => e2,
                     Col::Shared(SharedPar::Phase) => d_shift,
                     Col::Shared(SharedPar::FilterCurvature) => dot(&u, &p.d_filter),
+                    Col::Shared(SharedPar::TableTilt) => ez * p.theta1_rate_dps,
                     // Moving the gear angle moves the rippled angle by (ripple − 1) and the
                     // rippled speed by θ2'·∂ripple/∂θ.
                     Col::Shared(SharedPar::GearLag) => {

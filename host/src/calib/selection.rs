@@ -174,6 +174,14 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
     if (evidence.phase || evidence.drift || evidence.orders[2]) && !has(Effect::EarthRotation) {
         out.push(plain(Effect::EarthRotation));
     }
+    // Both change the 1× signal or the offsets differently at different speeds.
+    if separates_delay_and_index(data) && (evidence.phase || evidence.drift) {
+        for e in [Effect::GSensitivity, Effect::TableTilt] {
+            if !has(e) {
+                out.push(plain(e));
+            }
+        }
+    }
     if evidence.rate_scale && !has(Effect::RateScale) {
         out.push(plain(Effect::RateScale));
     }

@@ -29,6 +29,41 @@ pub struct Effects {
     pub earth_rotation: Option<EarthRotation>,
     /// Periodic transmission error of the magnetic gears.
     pub gear_transmission: Option<GearTransmission>,
+    /// Rate bias in proportion to gravity.
+    pub g_sensitivity: Option<GSensitivity>,
+    /// Sensor-table axis off perpendicular to the base axis.
+    pub table_tilt: Option<TableTilt>,
+}
+
+/// Physical source: a MEMS gyro's proof masses are accelerometers too; typical parts show
+/// 0.02-0.1 °/s/g (the L3G4200D datasheet gives no figure). Rows: sensing axes; columns: the
+/// specific force along package x, y, z. Default: a mixed matrix of that size.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GSensitivity {
+    /// °/s per g.
+    pub dps_per_g: [[f64; 3]; 3],
+}
+
+impl Default for GSensitivity {
+    fn default() -> Self {
+        Self { dps_per_g: [[0.05, 0.01, 0.0], [0.0, -0.04, 0.01], [0.02, 0.0, 0.03]] }
+    }
+}
+
+/// Physical source: the sensor-table bearing is machined and assembled to a fraction of a
+/// degree; 0.1-0.5° is typical of such a fixture. Default 0.3°.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TableTilt {
+    /// ε, degrees.
+    pub tilt_deg: f64,
+}
+
+impl Default for TableTilt {
+    fn default() -> Self {
+        Self { tilt_deg: 0.3 }
+    }
 }
 
 /// Earth's sidereal rotation rate, rad/s (IERS Conventions 2010, §1.2: 7.292115×10⁻⁵ rad/s,
@@ -275,7 +310,7 @@ impl std::error::Error for EffectSpecError {}
 
 impl Effects {
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 10] = [
+    pub const NAMES: [(&'static str, &'static str); 12] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -286,6 +321,8 @@ impl Effects {
         ("mystery_harmonic", "3×θ2 harmonic on x, °/s (default 0.3)"),
         ("earth_rotation", "Earth's rotation at this latitude, degrees (default 45)"),
         ("gear_transmission", "magnetic-gear error at 12×, degrees (default 0.03; 24× scales with it)"),
+        ("g_sensitivity", "bias from gravity, largest coefficient in °/s/g (default 0.05)"),
+        ("table_tilt", "sensor-table axis off perpendicular, degrees (default 0.3)"),
     ];
 
     /// True when no effect is on.
@@ -364,6 +401,17 @@ impl Effects {
                     e.latitude_deg = v;
                 }
                 self.earth_rotation = Some(e);
+            }
+            "g_sensitivity" => {
+                let mut g = GSensitivity::default();
+                if let Some(v) = value {
+                    let scale = v / 0.05;
+                    g.dps_per_g = g.dps_per_g.map(|row| row.map(|x| x * scale));
+                }
+                self.g_sensitivity = Some(g);
+            }
+            "table_tilt" => {
+                self.table_tilt = Some(TableTilt { tilt_deg: value.unwrap_or(TableTilt::default().tilt_deg) })
             }
             "gear_transmission" => {
                 let mut g = GearTransmission::default();

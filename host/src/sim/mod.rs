@@ -27,8 +27,8 @@ mod truth;
 mod tests;
 
 pub use effects::{
-    EffectSpecError, Effects, FilterDelay, GearRatioError, IndexOffset, MysteryHarmonic, Nonlinearity, OffsetDrift,
-    RippleHarmonic, SpeedRipple,
+    EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission, IndexOffset,
+    MysteryHarmonic, Nonlinearity, OffsetDrift, RippleHarmonic, SpeedRipple, TableTilt,
 };
 pub use rig::{serve, Port, SimRig, HOST_LINK_TIMEOUT_S};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;

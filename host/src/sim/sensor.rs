@@ -3,7 +3,7 @@
 //! Model (EXCITER.md eq. 6): `v = K S ω_s + v_off`, with each axis `s_i` tilted from the package
 //! axis `e_i`, its own sensitivity `k_i` and offset, white noise, rounding to i16 and clipping.
 
-use super::effects::{Effects, MysteryHarmonic, Nonlinearity, OffsetDrift};
+use super::effects::{Effects, GSensitivity, MysteryHarmonic, Nonlinearity, OffsetDrift};
 use nalgebra::{Matrix3, Vector3};
 use protocol::FullScale;
 use rand::Rng;
@@ -137,6 +137,9 @@ pub struct SenseChain {
     full_scale_dps: f64,
     nonlinearity: Option<Nonlinearity>,
     mystery: Option<MysteryHarmonic>,
+    /// R_qᵀ: table frame → package frame (for the specific force).
+    package_from_table: Matrix3<f64>,
+    g_sensitivity: Option<GSensitivity>,
 }
 
 impl SenseChain {
@@ -148,6 +151,8 @@ impl SenseChain {
             full_scale_dps: f64::from(fs.range_dps()),
             nonlinearity: effects.nonlinearity,
             mystery: effects.mystery_harmonic,
+            package_from_table: r_pose.transpose(),
+            g_sensitivity: effects.g_sensitivity,
         }
     }
 
@@ -160,6 +165,14 @@ impl SenseChain {
             for v in &mut y {
                 let sign = if *v >= 0.0 { 1.0 } else { -1.0 };
                 *v = *v * (1.0 + 0.5 * sign * n.asymmetry) + n.quadratic_fs * *v * v.abs() / self.full_scale_dps;
+            }
+        }
+        if let Some(g) = &self.g_sensitivity {
+            // At rest the table feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2 (EXCITER.md eq. 1).
+            let (s2, c2) = theta2_rad.sin_cos();
+            let f = self.package_from_table * Vector3::new(s2, c2, 0.0);
+            for (v, row) in y.iter_mut().zip(&g.dps_per_g) {
+                *v += row[0] * f[0] + row[1] * f[1] + row[2] * f[2];
             }
         }
         if let Some(m) = &self.mystery {

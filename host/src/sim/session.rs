@@ -417,6 +417,10 @@ impl Session {
     fn sensed_counts_at(&self, chain: &SenseChain, st: &BaseState) -> [f64; 3] {
         let theta2 = self.theta2_rad(st.theta1_deg);
         let mut w2 = omega2(st.theta1_rate_dps, theta2, self.theta2_rate_dps(st));
+        if let Some(t) = &self.effects.table_tilt {
+            // z1 leans by ε towards z2: θ1' gets a part along z2.
+            w2[2] += st.theta1_rate_dps * t.tilt_deg.to_radians().sin();
+        }
         if let Some(e) = &self.effects.earth_rotation {
             // θ1 on the encoder's scale: the heading is measured from the encoder's zero.
             let theta1 = st.theta1_deg.to_radians()
