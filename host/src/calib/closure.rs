@@ -444,6 +444,52 @@ fn final_cal_report(base: &CalReport, s: &State, data: &LoopData) -> CalReport {
     r
 }
 
+/// With a drift model the offset column alone is not "the offset": says what time or die
+/// temperature the reported offsets refer to, and what the model gives at the first sample of the
+/// first run (where a sensor's datasheet offset is usually taken: at power-up).
+fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
+    let drift = m.effects.iter().copied().find(|e| e.is_drift())?;
+    let refers_to = match drift {
+        Effect::DriftWarmUp => "the warmed-up level (t → ∞ of the exponential)",
+        Effect::DriftPolynomial => "the middle of the capture's time span, less half the quadratic term",
+        Effect::DriftTemperature => "the capture's mean die temperature",
+        _ => return None,
+    };
+    let r = data.runs.iter().position(|r| r.n_valid > 0)?;
+    let i = data.runs[r].valid.iter().position(|&v| v)?;
+    let ev = super::extended::Evaluator::new(data, m);
+    let p = ev.point(r, i);
+    let at_start: Vec<String> = (0..3)
+        .map(|a| {
+            let v: f64 = m
+                .lin
+                .iter()
+                .zip(&m.beta[a])
+                .filter(|(c, _)| {
+                    matches!(
+                        c,
+                        LinCol::One
+                            | LinCol::DriftExp
+                            | LinCol::DriftExpFixed(_)
+                            | LinCol::DriftT1
+                            | LinCol::DriftT2
+                            | LinCol::DriftTemp
+                    )
+                })
+                .map(|(&c, b)| b * ev.lin_value(c, &p, a))
+                .sum();
+            format!("{v:+.2}")
+        })
+        .collect();
+    Some(format!(
+        "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts.",
+        drift.name(),
+        data.kin.runs[r].label,
+        data.kin.runs[r].samples[i].t_s,
+        at_start.join(" / ")
+    ))
+}
+
 /// Earth's rate, °/s (IERS Conventions 2010: 7.292115e-5 rad/s).
 fn earth_rate_dps() -> f64 {
     crate::sim::effects::EARTH_RATE_RAD_S.to_degrees()
@@ -547,6 +593,9 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
             "Delay and index offset are separable here: the runs turn at more than one θ2' (speed or direction)."
                 .into(),
         );
+    }
+    if let Some(note) = offset_reference_note(&state.fitted.model, &data) {
+        notes.push(note);
     }
     if effects.iter().any(|e| e.is_drift()) && !both_directions(&data) {
         asks.push(

@@ -174,12 +174,16 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
     if (evidence.phase || evidence.drift || evidence.orders[2]) && !has(Effect::EarthRotation) {
         out.push(plain(Effect::EarthRotation));
     }
-    // Both change the 1× signal or the offsets differently at different speeds.
+    // Both change the 1× signal or the offsets differently at different speeds. With nine
+    // parameters g-sensitivity could also soak up a phase error, so it comes after the phase
+    // effects, which are more common and far cheaper, have had their turn.
     if separates_delay_and_index(data) && (evidence.phase || evidence.drift) {
-        for e in [Effect::GSensitivity, Effect::TableTilt] {
-            if !has(e) {
-                out.push(plain(e));
-            }
+        let phase_modelled = has(Effect::Delay) || has(Effect::IndexOffset) || has(Effect::Phase);
+        if !has(Effect::TableTilt) {
+            out.push(plain(Effect::TableTilt));
+        }
+        if !has(Effect::GSensitivity) && (phase_modelled || !evidence.phase) {
+            out.push(plain(Effect::GSensitivity));
         }
     }
     if evidence.rate_scale && !has(Effect::RateScale) {
