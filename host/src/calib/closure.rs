@@ -255,12 +255,17 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             SharedPar::GearLag => ("gear lag per unit of speed".to_string(), 1e3, "ms"),
             SharedPar::TableTilt => ("sensor-table axis tilt ε".to_string(), 180.0 / std::f64::consts::PI, "°"),
             SharedPar::FilterCurvature => ("filter curvature κ (gain 1 − κω²)".to_string(), 1e6, "ms²"),
+            SharedPar::Fixture(k) => {
+                (format!("pose-2 fixture rotation about {}2", ['x', 'y', 'z'][k]), 180.0 / std::f64::consts::PI, "°")
+            }
             SharedPar::EarthVertical => ("Earth rate, vertical".to_string(), 3600.0, "°/h"),
             SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at encoder zero".to_string(), 3600.0, "°/h"),
             SharedPar::EarthWestAtZero => ("Earth rate, horizontal 90° on".to_string(), 3600.0, "°/h"),
-            SharedPar::Harmonic { order, quadrature } => {
-                (format!("table-speed ripple {order}× {}", if quadrature { "sin" } else { "cos" }), 1e6, "ppm of θ2'")
-            }
+            SharedPar::Harmonic { order, quadrature, pose } => (
+                format!("table-speed ripple {order}× {}, {pose}", if quadrature { "sin" } else { "cos" }),
+                1e6,
+                "ppm of θ2'",
+            ),
         };
         out.push(EffectParam { name, value: v * scale, sigma: s * scale, unit: unit.into() });
     }
@@ -555,7 +560,7 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
     // the drift models and costs 10-20 ppm of σ in every sensitivity, so it is a candidate like
     // the others, and while it is not in the model the σ of every k carries what it may do
     // (`earth_type_b_rel`). Its Jacobian goes through M, so it starts from the fitted linear model.
-    let mut first = fit(&data, Model::base(), [1.0; 3])?;
+    let mut first = fit(&data, Model::base_for(&data.poses), [1.0; 3])?;
     if let Some(lat) = opts.latitude_deg {
         let mut with_earth = first.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
         with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();

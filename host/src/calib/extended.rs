@@ -15,6 +15,7 @@ use super::catalogue::{Effect, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{KinSample, Kinematics};
 use super::lsq::is_clipped;
+use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// Longest delay (either sign) the model represents, s: 50 ms is 6× the slowest L3G4200D filter
@@ -89,6 +90,9 @@ pub enum SharedPar {
     GearLag,
     /// The filter's curvature κ, s²: output = M(ω + κ·ω̈) at the delayed time.
     FilterCurvature,
+    /// Rotation of the pose-2 fixture against pose 1 about the pose-2 table axis x2, y2 or z2
+    /// (0, 1, 2), rad: R2 → (I + [e]×)·R2.
+    Fixture(usize),
     /// Earth's rate along the base axis z1 (vertical), °/s.
     EarthVertical,
     /// Earth's horizontal rate, the component along the base-frame direction the encoder's zero
@@ -96,13 +100,17 @@ pub enum SharedPar {
     EarthNorthAtZero,
     /// The horizontal component 90° further on, °/s.
     EarthWestAtZero,
-    /// Relative table-speed ripple at `order`× θ2: θ2' → θ2'(1 + a·cos nθ2 + b·sin nθ2), with the
-    /// matching angle ripple; `quadrature` selects b.
+    /// Relative table-speed ripple at `order`× θ2 in one pose: θ2' → θ2'(1 + a·cos nθ2 + b·sin nθ2),
+    /// with the matching angle ripple; `quadrature` selects b. The ripple is tied to the gear mesh,
+    /// whose phase against the index holds while the table stays engaged; a remount can re-seat it,
+    /// so each pose has its own pair (`Effect::TableHarmonic`).
     Harmonic {
         /// n.
         order: u32,
         /// false: a (cosine in speed), true: b (sine in speed).
         quadrature: bool,
+        /// The pose (mount) the pair holds for.
+        pose: Pose,
     },
 }
 
@@ -115,8 +123,8 @@ pub enum Col {
     Shared(SharedPar),
 }
 
-/// The columns an effect adds.
-pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
+/// The columns an effect adds, for data holding `poses`.
+pub fn effect_columns(e: Effect, poses: &[Pose]) -> (Vec<LinCol>, Vec<SharedPar>) {
     match e {
         Effect::Delay => (vec![], vec![SharedPar::Delay]),
         Effect::IndexOffset => (vec![], vec![SharedPar::IndexOffset]),
@@ -127,6 +135,7 @@ pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
         Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
         Effect::GSensitivity => (vec![LinCol::Gravity(0), LinCol::Gravity(1), LinCol::Gravity(2)], vec![]),
         Effect::TableTilt => (vec![], vec![SharedPar::TableTilt]),
+        Effect::PoseFixture => (vec![], vec![SharedPar::Fixture(2)]),
         Effect::FilterGain => (vec![], vec![SharedPar::FilterCurvature]),
         Effect::GearLag => (vec![], vec![SharedPar::GearLag]),
         Effect::EarthRotation => {
@@ -135,7 +144,10 @@ pub fn effect_columns(e: Effect) -> (Vec<LinCol>, Vec<SharedPar>) {
         Effect::EarthRotationAtLatitude => (vec![], vec![SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero]),
         Effect::TableHarmonic(order) => (
             vec![],
-            vec![SharedPar::Harmonic { order, quadrature: false }, SharedPar::Harmonic { order, quadrature: true }],
+            poses
+                .iter()
+                .flat_map(|&pose| [false, true].map(|quadrature| SharedPar::Harmonic { order, quadrature, pose }))
+                .collect(),
         ),
     }
 }
@@ -165,6 +177,8 @@ pub struct LoopData {
     pub t_mid_s: f64,
     /// Half-span, s.
     pub t_half_s: f64,
+    /// The poses the runs are in, in order of first appearance.
+    pub poses: Vec<Pose>,
 }
 
 impl LoopData {
@@ -228,7 +242,13 @@ impl LoopData {
                 .collect();
             runs.push(RunData { valid, temp_c, n_valid });
         }
-        Self { kin, runs, t0_s: t_lo, t_mid_s: 0.5 * (t_lo + t_hi), t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9) }
+        let mut poses: Vec<Pose> = Vec::new();
+        for r in &kin.runs {
+            if !poses.contains(&r.pose) {
+                poses.push(r.pose);
+            }
+        }
+        Self { kin, runs, t0_s: t_lo, t_mid_s: 0.5 * (t_lo + t_hi), t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9), poses }
     }
 }
 
@@ -250,11 +270,18 @@ pub struct Model {
     pub s_hat: [Vector3<f64>; 3],
     /// Earth's vertical rate when it is known (from a latitude) rather than fitted, °/s.
     pub earth_vertical_known_dps: f64,
+    /// Poses of the data, for the effects with a parameter set per pose.
+    pub poses: Vec<Pose>,
 }
 
 impl Model {
-    /// The linear model of EXCITER.md eq. 6 with all coefficients 0.
+    /// The linear model of EXCITER.md eq. 6 with all coefficients 0, for data in both poses.
     pub fn base() -> Self {
+        Self::base_for(&Pose::ALL)
+    }
+
+    /// The linear model for data holding `poses`.
+    pub fn base_for(poses: &[Pose]) -> Self {
         Self {
             effects: Vec::new(),
             lin: vec![LinCol::Omega(0), LinCol::Omega(1), LinCol::Omega(2), LinCol::One],
@@ -263,6 +290,7 @@ impl Model {
             theta: Vec::new(),
             s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
             earth_vertical_known_dps: 0.0,
+            poses: poses.to_vec(),
         }
     }
 
@@ -289,7 +317,7 @@ impl Model {
     /// The model with `effect` added, its linear coefficients and shared parameters set from
     /// `init_lin` (per axis, one per new linear column) and `init_shared`.
     pub fn with(&self, effect: Effect, init_lin: [Vec<f64>; 3], init_shared: Vec<f64>) -> Self {
-        let (lin, shared) = effect_columns(effect);
+        let (lin, shared) = effect_columns(effect, &self.poses);
         let mut m = self.clone();
         m.effects.push(effect);
         m.lin.extend(lin);
@@ -337,12 +365,17 @@ pub struct Point {
     pub t_scaled: f64,
     /// Smoothed temperature from the capture mean, °C.
     pub temp_c: f64,
-    /// Base angle against the ground from the encoder, rad (the transmission error's argument).
-    pub gear_rad: f64,
+    /// The gear mesh's angle, rad: the transmission error's argument (index-referenced θ2 with
+    /// the gear lag).
+    pub mesh_rad: f64,
+    /// The run's pose (the transmission error has a parameter set per pose).
+    pub pose: Pose,
     /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame.
     pub d_earth: [[f64; 3]; 3],
     /// ω̈ in the package frame, °/s³ (∂ω_s/∂κ).
     pub d_filter: [f64; 3],
+    /// ∂ω_s/∂(pose-2 fixture rotation about x2, y2, z2), °/s per rad (zero outside pose 2).
+    pub d_fixture: [[f64; 3]; 3],
     /// θ1', rad/s.
     pub theta1_rate_rad_s: f64,
     /// θ1', °/s.
@@ -363,26 +396,28 @@ struct Shifts {
     gear_lag_s: f64,
     /// Table tilt ε, rad.
     table_tilt_rad: f64,
-    /// (n, a, b) of each ripple harmonic.
-    ripple: Vec<(u32, f64, f64)>,
+    /// Pose-2 fixture rotation, rad.
+    fixture_rad: [f64; 3],
+    /// (n, pose, a, b) of each ripple harmonic.
+    ripple: Vec<(u32, Pose, f64, f64)>,
 }
 
 impl Shifts {
     fn of(m: &Model) -> Self {
-        let mut ripple: Vec<(u32, f64, f64)> = Vec::new();
+        let mut ripple: Vec<(u32, Pose, f64, f64)> = Vec::new();
         for (&p, &v) in m.shared.iter().zip(&m.theta) {
-            if let SharedPar::Harmonic { order, quadrature } = p {
-                let i = match ripple.iter().position(|h| h.0 == order) {
+            if let SharedPar::Harmonic { order, quadrature, pose } = p {
+                let i = match ripple.iter().position(|h| h.0 == order && h.1 == pose) {
                     Some(i) => i,
                     None => {
-                        ripple.push((order, 0.0, 0.0));
+                        ripple.push((order, pose, 0.0, 0.0));
                         ripple.len() - 1
                     }
                 };
                 if quadrature {
-                    ripple[i].2 = v;
+                    ripple[i].3 = v;
                 } else {
-                    ripple[i].1 = v;
+                    ripple[i].2 = v;
                 }
             }
         }
@@ -394,6 +429,7 @@ impl Shifts {
             filter_s2: m.theta_of(SharedPar::FilterCurvature).unwrap_or(0.0),
             gear_lag_s: m.theta_of(SharedPar::GearLag).unwrap_or(0.0),
             table_tilt_rad: m.theta_of(SharedPar::TableTilt).unwrap_or(0.0),
+            fixture_rad: std::array::from_fn(|k| m.theta_of(SharedPar::Fixture(k)).unwrap_or(0.0)),
             earth_dps: [
                 m.theta_of(SharedPar::EarthVertical).unwrap_or(m.earth_vertical_known_dps),
                 m.theta_of(SharedPar::EarthNorthAtZero).unwrap_or(0.0),
@@ -477,15 +513,16 @@ impl<'a> Evaluator<'a> {
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
-        // The transmission error is a function of the base's angle against the ground (the
-        // gear mesh), from the encoder; the index offset does not move it.
+        // The transmission error is periodic in the mesh angle, which moves with the table
+        // against the index (1:1 gears): the index-referenced θ2, lagging by the gear lag. The
+        // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
         let theta1_rad = rk.theta1_at_index_rad + theta2 / rk.gear_ratio;
-        let gear_rad = theta1_rad + sh.gear_lag_s * theta1_rate_rad_s;
+        let mesh_rad = theta2 + sh.gear_lag_s * theta1_rate_rad_s;
         let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
-        for &(n, a, b) in &sh.ripple {
+        for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == rk.pose) {
             let nf = f64::from(n);
-            let (sn, cn) = (nf * gear_rad).sin_cos();
+            let (sn, cn) = (nf * mesh_rad).sin_cos();
             th_eff += (a * sn - b * cn) / nf;
             ripple += a * cn + b * sn;
             dripple += nf * (b * cn - a * sn);
@@ -493,33 +530,56 @@ impl<'a> Evaluator<'a> {
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
-        // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame by R_qᵀ.
+        // The pose-2 fixture turned by e: R2 → (I + [e]×)·R2, so a table-frame vector v reaches
+        // the package as R2ᵀ(v − e × v) (first order: e is a fraction of a degree).
+        let e = if rk.pose == Pose::Two { sh.fixture_rad } else { [0.0; 3] };
+        let to_package = |v: &[f64; 3]| -> [f64; 3] {
+            let f = sub(v, &cross(&e, v));
+            std::array::from_fn(|i| rt[i][0] * f[0] + rt[i][1] * f[1] + rt[i][2] * f[2])
+        };
+        // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame.
         let (se, ce) = th_eff.sin_cos();
         // A table axis tilted by ε from perpendicular puts θ1'·sin ε along z2 (and scales the
         // in-plane part by cos ε, 1 − ε²/2: second order, left out).
         let w2 = [rate1 * se, rate1 * ce, rate2_eff + rate1 * sh.table_tilt_rad.sin()];
-        let dw2 = [rate1 * ce, -rate1 * se];
-        let to_package =
-            |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
+        let mut dw2 = [rate1 * ce, -rate1 * se, 0.0];
         // ω̈ of the table motion at steady speed (Earth's part is 1e-5 of it): the θ1' sinusoid
         // turns at θ2', so its second derivative is −θ2'²·(θ1' sin θ2, θ1' cos θ2, 0).
         let w2_rad_s = rate2.to_radians();
-        let d_filter = to_package(&[-w2_rad_s * w2_rad_s * w2[0], -w2_rad_s * w2_rad_s * w2[1], 0.0]);
+        let w2_ddot = [-w2_rad_s * w2_rad_s * w2[0], -w2_rad_s * w2_rad_s * w2[1], 0.0];
+        let d_filter = to_package(&w2_ddot);
+        let filter_dw2 = dw2;
         // Earth's rate in the table frame O2, per unit of each component (module docs of
         // `earth_basis`), added to ω2.
         let basis = earth_basis(theta1_rad, th_eff);
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
-        let to_package =
-            |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
+        // The lab-fixed rate turns with θ2 too: ∂(basis)/∂θ2.
+        let (s1, c1) = theta1_rad.sin_cos();
+        let d_basis = [[ce, -se, 0.0], [s1 * se, s1 * ce, 0.0], [-c1 * se, -c1 * ce, 0.0]];
+        for (i, d) in dw2.iter_mut().enumerate() {
+            *d += ev * d_basis[0][i] + en * d_basis[1][i] + ew * d_basis[2][i];
+        }
         let d_earth = [to_package(&basis[0]), to_package(&basis[1]), to_package(&basis[2])];
+        // ∂ω_s/∂e_k = −R2ᵀ(e_k × v) = R2ᵀ(v × e_k), v = ω2 + κ·ω̈2, in pose 2 only.
+        let d_fixture: [[f64; 3]; 3] = if rk.pose == Pose::Two {
+            let v: [f64; 3] = std::array::from_fn(|i| w2[i] + sh.filter_s2 * w2_ddot[i]);
+            std::array::from_fn(|k| {
+                let c = cross(&v, &std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 }));
+                std::array::from_fn(|i| rt[i][0] * c[0] + rt[i][1] * c[1] + rt[i][2] * c[2])
+            })
+        } else {
+            [[0.0; 3]; 3]
+        };
         let omega = to_package(&w2);
         let omega: [f64; 3] = std::array::from_fn(|i| omega[i] + sh.filter_s2 * d_filter[i]);
         // The filter's ω̈ term turns with θ2 as the sinusoid does, scaled by −κ·θ2'².
         let filter_scale = 1.0 - sh.filter_s2 * w2_rad_s * w2_rad_s;
-        let d_theta2 = std::array::from_fn(|i| filter_scale * (rt[i][0] * dw2[0] + rt[i][1] * dw2[1]));
-
-        let d_rate2 = std::array::from_fn(|i| rt[i][2]);
+        let d_theta2: [f64; 3] = {
+            let (a, b) = (to_package(&filter_dw2), to_package(&dw2));
+            std::array::from_fn(|i| filter_scale * a[i] + (b[i] - a[i]))
+        };
+        let d_rate2 = to_package(&[0.0, 0.0, 1.0]);
         Point {
             omega,
             d_theta2,
@@ -532,9 +592,11 @@ impl<'a> Evaluator<'a> {
             t_rel_s: s.t_s - self.data.t0_s,
             t_scaled: (s.t_s - self.data.t_mid_s) / self.data.t_half_s,
             temp_c: f64::from(self.data.runs[r].temp_c[i]),
-            gear_rad,
+            mesh_rad,
+            pose: rk.pose,
             d_earth,
             d_filter,
+            d_fixture,
             theta1_rate_rad_s,
             theta1_rate_dps: rate1,
         }
@@ -603,6 +665,7 @@ impl<'a> Evaluator<'a> {
                     Col::Shared(SharedPar::GearLag) => {
                         p.theta1_rate_rad_s * (e2 * (p.dtheta_eff - 1.0) + ez * p.drate_eff_dps)
                     }
+                    Col::Shared(SharedPar::Fixture(k)) => dot(&u, &p.d_fixture[k]),
                     Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
                     Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
                     Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),
@@ -611,9 +674,10 @@ impl<'a> Evaluator<'a> {
                         let t = self.shifts.drift_tau_s;
                         self.c_exp[a] * (-p.t_rel_s / t).exp() * p.t_rel_s / (t * t)
                     }
-                    Col::Shared(SharedPar::Harmonic { order, quadrature }) => {
+                    Col::Shared(SharedPar::Harmonic { pose, .. }) if pose != p.pose => 0.0,
+                    Col::Shared(SharedPar::Harmonic { order, quadrature, .. }) => {
                         let n = f64::from(order);
-                        let (sn, cn) = (n * p.gear_rad).sin_cos();
+                        let (sn, cn) = (n * p.mesh_rad).sin_cos();
                         if quadrature {
                             -e2 * cn / n + ez * p.rate2_dps * sn
                         } else {
@@ -632,12 +696,24 @@ impl<'a> Evaluator<'a> {
 /// e_z2 = (0, 0, 1) and u = z1 × z2 = (cos θ2, −sin θ2, 0), right-handed as (e_z2, u, z1). A
 /// lab-fixed horizontal vector at azimuth ψ lies at ψ − θ1 in the base frame, cos(ψ−θ1)·e_z2 +
 /// sin(ψ−θ1)·u; expanding in cos ψ and sin ψ gives the two horizontal columns. θ1 is the
-/// encoder's angle (`Point::gear_rad`), θ2 the index-referenced table angle.
+/// encoder's angle, θ2 the index-referenced table angle.
 #[inline]
 fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
     let (s1, c1) = theta1_rad.sin_cos();
     let (s2, c2) = theta2_rad.sin_cos();
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
+}
+
+/// a × b.
+#[inline]
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// a − b.
+#[inline]
+fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| a[i] - b[i])
 }
 
 /// sin and cos of n·θ for n = 0..=MAX_HARMONIC_ORDER, by the angle-addition recurrence (one

@@ -134,7 +134,7 @@ impl Evidence {
 pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> Vec<Candidate> {
     let has = |e: Effect| current.contains(&e);
     let plain = |effect: Effect| {
-        let (lin, shared) = effect_columns(effect);
+        let (lin, shared) = effect_columns(effect, &data.poses);
         Candidate {
             effect,
             cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
@@ -181,6 +181,9 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
         let phase_modelled = has(Effect::Delay) || has(Effect::IndexOffset) || has(Effect::Phase);
         if !has(Effect::TableTilt) {
             out.push(plain(Effect::TableTilt));
+        }
+        if phase_modelled && !has(Effect::PoseFixture) && data.poses.len() == 2 {
+            out.push(plain(Effect::PoseFixture));
         }
         if !has(Effect::GSensitivity) && (phase_modelled || !evidence.phase) {
             out.push(plain(Effect::GSensitivity));
@@ -236,7 +239,7 @@ pub struct DriftChoice {
 /// warm-up's time constant is not in that solution (its grid value stands).
 fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
     let ns = state.model.shared.len();
-    let (lin, shared) = effect_columns(c.effect);
+    let (lin, shared) = effect_columns(c.effect, &state.model.poses);
     let mut model = state.model.with(
         c.effect,
         std::array::from_fn(|_| vec![0.0; lin.len()]),
@@ -348,7 +351,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 match fit_of(i) {
                     Ok(f) => {
                         seen.push(sc.effect);
-                        let (lin, shared) = effect_columns(sc.effect);
+                        let (lin, shared) = effect_columns(sc.effect, &data.poses);
                         let k = 3 * lin.len() + shared.len();
                         let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
                         choices.push((i, f, bic));
