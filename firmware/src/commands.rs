@@ -5,7 +5,7 @@
 use crate::link::Received;
 use crate::rig::{GyroControl, Rig, Run};
 use crate::supervisor::MAX_RATE_MDPS;
-use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, StartRun, ENCODER_COUNTS_PER_REV};
+use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, RunStopped, StartRun, ENCODER_COUNTS_PER_REV};
 
 /// Milli-degrees per second to base-table encoder counts per second, rounded to nearest:
 /// 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
@@ -14,9 +14,9 @@ pub fn rate_cps(rate_mdps: u32) -> u32 {
     ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV) as u32
 }
 
-/// Signed setpoint for a start request, or why it is refused.
+/// Signed setpoint for a start request (0 for a static run), or why it is refused.
 pub fn setpoint_cps(start: &StartRun) -> Result<i32, CmdResult> {
-    if start.rate_mdps == 0 || start.rate_mdps > MAX_RATE_MDPS {
+    if start.rate_mdps > MAX_RATE_MDPS {
         return Err(CmdResult::InvalidArgument);
     }
     Ok(start.direction.sign() * rate_cps(start.rate_mdps) as i32)
@@ -36,9 +36,17 @@ impl Rig {
             }
             Command::Start(start) => self.start(t_us, &start),
             Command::Stop => {
-                if let Run::Running { tag } = self.run {
-                    self.speed_loop.set_target(0);
-                    self.run = Run::Stopping { tag };
+                match self.run {
+                    Run::Running { tag } => {
+                        self.speed_loop.set_target(0);
+                        self.run = Run::Stopping { tag };
+                    }
+                    // Nothing turns: the run ends now.
+                    Run::Static { tag } => {
+                        self.run = Run::Idle;
+                        self.link.send(&RigMsg::RunStopped(RunStopped { t_us, run_tag: tag }));
+                    }
+                    Run::Idle | Run::Stopping { .. } => {}
                 }
                 CmdResult::Ok
             }
@@ -82,7 +90,8 @@ impl Rig {
         self.motor_off();
         self.motor_faults = 0;
         self.speed_loop.set_target(target_cps);
-        self.run = Run::Running { tag: start.run_tag };
+        self.run =
+            if start.is_static() { Run::Static { tag: start.run_tag } } else { Run::Running { tag: start.run_tag } };
         self.link.send(&RigMsg::RunStarted(RunStarted {
             t_us,
             run_tag: start.run_tag,
@@ -112,7 +121,7 @@ mod tests {
         let run = |rate_mdps, direction| StartRun { rate_mdps, direction, run_tag: 1 };
         assert_eq!(setpoint_cps(&run(180_000, Direction::Cw)), Ok(-162_000));
         assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS, Direction::Ccw)), Ok(324_000));
-        assert_eq!(setpoint_cps(&run(0, Direction::Ccw)), Err(CmdResult::InvalidArgument));
+        assert_eq!(setpoint_cps(&run(0, Direction::Cw)), Ok(0), "a static run");
         assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS + 1, Direction::Ccw)), Err(CmdResult::InvalidArgument));
     }
 }

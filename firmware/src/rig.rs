@@ -74,13 +74,15 @@ pub(crate) enum Run {
     Running { tag: u8 },
     /// Ramping down after a Stop.
     Stopping { tag: u8 },
+    /// A static run: motor off, samples framed by RunStarted/RunStopped (a Start at 0 m°/s).
+    Static { tag: u8 },
 }
 
 impl Run {
     pub(crate) fn tag(self) -> Option<u8> {
         match self {
             Run::Idle => None,
-            Run::Running { tag } | Run::Stopping { tag } => Some(tag),
+            Run::Running { tag } | Run::Stopping { tag } | Run::Static { tag } => Some(tag),
         }
     }
 }
@@ -197,7 +199,7 @@ impl Rig {
             }
         }
         self.applied = match self.run {
-            Run::Idle => MotorCommand::OFF,
+            Run::Idle | Run::Static { .. } => MotorCommand::OFF,
             Run::Running { .. } => self.drive(delta),
             Run::Stopping { tag } => {
                 let cmd = self.drive(delta);

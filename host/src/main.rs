@@ -71,6 +71,11 @@ enum Cmd {
         /// 180,90,-180) to separate the offsets from the constant θ2' term as well.
         #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true, value_parser = parse_rate)]
         rates_dps: Vec<f64>,
+        /// Live: end the session with a static run (motor off) of this many seconds in the last
+        /// pose, for noise figures (Allan deviation, ARW, bias instability, RRW). An hour gives
+        /// bias instability and RRW that are more than indicative.
+        #[arg(long, value_parser = parse_duration, conflicts_with = "replay")]
+        static_s: Option<f64>,
         /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
         /// `x.cap`, if present).
         #[arg(long, requires = "replay")]
@@ -127,8 +132,8 @@ enum Cmd {
     /// Noise figures of a capture's static stretch (motor at rest): overlapping Allan deviation
     /// per axis, angle random walk, bias instability, rate random walk.
     Noise {
-        /// Capture holding a static stretch (for now from the simulator: `host simulate --poses 1
-        /// --rates-dps 0`; the firmware refuses 0 °/s runs).
+        /// Capture holding a static stretch: a static run of `host calibrate --static-s`, or of
+        /// `host simulate --poses 1 --rates-dps 0`.
         #[arg(long)]
         capture: PathBuf,
         /// Calibration to turn counts into rates (default: the datasheet sensitivity).
@@ -290,6 +295,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             out_dir,
             duration,
             rates_dps,
+            static_s,
             truth,
             sensor,
             operator,
@@ -322,7 +328,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         operator.as_mut(),
                         &interrupted,
                     )?;
-                    let plan = session::plan(&Pose::ALL, &rates_dps, duration);
+                    let plan = session::plan_with_static(&Pose::ALL, &rates_dps, duration, static_s);
                     let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
                     manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
                     manifest.write(&out_dir)?;
@@ -480,14 +486,6 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
     Ok(ExitCode::SUCCESS)
 }
 
-/// Noise figures of the longest static stretch among the captures, through the calibration.
-fn static_noise(caps: &[(PathBuf, Capture)], cal: &calib::Calibration) -> Option<host::allan::NoiseReport> {
-    caps.iter()
-        .filter_map(|(_, c)| host::allan::static_stretch(c).map(|(_, r)| (r.len(), c)))
-        .max_by_key(|(n, _)| *n)
-        .and_then(|(_, c)| host::allan::capture_noise(c, Some(cal)).ok())
-}
-
 /// Writes the manifest of a live session before its first capture, so even an interrupted
 /// session names its sensor; an existing one means the directory holds another session.
 fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest> {
@@ -583,7 +581,7 @@ fn calibrate(
     let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
-    let noise = static_noise(&caps, &lr.final_report().calibration());
+    let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
     if let Some(n) = &noise {
         let mut text = n.to_string();
         text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));

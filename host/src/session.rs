@@ -26,8 +26,22 @@ pub struct RunPlan {
 }
 
 impl RunPlan {
-    /// File name of the run's capture, e.g. `pose1-p180dps.cap`.
+    /// A static run (motor off) of `duration_s` in `pose`: a Start at 0 °/s
+    /// ([`StartRun::static_run`]), for noise figures.
+    pub fn static_run(pose: Pose, duration_s: f64) -> Self {
+        Self { pose, rate_dps: 0.0, duration_s }
+    }
+
+    /// Whether the motor stays off.
+    pub fn is_static(&self) -> bool {
+        self.rate_dps == 0.0
+    }
+
+    /// File name of the run's capture, e.g. `pose1-p180dps.cap`, `pose2-static.cap`.
     pub fn file_name(&self) -> String {
+        if self.is_static() {
+            return format!("pose{}-static.cap", self.pose.number());
+        }
         let sign = if self.rate_dps < 0.0 { 'm' } else { 'p' };
         format!("pose{}-{sign}{:.0}dps.cap", self.pose.number(), self.rate_dps.abs())
     }
@@ -47,6 +61,16 @@ pub fn plan(poses: &[Pose], rates_dps: &[f64], duration_s: f64) -> Vec<RunPlan> 
         .iter()
         .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunPlan { pose, rate_dps, duration_s }))
         .collect()
+}
+
+/// `plan` plus, with `static_s`, a static run of that many seconds at the end, in the pose
+/// mounted last (no remounting; the gyro has warmed up with the runs before it).
+pub fn plan_with_static(poses: &[Pose], rates_dps: &[f64], duration_s: f64, static_s: Option<f64>) -> Vec<RunPlan> {
+    let mut runs = plan(poses, rates_dps, duration_s);
+    if let (Some(s), Some(&last)) = (static_s, poses.last()) {
+        runs.push(RunPlan::static_run(last, s));
+    }
+    runs
 }
 
 const fn ms(v: u32) -> Duration {
@@ -307,7 +331,9 @@ fn stream_run<P: Read + Write>(
     progress.set_style(bar_style());
     progress.set_length((run.duration_s * 10.0).round() as u64);
     progress.set_position(0);
-    progress.set_message(format!("{}: spinning up", run_label(run)));
+    // A static run is "at speed" once the rig reports the table at rest (setpoint and speed 0).
+    let waiting = if run.is_static() { "waiting for the table at rest" } else { "spinning up" };
+    progress.set_message(format!("{}: {waiting}", run_label(run)));
 
     let t_start = link.now();
     let mut last_sample = link.now();
@@ -411,6 +437,9 @@ fn stop_run<P: Read + Write>(link: &mut Link<P>, tag: u8, interrupted: &AtomicBo
 }
 
 fn run_label(run: &RunPlan) -> String {
+    if run.is_static() {
+        return format!("{}, static (motor off)", run.pose);
+    }
     format!("{}, {:+.1} °/s", run.pose, run.rate_dps)
 }
 

@@ -43,6 +43,26 @@ fn a_wrong_option_is_a_usage_error() {
     assert!(stderr(&o).contains("<--port <PORT>|--replay <REPLAY>...>"), "{}", stderr(&o));
 }
 
+/// `--static-s` is a live option with a positive duration.
+#[test]
+fn static_s_is_live_only_and_positive() {
+    let o = host(&["calibrate", "--replay", "x.cap", "--static-s", "60"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o)
+            .starts_with("error: the argument '--replay <REPLAY>...' cannot be used with '--static-s <STATIC_S>'"),
+        "{}",
+        stderr(&o)
+    );
+    let o = host(&["calibrate", "--port", "/dev/null", "--sensor", "S", "--static-s", "0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("invalid value '0' for '--static-s <STATIC_S>': \"0\" is not a duration"),
+        "{}",
+        stderr(&o)
+    );
+}
+
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("host-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);

@@ -94,4 +94,5 @@ fn main() {
         }),
     );
     show(4, &Command::Heartbeat);
+    show(5, &Command::Start(StartRun::static_run(2)));
 }

@@ -191,7 +191,7 @@ pub struct RunStarted {
     pub t_us: u32,
     /// Host-chosen tag, echoed verbatim; the host puts the sensor pose in it.
     pub run_tag: u8,
-    /// Commanded base-table speed, milli-degrees per second (unsigned).
+    /// Commanded base-table speed, milli-degrees per second (unsigned); 0: a static run.
     pub rate_mdps: u32,
     /// Commanded direction.
     pub direction: Direction,
@@ -264,15 +264,29 @@ pub enum RigMsg {
     Fault(FaultReport),
 }
 
-/// Start a run: ramp the base table to a speed in a direction.
+/// Start a run: ramp the base table to a speed in a direction, or, with `rate_mdps` 0, a static
+/// run: the motor stays off (bridge disabled) and the run only frames the samples, for noise
+/// figures (protocol/README.md, "Runs").
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StartRun {
-    /// Base-table speed, milli-degrees per second (180 000 = 0.5 Hz).
+    /// Base-table speed, milli-degrees per second (180 000 = 0.5 Hz); 0: a static run.
     pub rate_mdps: u32,
-    /// Direction.
+    /// Direction (echoed, and without effect, in a static run).
     pub direction: Direction,
     /// Echoed in [`RunStarted::run_tag`].
     pub run_tag: u8,
+}
+
+impl StartRun {
+    /// A static run (motor off) tagged `run_tag`.
+    pub const fn static_run(run_tag: u8) -> Self {
+        Self { rate_mdps: 0, direction: Direction::Ccw, run_tag }
+    }
+
+    /// Whether this asks for a static run.
+    pub const fn is_static(&self) -> bool {
+        self.rate_mdps == 0
+    }
 }
 
 /// Everything the host sends. Variant order is wire order.

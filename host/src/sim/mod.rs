@@ -30,7 +30,7 @@ pub use effects::{
     EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission, IndexOffset,
     MysteryHarmonic, Nonlinearity, OffsetDrift, RippleHarmonic, SpeedRipple, TableTilt,
 };
-pub use rig::{serve, Port, SimRig, HOST_LINK_TIMEOUT_S};
+pub use rig::{serve, Port, SimRig};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;
 pub use session::FIRMWARE_VERSION;
 pub use stream::FrameWriter;
