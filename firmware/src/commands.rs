@@ -7,11 +7,10 @@ use crate::rig::{GyroControl, Rig, Run};
 use crate::supervisor::MAX_RATE_MDPS;
 use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, RunStopped, StartRun, ENCODER_COUNTS_PER_REV};
 
-/// Milli-degrees per second to base-table encoder counts per second, rounded to nearest:
-/// 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
-pub fn rate_cps(rate_mdps: u32) -> u32 {
-    const MDEG_PER_REV: u64 = 360_000;
-    ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV) as u32
+/// Milli-degrees per second to base-table encoder counts per second, rounded to nearest
+/// ([`protocol::units::cps_from_mdps`]): 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
+pub const fn rate_cps(rate_mdps: u32) -> u32 {
+    protocol::units::cps_from_mdps(rate_mdps, ENCODER_COUNTS_PER_REV)
 }
 
 /// Signed setpoint for a start request (0 for a static run), or why it is refused.
@@ -107,14 +106,6 @@ impl Rig {
 mod tests {
     use super::*;
     use protocol::Direction;
-
-    #[test]
-    fn rate_conversion_is_exact_at_the_paper_speed() {
-        assert_eq!(rate_cps(180_000), 162_000);
-        assert_eq!(rate_cps(360_000), ENCODER_COUNTS_PER_REV);
-        assert_eq!(rate_cps(1), 1); // 0.9 rounds up
-        assert_eq!(rate_cps(u32::MAX), 3_865_470_566); // 3 865 470 565.5, no overflow
-    }
 
     #[test]
     fn start_validation() {

@@ -38,11 +38,11 @@ pub const TASK_ALIVE_US: i32 = 20_000;
 const MIN_PERIOD_US: i32 = 200;
 const MAX_PERIOD_US: i32 = 10_000;
 
-/// Loop periods between [`MotorStatus`] frames (10 Hz).
-pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / 10;
+/// Loop periods between [`MotorStatus`] frames ([`protocol::timing::MOTOR_STATUS_HZ`]).
+pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / protocol::timing::MOTOR_STATUS_HZ;
 
-/// Loop periods between [`Counters`] and [`Temperature`] frames (1 Hz).
-pub const COUNTERS_PERIODS: u32 = LOOP_HZ;
+/// Loop periods between [`Counters`] and [`Temperature`] frames ([`protocol::timing::COUNTERS_HZ`]).
+pub const COUNTERS_PERIODS: u32 = LOOP_HZ / protocol::timing::COUNTERS_HZ;
 
 /// Microseconds from `since` to `now` on the wrapping TIM5 clock, negative when `since` is later
 /// (an event stamped by a preempting task after `now` was read). Valid for spans under 35 min.
@@ -376,11 +376,11 @@ impl Rig {
         self.status_window_encoder = encoder;
         self.link.send(&RigMsg::Motor(MotorStatus {
             t_us,
-            speed_cps: travelled * (LOOP_HZ / MOTOR_STATUS_PERIODS) as i32,
+            speed_cps: travelled * protocol::timing::MOTOR_STATUS_HZ as i32,
             setpoint_cps: self.speed_loop.setpoint_cps(),
             duty_permille: (self.applied.duty() * 1000.0) as i16,
             faults: self.motor_faults,
-            run_tag: self.run.tag().unwrap_or(0),
+            run_tag: self.run.tag().unwrap_or(protocol::run_tag::IDLE),
         }));
     }
 

@@ -248,9 +248,10 @@ fn parse_duration(s: &str) -> Result<f64, String> {
 
 /// A base-table rate in °/s: finite, non-zero, at most the rig's limit (`nan` would send 0).
 fn parse_rate(s: &str) -> Result<f64, String> {
-    let max = f64::from(protocol::MAX_RATE_MDPS) / 1000.0;
+    use protocol::units::{dps_from_mdps, mdps_from_dps};
+    let max = dps_from_mdps(protocol::MAX_RATE_MDPS);
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= max && (v.abs() * 1000.0).round() >= 1.0 => Ok(v),
+        Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= max && mdps_from_dps(v) >= 1 => Ok(v),
         _ => Err(format!("{s:?} is not a rate: give °/s, non-zero, between -{max} and {max}")),
     }
 }

@@ -6,7 +6,7 @@ use crate::geometry::Pose;
 use crate::link::Link;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{timing, CmdResult, Command, Direction, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
+use protocol::{timing, units, CmdResult, Command, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
 use std::fs::File;
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
@@ -48,8 +48,8 @@ impl RunPlan {
 
     fn start(&self) -> StartRun {
         StartRun {
-            rate_mdps: (self.rate_dps.abs() * 1000.0).round() as u32,
-            direction: if self.rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
+            rate_mdps: units::mdps_from_dps(self.rate_dps),
+            direction: units::direction_of(self.rate_dps),
             run_tag: self.pose.run_tag(),
         }
     }
@@ -315,7 +315,7 @@ fn stream_run<P: Read + Write>(
 ) -> Result<()> {
     let where_ = format!("{} (capture kept in {})", run_label(run), path.display());
     let hello = identify(link)?;
-    let target_cps = f64::from(run.start().rate_mdps) / 1000.0 / 360.0 * f64::from(hello.encoder_counts_per_rev);
+    let target_cps = units::counts_from_deg(units::dps_from_mdps(run.start().rate_mdps), hello.encoder_counts_per_rev);
     let tag = run.start().run_tag;
     let mut started = false;
     let answer = link.request(&Command::Start(run.start()), |m| {

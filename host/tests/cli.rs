@@ -63,6 +63,19 @@ fn static_s_is_live_only_and_positive() {
     );
 }
 
+/// The simulator cannot promise what the firmware refuses: its rate limit is the protocol's.
+#[test]
+fn simulate_refuses_a_rate_the_rig_refuses() {
+    let out = std::env::temp_dir().join(format!("host-cli-{}-fast.cap", std::process::id()));
+    let o = host(&["simulate", "--rates-dps", "500", "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: invalid simulation: runs[0].rate_dps must be within ±360 °/s, the rig's limit (0: a static run, for noise figures)\n"
+    );
+    assert!(!out.exists());
+}
+
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("host-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);

@@ -10,9 +10,10 @@
 
 use crate::l3g4200d::{reg, status, DEVICE_ID};
 use embedded_hal::spi::{self, ErrorKind, ErrorType, Operation, SpiDevice};
-use libm::{round, sqrt};
-use rand_chacha::rand_core::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use libm::round;
+#[cfg(feature = "sim")]
+use rand_chacha::{rand_core::SeedableRng, ChaCha8Rng};
+#[cfg(feature = "sim")]
 use rand_distr::{Distribution, StandardNormal};
 
 /// Rate noise density of the L3G4200D, °/s/√Hz (datasheet Table 4, "Rn", typ.). The host's
@@ -40,6 +41,14 @@ impl spi::Error for BusError {
     }
 }
 
+/// A chip's white rate noise: density and the generator it is drawn from.
+#[cfg(feature = "sim")]
+#[derive(Debug, Clone)]
+struct Noise {
+    density_dps_per_sqrt_hz: f64,
+    rng: ChaCha8Rng,
+}
+
 /// Where the current transaction is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -59,9 +68,9 @@ pub struct L3g4200dModel {
     /// The chip stopped producing data (brown-out, broken INT2 wire).
     pub halted: bool,
     next_sample_s: Option<f64>,
-    /// White rate noise density, °/s/√Hz (0: a noiseless chip, outputs exactly predictable).
-    pub noise_dps_per_sqrt_hz: f64,
-    noise_rng: ChaCha8Rng,
+    /// White rate noise (none: a noiseless chip, outputs exactly predictable).
+    #[cfg(feature = "sim")]
+    noise: Option<Noise>,
     /// Samples produced.
     pub samples: u32,
     /// Samples overwritten before being read (ZYXOR events).
@@ -86,8 +95,8 @@ impl L3g4200dModel {
             fault: BusFault::None,
             halted: false,
             next_sample_s: None,
-            noise_dps_per_sqrt_hz: 0.0,
-            noise_rng: ChaCha8Rng::seed_from_u64(0),
+            #[cfg(feature = "sim")]
+            noise: None,
             samples: 0,
             overruns: 0,
         }
@@ -98,12 +107,23 @@ impl L3g4200dModel {
     /// some 100 times quieter than the part: table-speed jitter that the encoder cannot resolve
     /// (≈ 0.03 °/s rms at 20-400 Hz from the speed loop, see firmware/README.md) then dominates
     /// the residual of a calibration, where the real part's noise buries it.
+    #[cfg(feature = "sim")]
     pub fn with_noise(seed: u64) -> Self {
-        Self {
-            noise_dps_per_sqrt_hz: NOISE_DENSITY_DPS_PER_SQRT_HZ,
-            noise_rng: ChaCha8Rng::seed_from_u64(seed),
-            ..Self::new()
+        let noise =
+            Noise { density_dps_per_sqrt_hz: NOISE_DENSITY_DPS_PER_SQRT_HZ, rng: ChaCha8Rng::seed_from_u64(seed) };
+        Self { noise: Some(noise), ..Self::new() }
+    }
+
+    /// One sample's rate noise per axis, °/s: white at the ODR, σ = ρ·√(ODR/2) (the Nyquist
+    /// band; as host::sim does).
+    fn noise_dps(&mut self, period_s: f64) -> [f64; 3] {
+        #[cfg(feature = "sim")]
+        if let Some(n) = self.noise.as_mut() {
+            let sigma_dps = n.density_dps_per_sqrt_hz * (0.5 / period_s).sqrt();
+            return [0; 3].map(|_| sigma_dps * Distribution::<f64>::sample(&StandardNormal, &mut n.rng));
         }
+        let _ = period_s;
+        [0.0; 3]
     }
 
     /// Replaces WHO_AM_I (another chip on the bus).
@@ -138,13 +158,12 @@ impl L3g4200dModel {
     }
 
     /// Latches a sample taken at the due time: `rate_dps` is the angular rate along the three
-    /// sensing axes, `temp_raw` the OUT_TEMP value. The noise is white at the ODR, σ = ρ·√(ODR/2)
-    /// (the Nyquist band; as host::sim does).
+    /// sensing axes, `temp_raw` the OUT_TEMP value; the chip adds its noise, if it has any.
     pub fn latch(&mut self, rate_dps: [f64; 3], temp_raw: i8) {
         let Some(period) = self.sample_period_s() else {
             return;
         };
-        let sigma_dps = self.noise_dps_per_sqrt_hz * sqrt(0.5 / period);
+        let noise_dps = self.noise_dps(period);
         self.next_sample_s = self.next_sample_s.map(|t| t + period);
         let lsb_dps = match (self.regs[usize::from(reg::CTRL_REG4)] >> 4) & 0b11 {
             0b00 => 8.75e-3,
@@ -158,13 +177,7 @@ impl L3g4200dModel {
         }
         self.regs[status_reg] |= status::ZYXDA | 0x07;
         for (axis, rate) in rate_dps.iter().enumerate() {
-            let noise_dps = if sigma_dps > 0.0 {
-                let z: f64 = StandardNormal.sample(&mut self.noise_rng);
-                sigma_dps * z
-            } else {
-                0.0
-            };
-            let counts = round((rate + noise_dps) / lsb_dps).clamp(i16::MIN.into(), i16::MAX.into()) as i16;
+            let counts = round((rate + noise_dps[axis]) / lsb_dps).clamp(i16::MIN.into(), i16::MAX.into()) as i16;
             let at = usize::from(reg::OUT_X_L) + 2 * axis;
             self.regs[at..at + 2].copy_from_slice(&counts.to_le_bytes());
         }
@@ -299,6 +312,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "sim")]
     fn noise_has_the_datasheet_density_and_is_reproducible() {
         let draw = |seed| {
             let mut gyro = L3g4200d::new(L3g4200dModel::with_noise(seed));

@@ -131,7 +131,7 @@ impl SimRig {
                     return CmdResult::Busy;
                 }
                 // The simulated operator has mounted the pose the run tag names.
-                let rate_dps = f64::from(start.rate_mdps) / 1000.0 * f64::from(start.direction.sign());
+                let rate_dps = protocol::units::signed_dps(start.rate_mdps, start.direction);
                 ok(self.session.start_run(t_s, pose, start.run_tag, rate_dps, w))
             }
             Command::Stop => ok(self.session.stop_run(t_s, None, w)),
