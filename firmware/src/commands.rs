@@ -4,13 +4,27 @@
 
 use crate::link::Received;
 use crate::rig::{GyroControl, Rig, Run};
-use crate::supervisor::MAX_RATE_MDPS;
-use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, RunStopped, StartRun, ENCODER_COUNTS_PER_REV};
+use crate::speed_loop::{Drive, Gains};
+use crate::supervisor::{MAX_RATE_MDPS, OVER_SPEED_CPS};
+use protocol::{
+    Ack, CmdResult, Command, DriveConfig, RigMsg, RunStarted, RunStopped, StartRun, ENCODER_COUNTS_PER_REV,
+};
 
 /// Milli-degrees per second to base-table encoder counts per second, rounded to nearest
 /// ([`protocol::units::cps_from_mdps`]): 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
 pub const fn rate_cps(rate_mdps: u32) -> u32 {
     protocol::units::cps_from_mdps(rate_mdps, ENCODER_COUNTS_PER_REV)
+}
+
+/// The drive a `ConfigureDrive` describes, or why it is refused: outside
+/// [`protocol::drive_limits`], or unable to exceed the over-speed limit at full duty (a runaway
+/// would then go undetected, [`crate::supervisor::OVER_SPEED_CPS`]).
+pub fn drive_for(config: &DriveConfig) -> Result<Drive, CmdResult> {
+    let drive = Drive::from_config(config);
+    if !config.in_limits() || drive.k_cps_per_duty() <= OVER_SPEED_CPS as f32 {
+        return Err(CmdResult::InvalidArgument);
+    }
+    Ok(drive)
 }
 
 /// Signed setpoint for a start request (0 for a static run), or why it is refused.
@@ -71,6 +85,14 @@ impl Rig {
                 }
             }
             Command::Heartbeat => CmdResult::Ok,
+            Command::ConfigureDrive(config) => match (self.run, drive_for(&config)) {
+                (Run::Idle, Ok(drive)) => {
+                    self.speed_loop.set_gains(Gains::for_drive(&drive));
+                    CmdResult::Ok
+                }
+                (Run::Idle, Err(refusal)) => refusal,
+                _ => CmdResult::Busy,
+            },
         };
         self.link.send(&RigMsg::Ack(Ack { cmd_seq: rx.seq, result }));
     }
@@ -106,6 +128,26 @@ impl Rig {
 mod tests {
     use super::*;
     use protocol::Direction;
+
+    #[test]
+    fn drive_validation() {
+        let ok = |c: DriveConfig| drive_for(&c).map(|d| (d.gear_ratio, d.load_inertia_kgm2, d.supply_v));
+        assert_eq!(ok(DriveConfig::PROTOTYPE), Ok((66.0, 0.012, 24.0)));
+        let p = DriveConfig::PROTOTYPE;
+        assert_eq!(ok(DriveConfig { gear_ratio_milli: 999, ..p }), Err(CmdResult::InvalidArgument));
+        assert_eq!(ok(DriveConfig { load_inertia_gcm2: 10_000_001, ..p }), Err(CmdResult::InvalidArgument));
+        assert_eq!(ok(DriveConfig { supply_mv: 5_999, ..p }), Err(CmdResult::InvalidArgument));
+        // 24 V through 117:1 still exceeds 450 °/s at full duty (405 000 cps: 724 000 × 66/117 =
+        // 408 000); 118:1 does not (404 900).
+        assert!(ok(DriveConfig { gear_ratio_milli: 117_000, ..p }).is_ok());
+        assert_eq!(ok(DriveConfig { gear_ratio_milli: 118_000, ..p }), Err(CmdResult::InvalidArgument));
+        // At 48 V, twice the ratio.
+        assert!(ok(DriveConfig { gear_ratio_milli: 235_000, supply_mv: 48_000, ..p }).is_ok());
+        assert_eq!(
+            ok(DriveConfig { gear_ratio_milli: 236_000, supply_mv: 48_000, ..p }),
+            Err(CmdResult::InvalidArgument)
+        );
+    }
 
     #[test]
     fn start_validation() {

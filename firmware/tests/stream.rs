@@ -262,3 +262,23 @@ fn a_static_run_keeps_the_motor_off_and_is_framed_like_any_run() {
     let after_ms = (t_stop_ns - quiet_from) / MS;
     assert!((2_000..=2_020).contains(&after_ms), "ended {after_ms} ms after the host fell silent");
 }
+
+/// ConfigureDrive is acknowledged: Ok when idle and in limits, InvalidArgument outside them (or
+/// for a drive that could not reach the over-speed limit), Busy during a run.
+#[test]
+fn configure_drive_is_validated_and_refused_during_a_run() {
+    use protocol::DriveConfig;
+    let mut s = Session::prototype();
+    let ok = s.command(Command::ConfigureDrive(DriveConfig::PROTOTYPE));
+    let slow = s.command(Command::ConfigureDrive(DriveConfig { gear_ratio_milli: 150_000, ..DriveConfig::PROTOTYPE }));
+    let zero = s.command(Command::ConfigureDrive(DriveConfig { supply_mv: 0, ..DriveConfig::PROTOTYPE }));
+    s.run(10 * MS);
+    start(&mut s, 1);
+    s.run(10 * MS);
+    let busy = s.command(Command::ConfigureDrive(DriveConfig::PROTOTYPE));
+    s.run(10 * MS);
+    assert_eq!(s.ack_for(ok), Some(CmdResult::Ok));
+    assert_eq!(s.ack_for(slow), Some(CmdResult::InvalidArgument));
+    assert_eq!(s.ack_for(zero), Some(CmdResult::InvalidArgument));
+    assert_eq!(s.ack_for(busy), Some(CmdResult::Busy));
+}

@@ -143,6 +143,27 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Tell the rig the drive train its speed loop is designed for: the gearhead, the inertia it
+    /// turns, the bridge supply. Lasts until the rig resets (then the prototype's: 66:1,
+    /// 0.012 kg·m², 24 V); send it after each power-up, before calibrating.
+    ConfigureDrive {
+        /// Serial port of the rig.
+        #[arg(long)]
+        port: String,
+        /// Gearhead reduction, motor turns per base-table turn (66 for 66:1), 1 to 500.
+        #[arg(long, value_parser = parse_gear_ratio)]
+        gear_ratio: f64,
+        /// Inertia the gearhead turns about the base-table axis, kg·m²: tables, magnetic gears,
+        /// counterweight and gyro, not the motor's rotor (the rig adds it). 0.0001 to 1.
+        #[arg(long, value_parser = parse_load_inertia)]
+        load_inertia_kgm2: f64,
+        /// Bridge supply, V, 6 to 48.
+        #[arg(long, default_value_t = 24.0, value_parser = parse_supply)]
+        supply_v: f64,
+        /// Baud rate (ignored by USB CDC-ACM).
+        #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+        baud: u32,
+    },
     /// The records database: every calibration stored, listed, compared, summarised.
     Records {
         /// sqlite:PATH or postgres://… (default: $GYROCAL_DB, else
@@ -193,6 +214,35 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// A drive value whose wire form (`to_wire`, through `DriveConfig::from_si`) lies in `range`,
+/// the protocol's limit (`protocol::drive_limits`), said in the option's own units.
+fn parse_drive(
+    s: &str,
+    to_wire: impl Fn(f64) -> u32,
+    range: std::ops::RangeInclusive<u32>,
+    what: &str,
+) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && range.contains(&to_wire(v)) => Ok(v),
+        _ => Err(format!("{s:?} is not {what}")),
+    }
+}
+
+fn parse_gear_ratio(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(v, 0.0, 0.0).gear_ratio_milli;
+    parse_drive(s, wire, protocol::drive_limits::GEAR_RATIO_MILLI, "a gear ratio from 1 to 500")
+}
+
+fn parse_load_inertia(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(0.0, v, 0.0).load_inertia_gcm2;
+    parse_drive(s, wire, protocol::drive_limits::LOAD_INERTIA_GCM2, "an inertia from 0.0001 to 1 kg·m²")
+}
+
+fn parse_supply(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(0.0, 0.0, v).supply_mv;
+    parse_drive(s, wire, protocol::drive_limits::SUPPLY_MV, "a supply from 6 to 48 V")
 }
 
 fn parse_latitude(s: &str) -> Result<f64, String> {
@@ -406,6 +456,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
         Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
+        Cmd::ConfigureDrive { port, gear_ratio, load_inertia_kgm2, supply_v, baud } => {
+            let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+            session::identify(&mut link)?;
+            session::configure_drive(
+                &mut link,
+                protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v),
+            )?;
+            eprintln!(
+                "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
+            );
+            Ok(ExitCode::SUCCESS)
+        }
         Cmd::Inspect { files, json } => {
             for f in &files {
                 let cap = read_capture(f)?;

@@ -6,7 +6,9 @@ use crate::geometry::Pose;
 use crate::link::Link;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{timing, units, CmdResult, Command, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
+use protocol::{
+    timing, units, CmdResult, Command, DriveConfig, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION,
+};
 use std::fs::File;
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
@@ -141,6 +143,29 @@ pub fn describe_fault(f: Fault) -> String {
 /// Sets the gyro (only between runs).
 pub fn configure<P: Read + Write>(link: &mut Link<P>, gyro: GyroConfig) -> Result<()> {
     link.command(&Command::ConfigureGyro(gyro), |_| {})
+}
+
+/// Tells the rig the drive train its speed loop must be designed for (until it resets).
+pub fn configure_drive<P: Read + Write>(link: &mut Link<P>, drive: DriveConfig) -> Result<()> {
+    let what = format!(
+        "{}:1 gearhead, {} kg·m² of load, {} V",
+        f64::from(drive.gear_ratio_milli) / 1e3,
+        f64::from(drive.load_inertia_gcm2) / 1e7,
+        f64::from(drive.supply_mv) / 1e3
+    );
+    match link.request(&Command::ConfigureDrive(drive), |_| {})?.result {
+        CmdResult::Ok => Ok(()),
+        CmdResult::InvalidArgument if drive.in_limits() => bail!(
+            "the rig on {} refused the drive ({what}): at full duty it would not exceed the rig's over-speed limit, so a runaway would go unnoticed (a lower ratio or a higher supply)",
+            link.name()
+        ),
+        CmdResult::InvalidArgument => bail!(
+            "the rig on {} refused the drive ({what}): outside the protocol's limits (ratio 1 to 500, load 0.0001 to 1 kg·m², supply 6 to 48 V)",
+            link.name()
+        ),
+        CmdResult::Busy => bail!("the rig on {} refused the drive: a run is in progress (stop it first)", link.name()),
+        r => bail!("the rig on {} refused the drive ({what}): {r:?}", link.name()),
+    }
 }
 
 /// What the operator said at a prompt.

@@ -135,6 +135,13 @@ impl SimRig {
                 ok(self.session.start_run(t_s, pose, start.run_tag, rate_dps, w))
             }
             Command::Stop => ok(self.session.stop_run(t_s, None, w)),
+            // The firmware's own validation; the simulated drive follows its setpoint regardless.
+            Command::ConfigureDrive(drive) => {
+                if self.session.running() {
+                    return CmdResult::Busy;
+                }
+                firmware::commands::drive_for(&drive).map_or_else(|refusal| refusal, |_| CmdResult::Ok)
+            }
             Command::ConfigureGyro(gyro) => {
                 if self.session.running() {
                     return CmdResult::Busy;
