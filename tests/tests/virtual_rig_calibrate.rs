@@ -8,8 +8,8 @@
 //! datasheet noise; without it (`--noiseless-gyro`) the speed loop's table jitter, ≈ 0.03 °/s rms
 //! at 20-400 Hz and below the encoder's resolution, is unexplained structure (firmware/README.md).
 
-use e2e::{LockstepRig, VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS, Z_1D, Z_2D};
-use host::calib::{self, derived::mahalanobis2, LoopOptions, Verdict};
+use e2e::{assert_matches_virtual_gyro, LockstepRig};
+use host::calib::{self, LoopOptions, Verdict};
 use host::capture;
 use host::geometry::Pose;
 use host::link::Link;
@@ -22,9 +22,6 @@ const DURATION_S: f64 = 120.0;
 
 /// `host calibrate --rates-dps`'s default.
 const RATES_DPS: [f64; 2] = [180.0, 90.0];
-
-/// ±500 °/s full scale (the rig's default): 17.5 m°/s per count (L3G4200D datasheet Table 4).
-const DPS_PER_COUNT: f64 = 17.5e-3;
 
 #[test]
 fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
@@ -72,29 +69,5 @@ fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
     let summary = result.summary();
     // `host calibrate` exits 0 on this verdict, 3 on unexplained structure.
     assert_eq!(result.verdict(), Verdict::AtNoiseFloor, "{summary}");
-    let report = result.final_report();
-
-    // The truth in the host's units: M = K S in counts per °/s, offsets in counts.
-    for (i, a) in report.axes.iter().enumerate() {
-        let m: [f64; 3] = VIRTUAL_GYRO_KS[i].map(|v| v / DPS_PER_COUNT);
-        let k = m.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let s = m.map(|v| v / k);
-        let offset = VIRTUAL_GYRO_OFFSET_DPS[i] / DPS_PER_COUNT;
-        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
-        let tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
-        let d = [a.tilt_components_deg[0] - tilt[0], a.tilt_components_deg[1] - tilt[1]];
-        let k_z = (a.k_counts_per_dps - k) / a.k_sigma;
-        let offset_z = (a.offset_counts - offset) / a.offset_sigma_counts;
-        let direction_md = mahalanobis2(d, a.tilt_components_cov_deg2);
-        eprintln!(
-            "axis {i}: k {:.3} vs {k:.3} ({k_z:+.2} σ), direction {direction_md:.2} σ, \
-             offset {:.2} vs {offset:.2} counts ({offset_z:+.2} σ)",
-            a.k_counts_per_dps, a.offset_counts
-        );
-        assert!(
-            k_z.abs() <= Z_1D && direction_md <= Z_2D && offset_z.abs() <= Z_1D,
-            "axis {i} off the virtual gyro: k {k_z:.2} σ, direction {direction_md:.2} σ, \
-             offset {offset_z:.2} σ\n{summary}"
-        );
-    }
+    assert_matches_virtual_gyro(result.final_report());
 }
