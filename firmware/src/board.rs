@@ -26,16 +26,14 @@ use stm32f4xx_hal::timer::PwmChannel;
 /// the next divider up, /8 = 10.5 MHz, would exceed it.
 pub const GYRO_SPI_HZ: u32 = 5_250_000;
 
-/// Input-capture digital filter for every capture channel, CCMRx ICxF = 0b0011: 8 samples at
-/// f_CK_INT (84 MHz), 95 ns. Identical on TIM2 and TIM5, so both latch the same edge after the
-/// same delay; the fastest encoder edges (324 kHz at 1 Hz) are 3 µs apart.
-pub const CAPTURE_FILTER: u8 = 0b0011;
+/// Input-capture digital filter for the encoder and data-ready channels, CCMRx ICxF: 8 samples
+/// at f_CK_INT, 95 ns ([`firmware::input_filter::CAPTURE_ICF`], tested there).
+pub const CAPTURE_FILTER: u8 = firmware::input_filter::CAPTURE_ICF;
 
-/// Input-capture filter of the index channels (CH3 of TIM2 and TIM5), CCMR2 IC3F = 0b1111: 8
-/// samples at f_DTS/32, with CR1.CKD = ÷4 (f_DTS = 21 MHz), 12.2 µs
-/// ([`firmware::index::INDEX_FILTER_US`]). CKD only slows the ICxF ≥ 0b0100 filters; the
-/// encoder and data-ready channels ([`CAPTURE_FILTER`]) sample at f_CK_INT and stay at 95 ns.
-pub const INDEX_FILTER: u8 = 0b1111;
+/// Input-capture filter of the index channels (CH3 of TIM2 and TIM5), CCMR2 IC3F: 8 samples at
+/// f_DTS/32 with CR1.CKD = ÷4, 12.2 µs ([`firmware::input_filter::INDEX_ICF`]). CKD only slows
+/// the ICxF ≥ 0b0100 filters; the encoder and data-ready channels stay at 95 ns.
+pub const INDEX_FILTER: u8 = firmware::input_filter::INDEX_ICF;
 
 /// Level of the data-ready input (PA3): high while the gyro holds an unread sample.
 pub fn drdy_level() -> bool {

@@ -7,6 +7,9 @@
 //! only interrupt these signals raise; interrupt latency affects neither value.
 
 use crate::board::{CAPTURE_FILTER, INDEX_FILTER};
+
+// The filter durations of `firmware::input_filter` assume the CKD this module writes.
+const _: () = assert!(firmware::input_filter::CKD_DIVIDER == 4, "capture.rs writes CR1.CKD = ÷4");
 use stm32f4xx_hal::pac::{TIM2, TIM5};
 
 /// One captured edge.
@@ -70,7 +73,8 @@ impl Captures {
             w.cc4e().set_bit()
         });
         tim2.arr().write(|w| w.arr().set(u32::MAX));
-        // CKD ÷4: f_DTS = 21 MHz for the index filter (board::INDEX_FILTER), as on TIM5.
+        // CKD ÷4: f_DTS = 21 MHz for the index filter (board::INDEX_FILTER), as on TIM5
+        // (input_filter::CKD_DIVIDER, asserted below).
         tim2.cr1().write(|w| {
             w.ckd().div4();
             w.cen().set_bit()

@@ -4,19 +4,32 @@
 
 use crate::link::Received;
 use crate::rig::{GyroControl, Rig, Run};
-use crate::supervisor::MAX_RATE_MDPS;
-use protocol::{Ack, CmdResult, Command, RigMsg, RunStarted, StartRun, ENCODER_COUNTS_PER_REV};
+use crate::speed_loop::{Drive, Gains};
+use crate::supervisor::{MAX_RATE_MDPS, OVER_SPEED_CPS};
+use protocol::{
+    Ack, CmdResult, Command, DriveConfig, RigMsg, RunStarted, RunStopped, StartRun, ENCODER_COUNTS_PER_REV,
+};
 
-/// Milli-degrees per second to base-table encoder counts per second, rounded to nearest:
-/// 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
-pub fn rate_cps(rate_mdps: u32) -> u32 {
-    const MDEG_PER_REV: u64 = 360_000;
-    ((u64::from(rate_mdps) * u64::from(ENCODER_COUNTS_PER_REV) + MDEG_PER_REV / 2) / MDEG_PER_REV) as u32
+/// Milli-degrees per second to base-table encoder counts per second, rounded to nearest
+/// ([`protocol::units::cps_from_mdps`]): 180 000 m°/s (0.5 Hz) is exactly 162 000 cps.
+pub const fn rate_cps(rate_mdps: u32) -> u32 {
+    protocol::units::cps_from_mdps(rate_mdps, ENCODER_COUNTS_PER_REV)
 }
 
-/// Signed setpoint for a start request, or why it is refused.
+/// The drive a `ConfigureDrive` describes, or why it is refused: outside
+/// [`protocol::drive_limits`], or unable to exceed the over-speed limit at full duty (a runaway
+/// would then go undetected, [`crate::supervisor::OVER_SPEED_CPS`]).
+pub fn drive_for(config: &DriveConfig) -> Result<Drive, CmdResult> {
+    let drive = Drive::from_config(config);
+    if !config.in_limits() || drive.k_cps_per_duty() <= OVER_SPEED_CPS as f32 {
+        return Err(CmdResult::InvalidArgument);
+    }
+    Ok(drive)
+}
+
+/// Signed setpoint for a start request (0 for a static run), or why it is refused.
 pub fn setpoint_cps(start: &StartRun) -> Result<i32, CmdResult> {
-    if start.rate_mdps == 0 || start.rate_mdps > MAX_RATE_MDPS {
+    if start.rate_mdps > MAX_RATE_MDPS {
         return Err(CmdResult::InvalidArgument);
     }
     Ok(start.direction.sign() * rate_cps(start.rate_mdps) as i32)
@@ -36,9 +49,17 @@ impl Rig {
             }
             Command::Start(start) => self.start(t_us, &start),
             Command::Stop => {
-                if let Run::Running { tag } = self.run {
-                    self.speed_loop.set_target(0);
-                    self.run = Run::Stopping { tag };
+                match self.run {
+                    Run::Running { tag } => {
+                        self.speed_loop.set_target(0);
+                        self.run = Run::Stopping { tag };
+                    }
+                    // Nothing turns: the run ends now.
+                    Run::Static { tag } => {
+                        self.run = Run::Idle;
+                        self.link.send(&RigMsg::RunStopped(RunStopped { t_us, run_tag: tag }));
+                    }
+                    Run::Idle | Run::Stopping { .. } => {}
                 }
                 CmdResult::Ok
             }
@@ -64,6 +85,14 @@ impl Rig {
                 }
             }
             Command::Heartbeat => CmdResult::Ok,
+            Command::ConfigureDrive(config) => match (self.run, drive_for(&config)) {
+                (Run::Idle, Ok(drive)) => {
+                    self.speed_loop.set_gains(Gains::for_drive(&drive));
+                    CmdResult::Ok
+                }
+                (Run::Idle, Err(refusal)) => refusal,
+                _ => CmdResult::Busy,
+            },
         };
         self.link.send(&RigMsg::Ack(Ack { cmd_seq: rx.seq, result }));
     }
@@ -82,7 +111,8 @@ impl Rig {
         self.motor_off();
         self.motor_faults = 0;
         self.speed_loop.set_target(target_cps);
-        self.run = Run::Running { tag: start.run_tag };
+        self.run =
+            if start.is_static() { Run::Static { tag: start.run_tag } } else { Run::Running { tag: start.run_tag } };
         self.link.send(&RigMsg::RunStarted(RunStarted {
             t_us,
             run_tag: start.run_tag,
@@ -100,11 +130,23 @@ mod tests {
     use protocol::Direction;
 
     #[test]
-    fn rate_conversion_is_exact_at_the_paper_speed() {
-        assert_eq!(rate_cps(180_000), 162_000);
-        assert_eq!(rate_cps(360_000), ENCODER_COUNTS_PER_REV);
-        assert_eq!(rate_cps(1), 1); // 0.9 rounds up
-        assert_eq!(rate_cps(u32::MAX), 3_865_470_566); // 3 865 470 565.5, no overflow
+    fn drive_validation() {
+        let ok = |c: DriveConfig| drive_for(&c).map(|d| (d.gear_ratio, d.load_inertia_kgm2, d.supply_v));
+        assert_eq!(ok(DriveConfig::PROTOTYPE), Ok((66.0, 0.012, 24.0)));
+        let p = DriveConfig::PROTOTYPE;
+        assert_eq!(ok(DriveConfig { gear_ratio_milli: 999, ..p }), Err(CmdResult::InvalidArgument));
+        assert_eq!(ok(DriveConfig { load_inertia_gcm2: 10_000_001, ..p }), Err(CmdResult::InvalidArgument));
+        assert_eq!(ok(DriveConfig { supply_mv: 5_999, ..p }), Err(CmdResult::InvalidArgument));
+        // 24 V through 117:1 still exceeds 450 °/s at full duty (405 000 cps: 724 000 × 66/117 =
+        // 408 000); 118:1 does not (404 900).
+        assert!(ok(DriveConfig { gear_ratio_milli: 117_000, ..p }).is_ok());
+        assert_eq!(ok(DriveConfig { gear_ratio_milli: 118_000, ..p }), Err(CmdResult::InvalidArgument));
+        // At 48 V, twice the ratio.
+        assert!(ok(DriveConfig { gear_ratio_milli: 235_000, supply_mv: 48_000, ..p }).is_ok());
+        assert_eq!(
+            ok(DriveConfig { gear_ratio_milli: 236_000, supply_mv: 48_000, ..p }),
+            Err(CmdResult::InvalidArgument)
+        );
     }
 
     #[test]
@@ -112,7 +154,7 @@ mod tests {
         let run = |rate_mdps, direction| StartRun { rate_mdps, direction, run_tag: 1 };
         assert_eq!(setpoint_cps(&run(180_000, Direction::Cw)), Ok(-162_000));
         assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS, Direction::Ccw)), Ok(324_000));
-        assert_eq!(setpoint_cps(&run(0, Direction::Ccw)), Err(CmdResult::InvalidArgument));
+        assert_eq!(setpoint_cps(&run(0, Direction::Cw)), Ok(0), "a static run");
         assert_eq!(setpoint_cps(&run(MAX_RATE_MDPS + 1, Direction::Ccw)), Err(CmdResult::InvalidArgument));
     }
 }

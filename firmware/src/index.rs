@@ -18,8 +18,9 @@ use protocol::{Edge, IndexEdge};
 pub const INDEX_CHATTER_COUNTS: u32 = 90;
 
 /// Glitches the index capture inputs ignore, µs: ICxF = 1111 (8 samples at f_DTS/32) with
-/// CKD = ÷4, f_DTS = 21 MHz: 8 × 32 / 21 MHz = 12.2 µs, alike on TIM2 and TIM5.
-pub const INDEX_FILTER_US: f32 = 12.2;
+/// CKD = ÷4, f_DTS = 21 MHz: 8 × 32 / 21 MHz = 12.2 µs, alike on TIM2 and TIM5
+/// ([`crate::input_filter::INDEX_FILTER_NS`]).
+pub const INDEX_FILTER_US: f32 = crate::input_filter::INDEX_FILTER_NS as f32 / 1e3;
 
 /// Builds index edges, rejects chatter and counts edges that went missing.
 #[derive(Debug, Default, Clone)]

@@ -10,6 +10,7 @@
 
 pub mod commands;
 pub mod index;
+pub mod input_filter;
 pub mod l3g4200d;
 pub mod link;
 pub mod pwm;

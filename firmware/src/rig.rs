@@ -38,11 +38,11 @@ pub const TASK_ALIVE_US: i32 = 20_000;
 const MIN_PERIOD_US: i32 = 200;
 const MAX_PERIOD_US: i32 = 10_000;
 
-/// Loop periods between [`MotorStatus`] frames (10 Hz).
-pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / 10;
+/// Loop periods between [`MotorStatus`] frames ([`protocol::timing::MOTOR_STATUS_HZ`]).
+pub const MOTOR_STATUS_PERIODS: u32 = LOOP_HZ / protocol::timing::MOTOR_STATUS_HZ;
 
-/// Loop periods between [`Counters`] and [`Temperature`] frames (1 Hz).
-pub const COUNTERS_PERIODS: u32 = LOOP_HZ;
+/// Loop periods between [`Counters`] and [`Temperature`] frames ([`protocol::timing::COUNTERS_HZ`]).
+pub const COUNTERS_PERIODS: u32 = LOOP_HZ / protocol::timing::COUNTERS_HZ;
 
 /// Microseconds from `since` to `now` on the wrapping TIM5 clock, negative when `since` is later
 /// (an event stamped by a preempting task after `now` was read). Valid for spans under 35 min.
@@ -74,13 +74,15 @@ pub(crate) enum Run {
     Running { tag: u8 },
     /// Ramping down after a Stop.
     Stopping { tag: u8 },
+    /// A static run: motor off, samples framed by RunStarted/RunStopped (a Start at 0 m°/s).
+    Static { tag: u8 },
 }
 
 impl Run {
     pub(crate) fn tag(self) -> Option<u8> {
         match self {
             Run::Idle => None,
-            Run::Running { tag } | Run::Stopping { tag } => Some(tag),
+            Run::Running { tag } | Run::Stopping { tag } | Run::Static { tag } => Some(tag),
         }
     }
 }
@@ -197,7 +199,7 @@ impl Rig {
             }
         }
         self.applied = match self.run {
-            Run::Idle => MotorCommand::OFF,
+            Run::Idle | Run::Static { .. } => MotorCommand::OFF,
             Run::Running { .. } => self.drive(delta),
             Run::Stopping { tag } => {
                 let cmd = self.drive(delta);
@@ -374,11 +376,11 @@ impl Rig {
         self.status_window_encoder = encoder;
         self.link.send(&RigMsg::Motor(MotorStatus {
             t_us,
-            speed_cps: travelled * (LOOP_HZ / MOTOR_STATUS_PERIODS) as i32,
+            speed_cps: travelled * protocol::timing::MOTOR_STATUS_HZ as i32,
             setpoint_cps: self.speed_loop.setpoint_cps(),
             duty_permille: (self.applied.duty() * 1000.0) as i16,
             faults: self.motor_faults,
-            run_tag: self.run.tag().unwrap_or(0),
+            run_tag: self.run.tag().unwrap_or(protocol::run_tag::IDLE),
         }));
     }
 

@@ -6,8 +6,10 @@
 //! never accumulates: 1 count per period is 1000 cps (0.6 % of 0.5 Hz) in a single-period
 //! speed, but the integral stays exact, and the mean speed converges to the setpoint.
 //!
-//! Gains are designed on a first-order model of the drive (maxon RE 30 through a 66:1 gearhead,
-//! see [`design`]): feed-forward `1/K`, PI zero on the mechanical pole, crossover 15 Hz.
+//! Gains are designed on a first-order model of the drive (maxon RE 30 through a gearhead, 66:1
+//! on the prototype, see [`design`] and [`Drive`]): feed-forward `1/K`, PI zero on the
+//! mechanical pole, crossover 15 Hz. The host sets the gearhead, load inertia and supply of its
+//! rig with `ConfigureDrive` ([`Gains::for_drive`]).
 
 /// Loop rate, Hz: one update per TIM3 period. 15 Hz crossover × ~65 leaves the sampling delay
 /// and the 1-count measurement noise (filtered by the mechanics) harmless.
@@ -39,6 +41,52 @@ pub mod design {
     pub const CROSSOVER_RAD_S: f32 = 2.0 * core::f32::consts::PI * 15.0;
 }
 
+/// A drive train, in the design's units ([`protocol::DriveConfig`] on the wire).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drive {
+    /// Gearhead reduction, motor turns per table turn.
+    pub gear_ratio: f32,
+    /// Inertia the gearhead turns, at the table, kg·m² (without the rotor).
+    pub load_inertia_kgm2: f32,
+    /// Bridge supply, V.
+    pub supply_v: f32,
+}
+
+/// The RE 30's rotor inertia, kg·m² (maxon #310007: 33.5 g·cm²).
+pub const ROTOR_INERTIA_KGM2: f32 = 33.5e-7;
+
+impl Drive {
+    /// The prototype ([`design`]).
+    pub const PROTOTYPE: Drive =
+        Drive { gear_ratio: design::GEAR_RATIO, load_inertia_kgm2: 0.012, supply_v: design::VBUS_V };
+
+    /// From the wire's integers.
+    pub fn from_config(c: &protocol::DriveConfig) -> Self {
+        Drive {
+            // Divisions, correctly rounded: 24 000 mV is exactly 24 V.
+            gear_ratio: c.gear_ratio_milli as f32 / 1e3,
+            load_inertia_kgm2: c.load_inertia_gcm2 as f32 / 1e7,
+            supply_v: c.supply_mv as f32 / 1e3,
+        }
+    }
+
+    /// Total inertia at the table: the load plus the rotor reflected through the gearhead.
+    pub const fn inertia_kgm2(&self) -> f32 {
+        self.load_inertia_kgm2 + ROTOR_INERTIA_KGM2 * self.gear_ratio * self.gear_ratio
+    }
+
+    /// Steady-state table speed per unit duty, counts/s: `V / (KE · N)` rad/s.
+    pub const fn k_cps_per_duty(&self) -> f32 {
+        self.supply_v / (design::KE_VS_PER_RAD * self.gear_ratio) * design::COUNTS_PER_RAD
+    }
+
+    /// Mechanical time constant, s: `R · J / (KE · N)²`.
+    pub const fn tau_s(&self) -> f32 {
+        let ke_n = design::KE_VS_PER_RAD * self.gear_ratio;
+        design::R_OHM * self.inertia_kgm2() / (ke_n * ke_n)
+    }
+}
+
 /// Controller gains. Duty is a signed fraction of the bridge supply.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gains {
@@ -58,11 +106,16 @@ impl Gains {
     /// Gains from [`design`]: crossover `ωc` with the PI zero cancelling the mechanical pole.
     /// The ramp, 90 °/s² (81 000 cps/s), reaches 0.5 Hz in 2 s with ≈ 19 mN·m of accelerating
     /// torque on the table, gentle on the contactless magnetic gears.
-    pub const RE30_GP32: Gains = {
-        use design::*;
-        let kp = CROSSOVER_RAD_S * TAU_S / K_CPS_PER_DUTY;
-        Gains { kff: 1.0 / K_CPS_PER_DUTY, kp, ki: kp / TAU_S, duty_limit: 0.95, ramp_cps_per_s: 81_000.0 }
-    };
+    pub const RE30_GP32: Gains = Gains::for_drive(&Drive::PROTOTYPE);
+
+    /// Gains for `drive`: the same design (crossover [`design::CROSSOVER_RAD_S`], PI zero on the
+    /// mechanical pole, feed-forward `1/K`), the same ramp and duty limit.
+    pub const fn for_drive(drive: &Drive) -> Gains {
+        let k = drive.k_cps_per_duty();
+        let tau = drive.tau_s();
+        let kp = design::CROSSOVER_RAD_S * tau / k;
+        Gains { kff: 1.0 / k, kp, ki: kp / tau, duty_limit: 0.95, ramp_cps_per_s: 81_000.0 }
+    }
 }
 
 /// Ramp + PI state. Call [`SpeedLoop::update_over`] once per period with the period measured
@@ -90,6 +143,16 @@ impl SpeedLoop {
     /// Motor off: forget the ramp and the integral, so a restart begins from rest.
     pub fn reset(&mut self) {
         *self = Self::new(self.gains);
+    }
+
+    /// New gains, from rest (the rig changes them only between runs).
+    pub fn set_gains(&mut self, gains: Gains) {
+        *self = Self::new(gains);
+    }
+
+    /// Gains in force.
+    pub fn gains(&self) -> Gains {
+        self.gains
     }
 
     /// One nominal period (1 / [`LOOP_HZ`]): [`Self::update_over`].
@@ -150,6 +213,22 @@ mod tests {
         // 24 V / (25.9 mV·s/rad · 66) = 14.04 rad/s at the table, × 51 566 counts/rad.
         assert!((design::K_CPS_PER_DUTY - 724_000.0).abs() < 1_000.0);
         assert!((design::TAU_S - 5.6e-3).abs() < 0.1e-3);
+    }
+
+    #[test]
+    fn the_prototype_drive_gives_the_design_gains() {
+        let d = Drive::PROTOTYPE;
+        assert_eq!(d.k_cps_per_duty(), design::K_CPS_PER_DUTY);
+        assert!((d.tau_s() / design::TAU_S - 1.0).abs() < 1e-6);
+        assert_eq!(Drive::from_config(&protocol::DriveConfig::PROTOTYPE), d);
+        // Half the ratio: twice the speed per duty; the rotor's share of J drops four-fold.
+        let half = Drive { gear_ratio: 33.0, ..d };
+        assert!((half.k_cps_per_duty() / d.k_cps_per_duty() - 2.0).abs() < 1e-6);
+        let j = 0.012 + 33.5e-7 * 33.0 * 33.0;
+        assert!((half.inertia_kgm2() - j).abs() < 1e-9);
+        let g = Gains::for_drive(&half);
+        assert!((g.kff * half.k_cps_per_duty() - 1.0).abs() < 1e-6);
+        assert!((g.kp / g.ki - half.tau_s()).abs() < 1e-9, "PI zero on the mechanical pole");
     }
 
     #[test]

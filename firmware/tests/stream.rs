@@ -201,3 +201,84 @@ fn starts_near_the_wrap_of_everything() {
     assert_eq!(vr.timer_us(6_000), 0);
     assert_eq!(Plant::prototype().encoder_count(), u32::MAX - 324_000);
 }
+
+/// A Start at 0 m°/s is a static run (noise figures): framed by RunStarted and RunStopped like
+/// any run, samples streaming, the bridge disabled throughout; Stop ends it at once; the gyro
+/// cannot be reconfigured under it; a silent host ends it with HostLinkLost.
+#[test]
+fn a_static_run_keeps_the_motor_off_and_is_framed_like_any_run() {
+    let mut s = Session::prototype();
+    s.run(200 * MS);
+    let go_at = s.vr.now_ns();
+    let go = s.command(Command::Start(StartRun::static_run(2)));
+    s.run(10 * MS);
+    let configure = s.command(Command::ConfigureGyro(GyroConfig::DEFAULT));
+    s.run(3 * S);
+    assert_eq!(s.ack_for(go), Some(CmdResult::Ok));
+    assert_eq!(s.ack_for(configure), Some(CmdResult::Busy), "the run holds the gyro settings");
+    let started = s
+        .msgs()
+        .find_map(|m| match m {
+            RigMsg::RunStarted(r) => Some(*r),
+            _ => None,
+        })
+        .expect("RunStarted");
+    assert_eq!((started.run_tag, started.rate_mdps), (2, 0));
+    let during: Vec<_> = s.probes.iter().filter(|p| p.t_ns > go_at).collect();
+    assert!(during.len() > 2_900, "{} control ticks", during.len());
+    assert!(during.iter().all(|p| !p.motor.enable && p.speed_cps == 0.0), "the bridge stays off, the table still");
+    let motors: Vec<_> = s
+        .msgs()
+        .filter_map(|m| match m {
+            RigMsg::Motor(ms) if ms.run_tag == 2 => Some(*ms),
+            _ => None,
+        })
+        .collect();
+    assert!(motors.len() >= 29, "{} Motor reports carry the run's tag", motors.len());
+    assert!(motors.iter().all(|m| m.speed_cps == 0 && m.setpoint_cps == 0 && m.duty_permille == 0));
+
+    // Stop: RunStopped before the Ack, with no ramp to wait for.
+    let stop = s.command(Command::Stop);
+    s.run(2 * MS);
+    let pos = |pred: &dyn Fn(&RigMsg) -> bool| s.position(pred).expect("frame");
+    let stopped = pos(&|m| matches!(m, RigMsg::RunStopped(r) if r.run_tag == 2));
+    let acked = pos(&|m| matches!(m, RigMsg::Ack(a) if a.cmd_seq == stop));
+    assert!(stopped < acked);
+    assert!(s.faults().is_empty(), "{:?}", s.faults());
+
+    // Another static run, then the host goes quiet: the link watchdog ends it, as any run.
+    s.command(Command::Start(StartRun::static_run(3)));
+    s.heartbeat = false;
+    let quiet_from = s.vr.now_ns();
+    s.run(2_500 * MS);
+    assert_eq!(s.faults(), [protocol::Fault::HostLinkLost]);
+    let t_stop_ns = s
+        .msgs()
+        .find_map(|m| match m {
+            RigMsg::RunStopped(r) if r.run_tag == 3 => Some(s.unwrap_us(r.t_us) * 1_000),
+            _ => None,
+        })
+        .expect("RunStopped after the trip");
+    let after_ms = (t_stop_ns - quiet_from) / MS;
+    assert!((2_000..=2_020).contains(&after_ms), "ended {after_ms} ms after the host fell silent");
+}
+
+/// ConfigureDrive is acknowledged: Ok when idle and in limits, InvalidArgument outside them (or
+/// for a drive that could not reach the over-speed limit), Busy during a run.
+#[test]
+fn configure_drive_is_validated_and_refused_during_a_run() {
+    use protocol::DriveConfig;
+    let mut s = Session::prototype();
+    let ok = s.command(Command::ConfigureDrive(DriveConfig::PROTOTYPE));
+    let slow = s.command(Command::ConfigureDrive(DriveConfig { gear_ratio_milli: 150_000, ..DriveConfig::PROTOTYPE }));
+    let zero = s.command(Command::ConfigureDrive(DriveConfig { supply_mv: 0, ..DriveConfig::PROTOTYPE }));
+    s.run(10 * MS);
+    start(&mut s, 1);
+    s.run(10 * MS);
+    let busy = s.command(Command::ConfigureDrive(DriveConfig::PROTOTYPE));
+    s.run(10 * MS);
+    assert_eq!(s.ack_for(ok), Some(CmdResult::Ok));
+    assert_eq!(s.ack_for(slow), Some(CmdResult::InvalidArgument));
+    assert_eq!(s.ack_for(zero), Some(CmdResult::InvalidArgument));
+    assert_eq!(s.ack_for(busy), Some(CmdResult::Busy));
+}

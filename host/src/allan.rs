@@ -191,9 +191,9 @@ pub fn axis_noise(axis: char, rate: &[f64], tau0_s: f64) -> AxisNoise {
 }
 
 /// The longest stretch of samples taken with the table at rest: the latest `MotorStatus`
-/// before each sample reports zero speed and zero setpoint. A simulated run at 0 °/s (`host
-/// simulate --rates-dps 0`) is one such stretch from end to end. (The firmware refuses a 0 °/s
-/// run and sends no samples between runs, so live captures have none yet.)
+/// before each sample reports zero speed and zero setpoint. A static run (a `Start` at 0 °/s:
+/// `host calibrate --static-s`, `host simulate --rates-dps 0`) is one such stretch from end to
+/// end.
 pub fn static_stretch(cap: &Capture) -> Option<(&Run, std::ops::Range<usize>)> {
     let mut best: Option<(&Run, std::ops::Range<usize>)> = None;
     for run in &cap.runs {
@@ -251,13 +251,22 @@ pub struct NoiseReport {
     pub axes: Vec<AxisNoise>,
 }
 
+/// Noise figures of a session: the longest static stretch among `caps`, through the calibration
+/// (`host calibrate` gives it the captures' static runs; `None` without one long enough).
+pub fn session_noise<'a>(caps: impl IntoIterator<Item = &'a Capture>, cal: &Calibration) -> Option<NoiseReport> {
+    caps.into_iter()
+        .filter_map(|c| static_stretch(c).map(|(_, r)| (r.len(), c)))
+        .max_by_key(|(n, _)| *n)
+        .and_then(|(_, c)| capture_noise(c, Some(cal)).ok())
+}
+
 /// Allan analysis of a capture's static stretch, in °/s through `cal` (package frame) or, without
 /// it, through the datasheet sensitivity (sensor axes).
 pub fn capture_noise(cap: &Capture, cal: Option<&Calibration>) -> Result<NoiseReport, String> {
     let (run, range) = static_stretch(cap).ok_or(
-        "the capture holds no static stretch (no sample with the motor reporting zero speed and setpoint). \
-         The rig's firmware streams samples only during runs and refuses 0 °/s, so for now static \
-         captures come from the simulator: `host simulate --poses 1 --rates-dps 0 --duration 600 --out static.cap`",
+        "the capture holds no static stretch (no sample with the motor reporting zero speed and setpoint): \
+         record one with `host calibrate --port … --static-s 600`, or simulate one with \
+         `host simulate --poses 1 --rates-dps 0 --duration 600 --out static.cap`",
     )?;
     let samples = &run.samples[range.clone()];
     if samples.len() < MIN_STATIC_SAMPLES {

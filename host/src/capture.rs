@@ -84,10 +84,16 @@ pub struct Run {
     pub stopped: bool,
 }
 
+/// The magnitude of a motor status's ramped setpoint, m°/s.
+fn setpoint_mdps(m: &MotorStatus, hello: &Hello) -> u32 {
+    use protocol::units::{deg_from_counts, mdps_from_dps};
+    mdps_from_dps(deg_from_counts(f64::from(m.setpoint_cps), hello.encoder_counts_per_rev))
+}
+
 impl Run {
     /// Signed commanded base-table rate, °/s.
     pub fn commanded_rate_dps(&self) -> f64 {
-        f64::from(self.rate_mdps) / 1000.0 * f64::from(self.direction.sign())
+        protocol::units::signed_dps(self.rate_mdps, self.direction)
     }
 
     /// Duration covered by the samples, s.
@@ -374,8 +380,7 @@ impl CaptureDecoder {
                     if run.origin == RunOrigin::Recovered {
                         // The lost RunStarted carried the commanded rate; the ramped setpoint
                         // reaches it once the ramp is over.
-                        let deg_per_count = 360.0 / f64::from(run.hello.encoder_counts_per_rev);
-                        let mdps = (f64::from(m.setpoint_cps.unsigned_abs()) * deg_per_count * 1000.0).round() as u32;
+                        let mdps = setpoint_mdps(&m, &run.hello);
                         if mdps > run.rate_mdps {
                             run.rate_mdps = mdps;
                             run.direction = if m.setpoint_cps < 0 { Direction::Cw } else { Direction::Ccw };
@@ -434,8 +439,7 @@ impl CaptureDecoder {
     /// Opens a run whose `RunStarted` was lost, from a motor status that names it.
     fn recover_run(&mut self, offset: u64, _t_us: i64, m: &MotorStatus) {
         let hello = self.capture.hello.unwrap_or_else(|| assumed_hello(GyroConfig::DEFAULT));
-        let deg_per_count = 360.0 / f64::from(hello.encoder_counts_per_rev);
-        let rate_mdps = (f64::from(m.setpoint_cps.unsigned_abs()) * deg_per_count * 1000.0).round() as u32;
+        let rate_mdps = setpoint_mdps(m, &hello);
         let rs = RunStarted {
             t_us: m.t_us,
             run_tag: m.run_tag,

@@ -26,16 +26,16 @@ impl Pose {
     /// The run tag the host sends in `StartRun` and the rig echoes in `RunStarted`.
     pub const fn run_tag(self) -> u8 {
         match self {
-            Pose::One => 1,
-            Pose::Two => 2,
+            Pose::One => protocol::run_tag::POSE_1,
+            Pose::Two => protocol::run_tag::POSE_2,
         }
     }
 
     /// The pose a run tag names, if any.
     pub const fn from_run_tag(tag: u8) -> Option<Pose> {
         match tag {
-            1 => Some(Pose::One),
-            2 => Some(Pose::Two),
+            protocol::run_tag::POSE_1 => Some(Pose::One),
+            protocol::run_tag::POSE_2 => Some(Pose::Two),
             _ => None,
         }
     }

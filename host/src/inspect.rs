@@ -107,7 +107,8 @@ pub fn summarize_run(run: &Run) -> RunSummary {
     let index_rate_hz = if index_span_s > 0.0 { (index_pulses.saturating_sub(1)) as f64 / index_span_s } else { 0.0 };
     let encoder_rate_dps = match (run.samples.first(), run.samples.last()) {
         (Some(a), Some(b)) if duration_s > 0.0 => {
-            (b.encoder - a.encoder) as f64 * 360.0 / f64::from(run.hello.encoder_counts_per_rev) / duration_s
+            protocol::units::deg_from_counts((b.encoder - a.encoder) as f64, run.hello.encoder_counts_per_rev)
+                / duration_s
         }
         _ => 0.0,
     };

@@ -242,5 +242,6 @@ pub fn command_name(cmd: &Command) -> &'static str {
         Command::Stop => "Stop",
         Command::ConfigureGyro(_) => "ConfigureGyro",
         Command::Heartbeat => "Heartbeat",
+        Command::ConfigureDrive(_) => "ConfigureDrive",
     }
 }

@@ -71,6 +71,11 @@ enum Cmd {
         /// 180,90,-180) to separate the offsets from the constant θ2' term as well.
         #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true, value_parser = parse_rate)]
         rates_dps: Vec<f64>,
+        /// Live: end the session with a static run (motor off) of this many seconds in the last
+        /// pose, for noise figures (Allan deviation, ARW, bias instability, RRW). An hour gives
+        /// bias instability and RRW that are more than indicative.
+        #[arg(long, value_parser = parse_duration, conflicts_with = "replay")]
+        static_s: Option<f64>,
         /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
         /// `x.cap`, if present).
         #[arg(long, requires = "replay")]
@@ -127,8 +132,8 @@ enum Cmd {
     /// Noise figures of a capture's static stretch (motor at rest): overlapping Allan deviation
     /// per axis, angle random walk, bias instability, rate random walk.
     Noise {
-        /// Capture holding a static stretch (for now from the simulator: `host simulate --poses 1
-        /// --rates-dps 0`; the firmware refuses 0 °/s runs).
+        /// Capture holding a static stretch: a static run of `host calibrate --static-s`, or of
+        /// `host simulate --poses 1 --rates-dps 0`.
         #[arg(long)]
         capture: PathBuf,
         /// Calibration to turn counts into rates (default: the datasheet sensitivity).
@@ -137,6 +142,27 @@ enum Cmd {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+    },
+    /// Tell the rig the drive train its speed loop is designed for: the gearhead, the inertia it
+    /// turns, the bridge supply. Lasts until the rig resets (then the prototype's: 66:1,
+    /// 0.012 kg·m², 24 V); send it after each power-up, before calibrating.
+    ConfigureDrive {
+        /// Serial port of the rig.
+        #[arg(long)]
+        port: String,
+        /// Gearhead reduction, motor turns per base-table turn (66 for 66:1), 1 to 500.
+        #[arg(long, value_parser = parse_gear_ratio)]
+        gear_ratio: f64,
+        /// Inertia the gearhead turns about the base-table axis, kg·m²: tables, magnetic gears,
+        /// counterweight and gyro, not the motor's rotor (the rig adds it). 0.0001 to 1.
+        #[arg(long, value_parser = parse_load_inertia)]
+        load_inertia_kgm2: f64,
+        /// Bridge supply, V, 6 to 48.
+        #[arg(long, default_value_t = 24.0, value_parser = parse_supply)]
+        supply_v: f64,
+        /// Baud rate (ignored by USB CDC-ACM).
+        #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+        baud: u32,
     },
     /// The records database: every calibration stored, listed, compared, summarised.
     Records {
@@ -188,6 +214,35 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// A drive value whose wire form (`to_wire`, through `DriveConfig::from_si`) lies in `range`,
+/// the protocol's limit (`protocol::drive_limits`), said in the option's own units.
+fn parse_drive(
+    s: &str,
+    to_wire: impl Fn(f64) -> u32,
+    range: std::ops::RangeInclusive<u32>,
+    what: &str,
+) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && range.contains(&to_wire(v)) => Ok(v),
+        _ => Err(format!("{s:?} is not {what}")),
+    }
+}
+
+fn parse_gear_ratio(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(v, 0.0, 0.0).gear_ratio_milli;
+    parse_drive(s, wire, protocol::drive_limits::GEAR_RATIO_MILLI, "a gear ratio from 1 to 500")
+}
+
+fn parse_load_inertia(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(0.0, v, 0.0).load_inertia_gcm2;
+    parse_drive(s, wire, protocol::drive_limits::LOAD_INERTIA_GCM2, "an inertia from 0.0001 to 1 kg·m²")
+}
+
+fn parse_supply(s: &str) -> Result<f64, String> {
+    let wire = |v| protocol::DriveConfig::from_si(0.0, 0.0, v).supply_mv;
+    parse_drive(s, wire, protocol::drive_limits::SUPPLY_MV, "a supply from 6 to 48 V")
 }
 
 fn parse_latitude(s: &str) -> Result<f64, String> {
@@ -243,9 +298,10 @@ fn parse_duration(s: &str) -> Result<f64, String> {
 
 /// A base-table rate in °/s: finite, non-zero, at most the rig's limit (`nan` would send 0).
 fn parse_rate(s: &str) -> Result<f64, String> {
-    let max = f64::from(protocol::MAX_RATE_MDPS) / 1000.0;
+    use protocol::units::{dps_from_mdps, mdps_from_dps};
+    let max = dps_from_mdps(protocol::MAX_RATE_MDPS);
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= max && (v.abs() * 1000.0).round() >= 1.0 => Ok(v),
+        Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= max && mdps_from_dps(v) >= 1 => Ok(v),
         _ => Err(format!("{s:?} is not a rate: give °/s, non-zero, between -{max} and {max}")),
     }
 }
@@ -290,6 +346,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             out_dir,
             duration,
             rates_dps,
+            static_s,
             truth,
             sensor,
             operator,
@@ -322,7 +379,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         operator.as_mut(),
                         &interrupted,
                     )?;
-                    let plan = session::plan(&Pose::ALL, &rates_dps, duration);
+                    let plan = session::plan_with_static(&Pose::ALL, &rates_dps, duration, static_s);
                     let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
                     manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
                     manifest.write(&out_dir)?;
@@ -399,6 +456,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
         }
         Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
         Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
+        Cmd::ConfigureDrive { port, gear_ratio, load_inertia_kgm2, supply_v, baud } => {
+            let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+            session::identify(&mut link)?;
+            session::configure_drive(
+                &mut link,
+                protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v),
+            )?;
+            eprintln!(
+                "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
+            );
+            Ok(ExitCode::SUCCESS)
+        }
         Cmd::Inspect { files, json } => {
             for f in &files {
                 let cap = read_capture(f)?;
@@ -478,14 +547,6 @@ fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s:
         bail!("interrupted; capture so far kept in {}", out.display());
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Noise figures of the longest static stretch among the captures, through the calibration.
-fn static_noise(caps: &[(PathBuf, Capture)], cal: &calib::Calibration) -> Option<host::allan::NoiseReport> {
-    caps.iter()
-        .filter_map(|(_, c)| host::allan::static_stretch(c).map(|(_, r)| (r.len(), c)))
-        .max_by_key(|(n, _)| *n)
-        .and_then(|(_, c)| host::allan::capture_noise(c, Some(cal)).ok())
 }
 
 /// Writes the manifest of a live session before its first capture, so even an interrupted
@@ -583,7 +644,7 @@ fn calibrate(
     let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
-    let noise = static_noise(&caps, &lr.final_report().calibration());
+    let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
     if let Some(n) = &noise {
         let mut text = n.to_string();
         text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));

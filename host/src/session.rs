@@ -6,7 +6,9 @@ use crate::geometry::Pose;
 use crate::link::Link;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use protocol::{timing, CmdResult, Command, Direction, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION};
+use protocol::{
+    timing, units, CmdResult, Command, DriveConfig, Fault, GyroConfig, Hello, RigMsg, StartRun, PROTOCOL_VERSION,
+};
 use std::fs::File;
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
@@ -26,16 +28,30 @@ pub struct RunPlan {
 }
 
 impl RunPlan {
-    /// File name of the run's capture, e.g. `pose1-p180dps.cap`.
+    /// A static run (motor off) of `duration_s` in `pose`: a Start at 0 °/s
+    /// ([`StartRun::static_run`]), for noise figures.
+    pub fn static_run(pose: Pose, duration_s: f64) -> Self {
+        Self { pose, rate_dps: 0.0, duration_s }
+    }
+
+    /// Whether the motor stays off.
+    pub fn is_static(&self) -> bool {
+        self.rate_dps == 0.0
+    }
+
+    /// File name of the run's capture, e.g. `pose1-p180dps.cap`, `pose2-static.cap`.
     pub fn file_name(&self) -> String {
+        if self.is_static() {
+            return format!("pose{}-static.cap", self.pose.number());
+        }
         let sign = if self.rate_dps < 0.0 { 'm' } else { 'p' };
         format!("pose{}-{sign}{:.0}dps.cap", self.pose.number(), self.rate_dps.abs())
     }
 
     fn start(&self) -> StartRun {
         StartRun {
-            rate_mdps: (self.rate_dps.abs() * 1000.0).round() as u32,
-            direction: if self.rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
+            rate_mdps: units::mdps_from_dps(self.rate_dps),
+            direction: units::direction_of(self.rate_dps),
             run_tag: self.pose.run_tag(),
         }
     }
@@ -47,6 +63,16 @@ pub fn plan(poses: &[Pose], rates_dps: &[f64], duration_s: f64) -> Vec<RunPlan> 
         .iter()
         .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunPlan { pose, rate_dps, duration_s }))
         .collect()
+}
+
+/// `plan` plus, with `static_s`, a static run of that many seconds at the end, in the pose
+/// mounted last (no remounting; the gyro has warmed up with the runs before it).
+pub fn plan_with_static(poses: &[Pose], rates_dps: &[f64], duration_s: f64, static_s: Option<f64>) -> Vec<RunPlan> {
+    let mut runs = plan(poses, rates_dps, duration_s);
+    if let (Some(s), Some(&last)) = (static_s, poses.last()) {
+        runs.push(RunPlan::static_run(last, s));
+    }
+    runs
 }
 
 const fn ms(v: u32) -> Duration {
@@ -117,6 +143,29 @@ pub fn describe_fault(f: Fault) -> String {
 /// Sets the gyro (only between runs).
 pub fn configure<P: Read + Write>(link: &mut Link<P>, gyro: GyroConfig) -> Result<()> {
     link.command(&Command::ConfigureGyro(gyro), |_| {})
+}
+
+/// Tells the rig the drive train its speed loop must be designed for (until it resets).
+pub fn configure_drive<P: Read + Write>(link: &mut Link<P>, drive: DriveConfig) -> Result<()> {
+    let what = format!(
+        "{}:1 gearhead, {} kg·m² of load, {} V",
+        f64::from(drive.gear_ratio_milli) / 1e3,
+        f64::from(drive.load_inertia_gcm2) / 1e7,
+        f64::from(drive.supply_mv) / 1e3
+    );
+    match link.request(&Command::ConfigureDrive(drive), |_| {})?.result {
+        CmdResult::Ok => Ok(()),
+        CmdResult::InvalidArgument if drive.in_limits() => bail!(
+            "the rig on {} refused the drive ({what}): at full duty it would not exceed the rig's over-speed limit, so a runaway would go unnoticed (a lower ratio or a higher supply)",
+            link.name()
+        ),
+        CmdResult::InvalidArgument => bail!(
+            "the rig on {} refused the drive ({what}): outside the protocol's limits (ratio 1 to 500, load 0.0001 to 1 kg·m², supply 6 to 48 V)",
+            link.name()
+        ),
+        CmdResult::Busy => bail!("the rig on {} refused the drive: a run is in progress (stop it first)", link.name()),
+        r => bail!("the rig on {} refused the drive ({what}): {r:?}", link.name()),
+    }
 }
 
 /// What the operator said at a prompt.
@@ -291,7 +340,7 @@ fn stream_run<P: Read + Write>(
 ) -> Result<()> {
     let where_ = format!("{} (capture kept in {})", run_label(run), path.display());
     let hello = identify(link)?;
-    let target_cps = f64::from(run.start().rate_mdps) / 1000.0 / 360.0 * f64::from(hello.encoder_counts_per_rev);
+    let target_cps = units::counts_from_deg(units::dps_from_mdps(run.start().rate_mdps), hello.encoder_counts_per_rev);
     let tag = run.start().run_tag;
     let mut started = false;
     let answer = link.request(&Command::Start(run.start()), |m| {
@@ -307,7 +356,9 @@ fn stream_run<P: Read + Write>(
     progress.set_style(bar_style());
     progress.set_length((run.duration_s * 10.0).round() as u64);
     progress.set_position(0);
-    progress.set_message(format!("{}: spinning up", run_label(run)));
+    // A static run is "at speed" once the rig reports the table at rest (setpoint and speed 0).
+    let waiting = if run.is_static() { "waiting for the table at rest" } else { "spinning up" };
+    progress.set_message(format!("{}: {waiting}", run_label(run)));
 
     let t_start = link.now();
     let mut last_sample = link.now();
@@ -411,6 +462,9 @@ fn stop_run<P: Read + Write>(link: &mut Link<P>, tag: u8, interrupted: &AtomicBo
 }
 
 fn run_label(run: &RunPlan) -> String {
+    if run.is_static() {
+        return format!("{}, static (motor off)", run.pose);
+    }
     format!("{}, {:+.1} °/s", run.pose, run.rate_dps)
 }
 

@@ -43,6 +43,65 @@ fn a_wrong_option_is_a_usage_error() {
     assert!(stderr(&o).contains("<--port <PORT>|--replay <REPLAY>...>"), "{}", stderr(&o));
 }
 
+/// `--static-s` is a live option with a positive duration.
+#[test]
+fn static_s_is_live_only_and_positive() {
+    let o = host(&["calibrate", "--replay", "x.cap", "--static-s", "60"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o)
+            .starts_with("error: the argument '--replay <REPLAY>...' cannot be used with '--static-s <STATIC_S>'"),
+        "{}",
+        stderr(&o)
+    );
+    let o = host(&["calibrate", "--port", "/dev/null", "--sensor", "S", "--static-s", "0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("invalid value '0' for '--static-s <STATIC_S>': \"0\" is not a duration"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// `configure-drive` checks the protocol's limits before it opens the port.
+#[test]
+fn configure_drive_refuses_values_outside_the_protocols_limits() {
+    for (args, msg) in [
+        (["--gear-ratio", "0.5", "--load-inertia-kgm2", "0.012"], "invalid value '0.5' for '--gear-ratio <GEAR_RATIO>': \"0.5\" is not a gear ratio from 1 to 500"),
+        (["--gear-ratio", "66", "--load-inertia-kgm2", "nan"], "invalid value 'nan' for '--load-inertia-kgm2 <LOAD_INERTIA_KGM2>': \"nan\" is not an inertia from 0.0001 to 1 kg·m²"),
+    ] {
+        let o = host(&[&["configure-drive", "--port", "/dev/null"][..], &args[..]].concat());
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&o).starts_with(&format!("error: {msg}")), "{}", stderr(&o));
+    }
+    let o = host(&[
+        "configure-drive",
+        "--port",
+        "/dev/null",
+        "--gear-ratio",
+        "66",
+        "--load-inertia-kgm2",
+        "0.012",
+        "--supply-v",
+        "60",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("\"60\" is not a supply from 6 to 48 V"), "{}", stderr(&o));
+}
+
+/// The simulator cannot promise what the firmware refuses: its rate limit is the protocol's.
+#[test]
+fn simulate_refuses_a_rate_the_rig_refuses() {
+    let out = std::env::temp_dir().join(format!("host-cli-{}-fast.cap", std::process::id()));
+    let o = host(&["simulate", "--rates-dps", "500", "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: invalid simulation: runs[0].rate_dps must be within ±360 °/s, the rig's limit (0: a static run, for noise figures)\n"
+    );
+    assert!(!out.exists());
+}
+
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("host-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);

@@ -94,4 +94,6 @@ fn main() {
         }),
     );
     show(4, &Command::Heartbeat);
+    show(5, &Command::Start(StartRun::static_run(2)));
+    show(6, &Command::ConfigureDrive(DriveConfig::PROTOTYPE));
 }

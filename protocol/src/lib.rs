@@ -11,6 +11,7 @@ pub mod decoder;
 pub mod frame;
 pub mod gyro;
 pub mod msg;
+pub mod units;
 
 pub use decoder::{Event, SeqTracker, StreamDecoder};
 pub use frame::{encode_frame, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN};
@@ -37,6 +38,17 @@ pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
 /// the rig refuses more with `InvalidArgument`. Pose 1 then peaks at 502 °/s (EXCITER.md: 251 °/s
 /// at 0.5 Hz), so above 0.5 Hz the host must select the ±2000 °/s range.
 pub const MAX_RATE_MDPS: u32 = 360_000;
+
+/// What a run tag means (protocol/README.md, "Field meanings"): the rig echoes any tag; the
+/// host, and a rig that mounts the gyro by itself (the virtual rig), read it as the pose.
+pub mod run_tag {
+    /// `Motor.run_tag` while no run is in progress.
+    pub const IDLE: u8 = 0;
+    /// The gyro in pose 1 (EXCITER.md: on the 54.74° wedge, turned 45° about z).
+    pub const POSE_1: u8 = 1;
+    /// The gyro in pose 2 (pose 1 turned −90° about the sensor table's y axis).
+    pub const POSE_2: u8 = 2;
+}
 
 /// The link's timing, one place for both ends (protocol/README.md, "Link timing").
 pub mod timing {
@@ -65,6 +77,14 @@ pub mod timing {
 
     /// Host: how long a run may take to reach its speed.
     pub const SPIN_UP_TIMEOUT_MS: u32 = 20_000;
+
+    /// Rig: `Motor` reports per second, during runs and while idle; `speed_cps` is measured over
+    /// one report interval.
+    pub const MOTOR_STATUS_HZ: u32 = 10;
+
+    /// Rig: `Counters` reports per second, each followed by the latest `Temperature` (if a
+    /// sample was read since the last one).
+    pub const COUNTERS_HZ: u32 = 1;
 
     /// Host: how long, after the `Stop` is acknowledged, the rig may take to report the motor
     /// stopped (`RunStopped`, or a `Motor` status with run tag 0 if that frame was lost). A

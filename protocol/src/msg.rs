@@ -191,7 +191,7 @@ pub struct RunStarted {
     pub t_us: u32,
     /// Host-chosen tag, echoed verbatim; the host puts the sensor pose in it.
     pub run_tag: u8,
-    /// Commanded base-table speed, milli-degrees per second (unsigned).
+    /// Commanded base-table speed, milli-degrees per second (unsigned); 0: a static run.
     pub rate_mdps: u32,
     /// Commanded direction.
     pub direction: Direction,
@@ -264,15 +264,83 @@ pub enum RigMsg {
     Fault(FaultReport),
 }
 
-/// Start a run: ramp the base table to a speed in a direction.
+/// Start a run: ramp the base table to a speed in a direction, or, with `rate_mdps` 0, a static
+/// run: the motor stays off (bridge disabled) and the run only frames the samples, for noise
+/// figures (protocol/README.md, "Runs").
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StartRun {
-    /// Base-table speed, milli-degrees per second (180 000 = 0.5 Hz).
+    /// Base-table speed, milli-degrees per second (180 000 = 0.5 Hz); 0: a static run.
     pub rate_mdps: u32,
-    /// Direction.
+    /// Direction (echoed, and without effect, in a static run).
     pub direction: Direction,
     /// Echoed in [`RunStarted::run_tag`].
     pub run_tag: u8,
+}
+
+impl StartRun {
+    /// A static run (motor off) tagged `run_tag`.
+    pub const fn static_run(run_tag: u8) -> Self {
+        Self { rate_mdps: 0, direction: Direction::Ccw, run_tag }
+    }
+
+    /// Whether this asks for a static run.
+    pub const fn is_static(&self) -> bool {
+        self.rate_mdps == 0
+    }
+}
+
+/// The drive train the speed loop is designed for: what differs between rigs built to the same
+/// design (the gearhead, the tables' inertia, the bridge supply); the motor is the RE 30. The rig
+/// recomputes its gains from it (firmware `speed_loop::Drive`). Integers in named units, so the
+/// wire stays exact; the limits are [`drive_limits`].
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DriveConfig {
+    /// Gearhead reduction, motor turns per base-table turn, × 1000 (66 000 = 66:1).
+    pub gear_ratio_milli: u32,
+    /// Inertia of everything the gearhead turns (tables, magnetic gears, counterweight, gyro),
+    /// about the base-table axis, g·cm² (120 000 = 0.012 kg·m²); the rotor's own is added by
+    /// the rig.
+    pub load_inertia_gcm2: u32,
+    /// Bridge supply, mV.
+    pub supply_mv: u32,
+}
+
+impl DriveConfig {
+    /// The prototype: GP 32 C 66:1, 0.012 kg·m² of load, 24 V (firmware README, "Measured").
+    pub const PROTOTYPE: DriveConfig =
+        DriveConfig { gear_ratio_milli: 66_000, load_inertia_gcm2: 120_000, supply_mv: 24_000 };
+
+    /// From SI units: ratio, kg·m², V (rounded to the wire's units; NaN or negative → 0, which
+    /// [`Self::in_limits`] refuses).
+    pub fn from_si(gear_ratio: f64, load_inertia_kgm2: f64, supply_v: f64) -> Self {
+        // `as` saturates and maps NaN to 0; + ½ rounds a non-negative value (no libm in no_std).
+        let round = |v: f64| (v + 0.5) as u32;
+        DriveConfig {
+            gear_ratio_milli: round(gear_ratio * 1e3),
+            load_inertia_gcm2: round(load_inertia_kgm2 * 1e7),
+            supply_mv: round(supply_v * 1e3),
+        }
+    }
+
+    /// Whether every field is inside [`drive_limits`] (the rig may still refuse a drive that
+    /// cannot reach its over-speed limit, protocol/README.md "Drive").
+    pub fn in_limits(&self) -> bool {
+        use drive_limits::*;
+        GEAR_RATIO_MILLI.contains(&self.gear_ratio_milli)
+            && LOAD_INERTIA_GCM2.contains(&self.load_inertia_gcm2)
+            && SUPPLY_MV.contains(&self.supply_mv)
+    }
+}
+
+/// What a [`DriveConfig`] may say.
+pub mod drive_limits {
+    use core::ops::RangeInclusive;
+    /// Gearhead reductions, × 1000: direct drive to 500:1.
+    pub const GEAR_RATIO_MILLI: RangeInclusive<u32> = 1_000..=500_000;
+    /// Load inertia, g·cm²: 0.0001 to 1 kg·m² (the prototype's tables are 0.012).
+    pub const LOAD_INERTIA_GCM2: RangeInclusive<u32> = 1_000..=10_000_000;
+    /// Bridge supply, mV: 6 to 48 V (the RE 30 #310007 is a 24 V winding).
+    pub const SUPPLY_MV: RangeInclusive<u32> = 6_000..=48_000;
 }
 
 /// Everything the host sends. Variant order is wire order.
@@ -288,4 +356,8 @@ pub enum Command {
     ConfigureGyro(GyroConfig),
     /// 4: keeps the link alive; the rig stops the motor after 2 s without any host frame.
     Heartbeat,
+    /// 5: the drive train the speed loop is designed for (volatile: a reset restores
+    /// [`DriveConfig::PROTOTYPE`]); refused with [`CmdResult::Busy`] during a run and
+    /// [`CmdResult::InvalidArgument`] outside the limits.
+    ConfigureDrive(DriveConfig),
 }

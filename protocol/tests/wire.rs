@@ -117,6 +117,9 @@ fn command_vectors() -> Vec<(u16, Command, &'static str)> {
             "0a 03 03 02 02 01 18 ae 22 f5 00",
         ),
         (4, Command::Heartbeat, "07 04 04 11 81 71 78 00"),
+        // A static run: rate 0, motor off.
+        (5, Command::Start(StartRun::static_run(2)), "03 05 01 01 06 02 66 7d 58 a1 00"),
+        (6, Command::ConfigureDrive(DriveConfig::PROTOTYPE), "10 06 05 d0 83 04 c0 a9 07 c0 bb 01 29 cf d9 58 00"),
     ]
 }
 

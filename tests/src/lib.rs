@@ -232,3 +232,38 @@ pub fn assert_within_3_sigma(report: &CalReport, truth: &Truth, context: &str) {
         );
     }
 }
+
+/// ±500 °/s full scale (the virtual rig's default): 17.5 m°/s per count (L3G4200D datasheet
+/// Table 4).
+const VIRTUAL_DPS_PER_COUNT: f64 = 17.5e-3;
+
+/// Panics with the report unless every axis matches the virtual rig's gyro
+/// ([`VIRTUAL_GYRO_KS`], [`VIRTUAL_GYRO_OFFSET_DPS`]) within 3σ of the calibration's own
+/// uncertainty: sensitivity, direction (both tilt components) and offset. In σ, not in fixed
+/// tolerances, since the virtual gyro has the datasheet's noise and nothing the model lacks
+/// stands above it (firmware/README.md, "Measured").
+pub fn assert_matches_virtual_gyro(report: &CalReport) {
+    let summary = report.summary();
+    for (i, a) in report.axes.iter().enumerate() {
+        let m: [f64; 3] = VIRTUAL_GYRO_KS[i].map(|v| v / VIRTUAL_DPS_PER_COUNT);
+        let k = m.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let s = m.map(|v| v / k);
+        let offset = VIRTUAL_GYRO_OFFSET_DPS[i] / VIRTUAL_DPS_PER_COUNT;
+        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
+        let tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
+        let d = [a.tilt_components_deg[0] - tilt[0], a.tilt_components_deg[1] - tilt[1]];
+        let k_z = (a.k_counts_per_dps - k) / a.k_sigma;
+        let offset_z = (a.offset_counts - offset) / a.offset_sigma_counts;
+        let direction_md = host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2);
+        eprintln!(
+            "axis {i}: k {:.3} vs {k:.3} ({k_z:+.2} σ), direction {direction_md:.2} σ, \
+             offset {:.2} vs {offset:.2} counts ({offset_z:+.2} σ)",
+            a.k_counts_per_dps, a.offset_counts
+        );
+        assert!(
+            k_z.abs() <= Z_1D && direction_md <= Z_2D && offset_z.abs() <= Z_1D,
+            "axis {i} off the virtual gyro: k {k_z:.2} σ, direction {direction_md:.2} σ, \
+             offset {offset_z:.2} σ\n{summary}"
+        );
+    }
+}

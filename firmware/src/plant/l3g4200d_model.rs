@@ -4,12 +4,21 @@
 //! CTRL_REG3.I2_DRDY is set, ODR from CTRL_REG1.DR and PD, full scale from CTRL_REG4.FS.
 //!
 //! Its clock is its own: the real sample period is the nominal one off by `odr_error`, which
-//! is why the firmware timestamps data-ready instead of trusting the ODR. The low-pass filter's
+//! is why the firmware timestamps data-ready instead of trusting the ODR. Rate noise is white, of
+//! the datasheet's density, when asked for ([`L3g4200dModel::with_noise`]); the low-pass filter's
 //! delay is not modelled.
 
 use crate::l3g4200d::{reg, status, DEVICE_ID};
 use embedded_hal::spi::{self, ErrorKind, ErrorType, Operation, SpiDevice};
 use libm::round;
+#[cfg(feature = "sim")]
+use rand_chacha::{rand_core::SeedableRng, ChaCha8Rng};
+#[cfg(feature = "sim")]
+use rand_distr::{Distribution, StandardNormal};
+
+/// Rate noise density of the L3G4200D, °/s/√Hz (datasheet Table 4, "Rn", typ.). The host's
+/// simulator uses the same figure (host::sim::NOISE_DENSITY_DPS_PER_SQRT_HZ).
+pub const NOISE_DENSITY_DPS_PER_SQRT_HZ: f64 = 0.03;
 
 /// How the bus misbehaves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,6 +41,14 @@ impl spi::Error for BusError {
     }
 }
 
+/// A chip's white rate noise: density and the generator it is drawn from.
+#[cfg(feature = "sim")]
+#[derive(Debug, Clone)]
+struct Noise {
+    density_dps_per_sqrt_hz: f64,
+    rng: ChaCha8Rng,
+}
+
 /// Where the current transaction is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -51,6 +68,9 @@ pub struct L3g4200dModel {
     /// The chip stopped producing data (brown-out, broken INT2 wire).
     pub halted: bool,
     next_sample_s: Option<f64>,
+    /// White rate noise (none: a noiseless chip, outputs exactly predictable).
+    #[cfg(feature = "sim")]
+    noise: Option<Noise>,
     /// Samples produced.
     pub samples: u32,
     /// Samples overwritten before being read (ZYXOR events).
@@ -75,9 +95,35 @@ impl L3g4200dModel {
             fault: BusFault::None,
             halted: false,
             next_sample_s: None,
+            #[cfg(feature = "sim")]
+            noise: None,
             samples: 0,
             overruns: 0,
         }
+    }
+
+    /// A chip with the datasheet's rate noise ([`NOISE_DENSITY_DPS_PER_SQRT_HZ`]), drawn from
+    /// `seed`. Without it the outputs are the rates rounded to an LSB (0.005 °/s rms at ±500 °/s),
+    /// some 100 times quieter than the part: table-speed jitter that the encoder cannot resolve
+    /// (≈ 0.03 °/s rms at 20-400 Hz from the speed loop, see firmware/README.md) then dominates
+    /// the residual of a calibration, where the real part's noise buries it.
+    #[cfg(feature = "sim")]
+    pub fn with_noise(seed: u64) -> Self {
+        let noise =
+            Noise { density_dps_per_sqrt_hz: NOISE_DENSITY_DPS_PER_SQRT_HZ, rng: ChaCha8Rng::seed_from_u64(seed) };
+        Self { noise: Some(noise), ..Self::new() }
+    }
+
+    /// One sample's rate noise per axis, °/s: white at the ODR, σ = ρ·√(ODR/2) (the Nyquist
+    /// band; as host::sim does).
+    fn noise_dps(&mut self, period_s: f64) -> [f64; 3] {
+        #[cfg(feature = "sim")]
+        if let Some(n) = self.noise.as_mut() {
+            let sigma_dps = n.density_dps_per_sqrt_hz * (0.5 / period_s).sqrt();
+            return [0; 3].map(|_| sigma_dps * Distribution::<f64>::sample(&StandardNormal, &mut n.rng));
+        }
+        let _ = period_s;
+        [0.0; 3]
     }
 
     /// Replaces WHO_AM_I (another chip on the bus).
@@ -112,11 +158,12 @@ impl L3g4200dModel {
     }
 
     /// Latches a sample taken at the due time: `rate_dps` is the angular rate along the three
-    /// sensing axes, `temp_raw` the OUT_TEMP value.
+    /// sensing axes, `temp_raw` the OUT_TEMP value; the chip adds its noise, if it has any.
     pub fn latch(&mut self, rate_dps: [f64; 3], temp_raw: i8) {
         let Some(period) = self.sample_period_s() else {
             return;
         };
+        let noise_dps = self.noise_dps(period);
         self.next_sample_s = self.next_sample_s.map(|t| t + period);
         let lsb_dps = match (self.regs[usize::from(reg::CTRL_REG4)] >> 4) & 0b11 {
             0b00 => 8.75e-3,
@@ -130,7 +177,7 @@ impl L3g4200dModel {
         }
         self.regs[status_reg] |= status::ZYXDA | 0x07;
         for (axis, rate) in rate_dps.iter().enumerate() {
-            let counts = round(rate / lsb_dps).clamp(i16::MIN.into(), i16::MAX.into()) as i16;
+            let counts = round((rate + noise_dps[axis]) / lsb_dps).clamp(i16::MIN.into(), i16::MAX.into()) as i16;
             let at = usize::from(reg::OUT_X_L) + 2 * axis;
             self.regs[at..at + 2].copy_from_slice(&counts.to_le_bytes());
         }
@@ -262,6 +309,37 @@ mod tests {
         assert!(!gyro.spi_mut().drdy(), "reading OUT_Z_H clears data-ready");
         let again = gyro.read().unwrap();
         assert!(!again.fresh());
+    }
+
+    #[test]
+    #[cfg(feature = "sim")]
+    fn noise_has_the_datasheet_density_and_is_reproducible() {
+        let draw = |seed| {
+            let mut gyro = L3g4200d::new(L3g4200dModel::with_noise(seed));
+            gyro.init(GyroConfig::DEFAULT).unwrap();
+            (0..20_000)
+                .map(|_| {
+                    gyro.spi_mut().latch([0.0, 100.0, -100.0], 0);
+                    gyro.read().unwrap().rate_counts
+                })
+                .collect::<Vec<_>>()
+        };
+        let samples = draw(7);
+        assert_eq!(samples, draw(7), "one seed, one noise sequence");
+        // 0.03 °/s/√Hz over the 404.8 Hz Nyquist band of 809.6 Hz: 0.6036 °/s, 34.49 LSB of
+        // 17.5 m°/s. 20 000 samples know the standard deviation to 0.5 % (1/√(2N)).
+        let expected_lsb = 0.03 * (809.6f64 / 2.0).sqrt() / 17.5e-3;
+        for (axis, mean_lsb) in [(0, 0.0), (1, 100.0 / 17.5e-3), (2, -100.0 / 17.5e-3)] {
+            let v: Vec<f64> = samples.iter().map(|s| f64::from(s[axis])).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+            assert!((sd / expected_lsb - 1.0).abs() < 0.03, "axis {axis}: σ {sd:.2} LSB vs {expected_lsb:.2}");
+            // The mean to 5 standard errors (0.24 LSB) plus half an LSB of rounding.
+            assert!((mean - mean_lsb).abs() < 5.0 * expected_lsb / 141.4 + 0.5, "axis {axis}: mean {mean}");
+        }
+        let lag1: f64 = samples.windows(2).map(|w| f64::from(w[0][0]) * f64::from(w[1][0])).sum::<f64>()
+            / (samples.len() - 1) as f64;
+        assert!(lag1.abs() / (expected_lsb * expected_lsb) < 0.03, "white: lag-1 correlation {lag1}");
     }
 
     #[test]

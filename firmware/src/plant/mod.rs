@@ -42,12 +42,11 @@ impl Pose {
         Self { r: mul(&ry.r, &Self::pose1().r) }
     }
 
-    /// The pose a run tag names, as the host encodes it (1, 2); the virtual rig's "automatic
-    /// mount".
+    /// The pose a run tag names ([`protocol::run_tag`]); the virtual rig's "automatic mount".
     pub fn from_run_tag(tag: u8) -> Option<Self> {
         match tag {
-            1 => Some(Self::pose1()),
-            2 => Some(Self::pose2()),
+            protocol::run_tag::POSE_1 => Some(Self::pose1()),
+            protocol::run_tag::POSE_2 => Some(Self::pose2()),
             _ => None,
         }
     }

@@ -30,7 +30,7 @@ pub use effects::{
     EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission, IndexOffset,
     MysteryHarmonic, Nonlinearity, OffsetDrift, RippleHarmonic, SpeedRipple, TableTilt,
 };
-pub use rig::{serve, Port, SimRig, HOST_LINK_TIMEOUT_S};
+pub use rig::{serve, Port, SimRig};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;
 pub use session::FIRMWARE_VERSION;
 pub use stream::FrameWriter;
@@ -130,9 +130,13 @@ impl SimConfig {
             "index_plate_width_deg must be in (0, 180)",
         )?;
         for (i, r) in self.runs.iter().enumerate() {
+            // The rig's limit: the simulator must not promise what the firmware refuses.
+            let max_dps = protocol::units::dps_from_mdps(protocol::MAX_RATE_MDPS);
             check(
-                r.rate_dps.is_finite() && r.rate_dps.abs() <= 1e4,
-                &format!("runs[{i}].rate_dps must be within ±10 000 °/s (0: a static run, for noise figures)"),
+                r.rate_dps.is_finite() && r.rate_dps.abs() <= max_dps,
+                &format!(
+                    "runs[{i}].rate_dps must be within ±{max_dps} °/s, the rig's limit (0: a static run, for noise figures)"
+                ),
             )?;
             check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s must be > 0"))?;
         }

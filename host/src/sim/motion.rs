@@ -123,7 +123,7 @@ impl Encoder {
     /// Unwrapped count at `theta1_deg` (the counter changes on each quadrature edge, so the count
     /// is the floor of the angle in counts).
     pub fn counts(&self, theta1_deg: f64) -> i64 {
-        (theta1_deg / 360.0 * f64::from(self.counts_per_rev)).floor() as i64
+        protocol::units::counts_from_deg(theta1_deg, self.counts_per_rev).floor() as i64
     }
 
     /// The register value: unwrapped count plus the start value, modulo 2³².

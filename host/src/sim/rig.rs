@@ -6,18 +6,16 @@ use super::stream::FrameWriter;
 use super::truth::Truth;
 use super::SimConfig;
 use crate::geometry::Pose;
-use protocol::{Ack, CmdResult, Command, Event, Fault, RigMsg, StreamDecoder};
+use protocol::timing::HOST_LINK_TIMEOUT_US;
+use protocol::{Ack, CmdResult, Command, Event, Fault, RigMsg, StreamDecoder, MAX_RATE_MDPS};
 use std::io::{self, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-/// The firmware stops the motor after this long without any host frame, s
-/// (`protocol::Command::Heartbeat`).
-pub const HOST_LINK_TIMEOUT_S: f64 = 2.0;
-
-/// Highest speed a `Start` may ask for, m°/s (assumed over-speed limit of the rig: 2 rev/s).
-/// The gyro, not the rig, limits useful speeds: pose 1 exceeds ±500 °/s above ≈ 359 °/s.
-pub const MAX_RATE_MDPS: u32 = 720_000;
+/// The rig's link timeout in the simulator's seconds ([`HOST_LINK_TIMEOUT_US`], the protocol's).
+fn host_link_timeout_s() -> f64 {
+    f64::from(HOST_LINK_TIMEOUT_US) * 1e-6
+}
 
 /// A simulated rig that speaks the protocol. One sensor (from the seed) for its whole life, so a
 /// live calibration can be checked against [`SimRig::truth`].
@@ -83,7 +81,7 @@ impl SimRig {
         if t_s <= self.now_s {
             return;
         }
-        let deadline = self.last_host_s + HOST_LINK_TIMEOUT_S;
+        let deadline = self.last_host_s + host_link_timeout_s();
         if self.session.running() && deadline <= t_s {
             self.session
                 .stop_run(deadline, Some(Fault::HostLinkLost), &mut self.out)
@@ -125,17 +123,25 @@ impl SimRig {
                 let Some(pose) = Pose::from_run_tag(start.run_tag) else {
                     return CmdResult::InvalidArgument;
                 };
-                if start.rate_mdps == 0 || start.rate_mdps > MAX_RATE_MDPS {
+                // The firmware's limit; 0 m°/s is a static run (motor off).
+                if start.rate_mdps > MAX_RATE_MDPS {
                     return CmdResult::InvalidArgument;
                 }
                 if self.session.running() {
                     return CmdResult::Busy;
                 }
                 // The simulated operator has mounted the pose the run tag names.
-                let rate_dps = f64::from(start.rate_mdps) / 1000.0 * f64::from(start.direction.sign());
+                let rate_dps = protocol::units::signed_dps(start.rate_mdps, start.direction);
                 ok(self.session.start_run(t_s, pose, start.run_tag, rate_dps, w))
             }
             Command::Stop => ok(self.session.stop_run(t_s, None, w)),
+            // The firmware's own validation; the simulated drive follows its setpoint regardless.
+            Command::ConfigureDrive(drive) => {
+                if self.session.running() {
+                    return CmdResult::Busy;
+                }
+                firmware::commands::drive_for(&drive).map_or_else(|refusal| refusal, |_| CmdResult::Ok)
+            }
             Command::ConfigureGyro(gyro) => {
                 if self.session.running() {
                     return CmdResult::Busy;
@@ -250,9 +256,9 @@ mod tests {
         assert!(matches!(frames(&all)[..], [RigMsg::Hello(_)]), "Hello at power-up");
         let f = exchange(&mut rig, &mut all, 0, Command::Identify);
         assert!(matches!(f[..], [RigMsg::Hello(_), RigMsg::Ack(Ack { cmd_seq: 0, result: CmdResult::Ok })]));
-        // Unknown pose tag, zero and excessive speeds are refused.
+        // Unknown pose tag and speeds beyond the firmware's limit (360 °/s) are refused.
         assert_eq!(acks(&exchange(&mut rig, &mut all, 1, start(180_000, 9))), [(1, CmdResult::InvalidArgument)]);
-        assert_eq!(acks(&exchange(&mut rig, &mut all, 2, start(0, 1))), [(2, CmdResult::InvalidArgument)]);
+        assert_eq!(acks(&exchange(&mut rig, &mut all, 2, start(360_001, 1))), [(2, CmdResult::InvalidArgument)]);
         assert_eq!(
             acks(&exchange(&mut rig, &mut all, 3, start(MAX_RATE_MDPS + 1, 1))),
             [(3, CmdResult::InvalidArgument)]
@@ -295,7 +301,7 @@ mod tests {
         let truth = rig.truth();
         assert_eq!(truth.runs.len(), 2);
         assert!((truth.runs[0].duration_s - 5.0).abs() < 1e-12);
-        assert!((truth.runs[1].duration_s - HOST_LINK_TIMEOUT_S).abs() < 1e-12);
+        assert!((truth.runs[1].duration_s - host_link_timeout_s()).abs() < 1e-12);
         assert!(truth.runs[1].faulted && !truth.runs[0].faulted);
         for (run, rt) in cap.runs.iter().zip(&truth.runs) {
             assert_eq!(run.samples.len() as u64, rt.samples);

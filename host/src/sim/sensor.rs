@@ -23,8 +23,8 @@ pub const SENSITIVITY_SIGMA: f64 = 0.015;
 /// different full scale scales it like a real rate.
 pub const OFFSET_SIGMA_COUNTS_AT_500: f64 = 10.0;
 
-/// Rate noise density, °/s/√Hz (datasheet Table 4, "Rn").
-pub const NOISE_DENSITY_DPS_PER_SQRT_HZ: f64 = 0.03;
+/// Rate noise density, °/s/√Hz (datasheet Table 4, "Rn"): the firmware's chip model's figure.
+pub const NOISE_DENSITY_DPS_PER_SQRT_HZ: f64 = firmware::plant::l3g4200d_model::NOISE_DENSITY_DPS_PER_SQRT_HZ;
 
 /// Nominal sensitivity, counts per °/s (datasheet Table 4 via `FullScale::udps_per_lsb`).
 pub fn nominal_counts_per_dps(fs: FullScale) -> f64 {

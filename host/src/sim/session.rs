@@ -10,8 +10,8 @@ use super::truth::{RunTruth, Truth};
 use super::SimConfig;
 use crate::geometry::{omega2, Pose};
 use protocol::{
-    Counters, Direction, Fault, FaultReport, GearRatio, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg, RunStarted,
-    RunStopped, Sample, Temperature, Version, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION, TIMESTAMP_HZ,
+    timing, units, Counters, Fault, FaultReport, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg, RunStarted,
+    RunStopped, Sample, Temperature, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION, TIMESTAMP_HZ,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -19,10 +19,10 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use std::io::{self, Write};
 
 /// Firmware version the simulator announces: the version of the firmware it emulates.
-pub const FIRMWARE_VERSION: Version = Version { major: 0, minor: 1, patch: 0 };
+pub use firmware::FIRMWARE_VERSION;
 
-/// Gear ratio announced in `Hello`: the prototype's 1:1 magnetic gears (EXCITER.md, "Mechanism").
-pub const GEAR_RATIO: GearRatio = GearRatio { num: 1, den: 1 };
+/// Gear ratio announced in `Hello`: the protocol's (the prototype's 1:1 magnetic gears).
+use protocol::GEAR_RATIO;
 
 /// Spread of the gyro's internal clock against the rig timer, ppm, 1 σ (assumed: the L3G4200D
 /// runs its ODR from an internal RC-trimmed oscillator; the datasheet gives no tolerance).
@@ -35,11 +35,10 @@ pub const TIMESTAMP_JITTER_US: f64 = 1.0;
 /// Die temperature at power-up, °C (assumed: lab ambient).
 pub const AMBIENT_C: f64 = 25.0;
 
-/// Message periods, s (protocol doc comments: `MotorStatus` at 10 Hz, `Temperature` and
-/// `Counters` at 1 Hz).
-const MOTOR_PERIOD_S: f64 = 0.1;
-const TEMPERATURE_PERIOD_S: f64 = 1.0;
-const COUNTERS_PERIOD_S: f64 = 1.0;
+/// Message periods, s: the protocol's rates (`protocol::timing`; `Temperature` with `Counters`).
+const MOTOR_PERIOD_S: f64 = 1.0 / timing::MOTOR_STATUS_HZ as f64;
+const TEMPERATURE_PERIOD_S: f64 = 1.0 / timing::COUNTERS_HZ as f64;
+const COUNTERS_PERIOD_S: f64 = 1.0 / timing::COUNTERS_HZ as f64;
 
 /// Base-table speed at 100 % PWM duty, °/s (assumed: RE 30 at 24 V through the drive train;
 /// only used to fill `MotorStatus::duty_permille` plausibly).
@@ -235,8 +234,8 @@ impl Session {
         w.send(&RigMsg::RunStarted(RunStarted {
             t_us: self.timer_us(t_s),
             run_tag,
-            rate_mdps: (rate_dps.abs() * 1000.0).round() as u32,
-            direction: if rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
+            rate_mdps: units::mdps_from_dps(rate_dps),
+            direction: units::direction_of(rate_dps),
             gyro: self.gyro,
         }))?;
         self.motor.set_target(t_s, rate_dps, self.spin_up_s);
@@ -395,13 +394,12 @@ impl Session {
         // The firmware measures speed as the encoder difference over one report period.
         let dc =
             self.encoder.counts(state.theta1_deg) - self.encoder.counts(self.motor.theta1_deg(t_s - MOTOR_PERIOD_S));
-        let cps_per_dps = f64::from(ENCODER_COUNTS_PER_REV) / 360.0;
         let sp = state.setpoint_dps;
         let duty = 1000.0 * sp / FULL_DUTY_DPS + if sp == 0.0 { 0.0 } else { FRICTION_DUTY_PERMILLE * sp.signum() };
         RigMsg::Motor(MotorStatus {
             t_us: self.timer_us(t_s),
             speed_cps: (dc as f64 / MOTOR_PERIOD_S).round() as i32,
-            setpoint_cps: (sp * cps_per_dps).round() as i32,
+            setpoint_cps: units::counts_from_deg(sp, ENCODER_COUNTS_PER_REV).round() as i32,
             duty_permille: duty.round().clamp(-1000.0, 1000.0) as i16,
             faults: 0,
             run_tag,
@@ -423,8 +421,9 @@ impl Session {
         }
         if let Some(e) = &self.effects.earth_rotation {
             // θ1 on the encoder's scale: the heading is measured from the encoder's zero.
-            let theta1 = st.theta1_deg.to_radians()
-                + f64::from(self.encoder.start_counts) / f64::from(self.encoder.counts_per_rev) * std::f64::consts::TAU;
+            let theta1 = (st.theta1_deg
+                + units::deg_from_counts(f64::from(self.encoder.start_counts), self.encoder.counts_per_rev))
+            .to_radians();
             w2 += nalgebra::Vector3::from(e.in_table_frame_dps(theta1, theta2));
         }
         chain.counts(&w2, theta2)
