@@ -1,7 +1,8 @@
 //! Compiles the PostgreSQL records tests in as ordinary tests when a server is configured
 //! (`GYROCAL_TEST_PG`) or under CI (where they must then run, and fail without a server), and as
 //! ignored tests with the reason otherwise, so a machine without PostgreSQL shows them as not
-//! run instead of passed.
+//! run instead of passed. The same for the report layout test that needs Chromium
+//! (`has_chromium`): under CI a missing Chromium fails the build.
 
 fn main() {
     println!("cargo::rustc-check-cfg=cfg(gyrocal_test_pg)");
@@ -11,5 +12,13 @@ fn main() {
     let ci = std::env::var("CI").is_ok_and(|v| v == "true");
     if pg || ci {
         println!("cargo::rustc-cfg=gyrocal_test_pg");
+    }
+    println!("cargo::rustc-check-cfg=cfg(has_chromium)");
+    println!("cargo::rerun-if-env-changed=PATH");
+    let chromium = std::process::Command::new("chromium").arg("--version").output().is_ok_and(|o| o.status.success());
+    if chromium {
+        println!("cargo::rustc-cfg=has_chromium");
+    } else if ci {
+        panic!("chromium is not runnable: CI must lay the report out at 1400 px (.ci/run installs it)");
     }
 }

@@ -327,10 +327,10 @@ impl NoiseReport {
     /// An HTML block with the figures table and the plot, for the report.
     pub fn html_section(&self) -> String {
         let mut o = String::from("<section class=\"noise\">\n<h2>Noise figures</h2>\n<table>\n");
-        o.push_str("<tr><th>axis</th><th>ARW [°/√h]</th><th>bias instability [°/h]</th><th>RRW [°/h/√h]</th><th>σ min [°/s]</th><th>at τ [s]</th></tr>\n");
+        o.push_str("<tr><th>axis</th><th class=\"num\">ARW [°/√h]</th><th class=\"num\">bias instability [°/h]</th><th class=\"num\">RRW [°/h/√h]</th><th class=\"num\">σ min [°/s]</th><th class=\"num\">at τ [s]</th></tr>\n");
         for a in &self.axes {
             o.push_str(&format!(
-                "<tr><td>{}</td><td>{:.4}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3e}</td><td>{:.2}</td></tr>\n",
+                "<tr><td>{}</td><td class=\"num\">{:.4}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3e}</td><td class=\"num\">{:.2}</td></tr>\n",
                 a.axis,
                 a.arw_deg_per_sqrt_h,
                 a.bias_instability_deg_per_h,
@@ -340,9 +340,18 @@ impl NoiseReport {
             ));
         }
         o.push_str(&format!(
-            "</table>\n<p>Run {}, {} samples over {:.1} s; rates through the {}.</p>\n",
+            "</table>\n<p>Run {}, {} samples over {:.1} s; rates through the {}.",
             self.run, self.samples, self.duration_s, self.scaling
         ));
+        if self.duration_s < SHORT_STRETCH_S {
+            o.push_str(&format!(
+                " A {:.0} s stretch measures σ(τ) up to τ = {:.0} s only: ARW is firm, bias instability and RRW are \
+                 indicative (0 where the curve shows no such term yet).",
+                self.duration_s,
+                self.duration_s * MAX_CLUSTER_FRACTION
+            ));
+        }
+        o.push_str("</p>\n");
         if let Ok(svg) = self.adev_svg() {
             o.push_str(&svg);
         }

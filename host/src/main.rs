@@ -416,7 +416,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
             let e =
                 export::Export::from_json(&text).with_context(|| format!("{} is not a calibration", cal.display()))?;
-            let rendered = e.render(format);
+            let rendered = e.render(format)?;
             match out {
                 Some(path) => {
                     fs::write(&path, rendered).with_context(|| format!("cannot write {}", path.display()))?;

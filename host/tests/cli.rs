@@ -92,7 +92,8 @@ fn configure_drive_refuses_values_outside_the_protocols_limits() {
 /// The simulator cannot promise what the firmware refuses: its rate limit is the protocol's.
 #[test]
 fn simulate_refuses_a_rate_the_rig_refuses() {
-    let out = std::env::temp_dir().join(format!("host-cli-{}-fast.cap", std::process::id()));
+    let tmp = scratch("fast");
+    let out = tmp.path().join("fast.cap");
     let o = host(&["simulate", "--rates-dps", "500", "--out", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(1));
     assert_eq!(
@@ -102,16 +103,15 @@ fn simulate_refuses_a_rate_the_rig_refuses() {
     assert!(!out.exists());
 }
 
-fn scratch(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("host-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory for one test, removed when dropped (also when the test fails).
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new().prefix(&format!("host-cli-{name}-")).tempdir().expect("temporary directory")
 }
 
 #[test]
 fn simulate_inspect_calibrate_apply() {
-    let dir = scratch("flow");
+    let tmp = scratch("flow");
+    let dir = tmp.path();
     let cap = dir.join("s.cap");
     let o = host(&["simulate", "--out", cap.to_str().unwrap(), "--seed", "5", "--duration", "6"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
@@ -281,7 +281,8 @@ fn simulate_inspect_calibrate_apply() {
 /// written, the one-line error says where they are and what refused, exit 1.
 #[test]
 fn an_unreachable_database_keeps_the_files_and_exits_1() {
-    let dir = scratch("nodb");
+    let tmp = scratch("nodb");
+    let dir = tmp.path();
     let cap = dir.join("s.cap");
     // 6 s per pose: shorter runs leave the gear ratio's σ undefined (NaN, written as null), which
     // `apply` cannot read back (a known limitation of the report, not of the records).
@@ -325,7 +326,8 @@ fn an_unreachable_database_keeps_the_files_and_exits_1() {
 /// `host noise` on a simulated static run prints the three figures per axis.
 #[test]
 fn noise_of_a_simulated_static_run() {
-    let dir = scratch("noise");
+    let tmp = scratch("noise");
+    let dir = tmp.path();
     let cap = dir.join("static.cap");
     let o = host(&["simulate", "--out", cap.to_str().unwrap(), "--poses", "1", "--rates-dps", "0", "--duration", "20"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
@@ -347,7 +349,8 @@ fn noise_of_a_simulated_static_run() {
 
 #[test]
 fn a_capture_without_pose_two_fails_naming_it() {
-    let dir = scratch("onepose");
+    let tmp = scratch("onepose");
+    let dir = tmp.path();
     let cap = dir.join("p1.cap");
     let o = host(&["simulate", "--out", cap.to_str().unwrap(), "--poses", "1", "--duration", "3"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
@@ -371,7 +374,8 @@ fn a_capture_without_pose_two_fails_naming_it() {
 
 #[test]
 fn an_unknown_effect_is_refused_with_the_list() {
-    let dir = scratch("effect");
+    let tmp = scratch("effect");
+    let dir = tmp.path();
     let o = host(&["simulate", "--out", dir.join("x.cap").to_str().unwrap(), "--effect", "wobble"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(
@@ -407,9 +411,8 @@ fn non_finite_durations_and_rates_are_usage_errors() {
 /// counted twice it would shrink every σ by √2.
 #[test]
 fn duplicate_runs_are_refused_naming_both() {
-    let dir = std::env::temp_dir().join(format!("host-cli-dup-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = scratch("dup");
+    let dir = tmp.path();
     let a = dir.join("a.cap");
     let o = host(&["simulate", "--out", a.to_str().unwrap(), "--duration", "6", "--seed", "5"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));

@@ -3,8 +3,9 @@
 //!
 //! Single precision because the targets this is for (Cortex-M4F, such as the rig's STM32F407)
 //! have a single-precision FPU only; `double` would be emulated in software. The coefficients
-//! are split ([`super::SplitRow`]) so that the only rounding left is the result's own: half a
-//! float ulp, ≤ 7.6e-6 °/s below 256 °/s, 1.5e-5 °/s up to 512 °/s.
+//! are split ([`super::SplitRow`]): `gyrocal_apply_split` gives the rate as a float pair
+//! `hi + lo` within 2^(e−19) °/s of `host apply` over the whole int16 range (2.4e-7 °/s at
+//! ±2000 °/s), and `gyrocal_apply` its float, which adds only its own rounding (half an ulp).
 
 use super::{f32_literal, sanitise, Export};
 use std::fmt::Write as _;
@@ -76,49 +77,86 @@ pub fn render(e: &Export) -> String {
             })
             .collect()
     };
-    let _ = writeln!(
-        o,
-        "\n/* The same split in a high part with at most 7 significant bits per row, so that every product"
-    );
-    let _ =
-        writeln!(o, " * with a raw count and every partial sum is exact in float, and a low part: gyrocal_apply then");
-    let _ = writeln!(
-        o,
-        " * rounds once, at the end, and agrees with the double-precision correction to float's resolution. */"
-    );
-    let _ = write!(o, "static const float GYROCAL_M_INV_HI[3][3] = {{\n{}}};\n", rows(&|r| r.m_hi));
-    let _ = write!(o, "static const float GYROCAL_M_INV_LO[3][3] = {{\n{}}};\n", rows(&|r| r.m_lo));
-    let _ = writeln!(
-        o,
-        "static const float GYROCAL_OFFSET_RATE_HI[3] = {{{}f, {}f, {}f}};",
-        f32_literal(sp.rows[0].b_hi),
-        f32_literal(sp.rows[1].b_hi),
-        f32_literal(sp.rows[2].b_hi)
-    );
-    let _ = writeln!(
-        o,
-        "static const float GYROCAL_OFFSET_RATE_LO[3] = {{{}f, {}f, {}f}};",
-        f32_literal(sp.rows[0].b_lo),
-        f32_literal(sp.rows[1].b_lo),
-        f32_literal(sp.rows[2].b_lo)
-    );
-    let _ = writeln!(
+    let vector = |f: &dyn Fn(&super::SplitRow) -> f64| -> String {
+        format!(
+            "{{{}f, {}f, {}f}}",
+            f32_literal(f(&sp.rows[0])),
+            f32_literal(f(&sp.rows[1])),
+            f32_literal(f(&sp.rows[2]))
+        )
+    };
+    let bound = sp.rows.iter().map(super::SplitRow::bound_dps).fold(0.0, f64::max);
+    let _ = write!(
         o,
         r#"
-/* Rate vector in the package frame, deg/s, from one raw reading (counts). */
-static inline void gyrocal_apply(const int16_t raw[3], float rate_dps[3])
+/* The same correction split in three per row (host/src/export/mod.rs, SplitRow): HI on a grid of
+ * 2^(e-7) and MID on 2^(e-14), each with at most 7 significant bits, so that every product with a
+ * raw count and every partial sum is exact in float; LO the remainder, the only part that rounds. */
+static const float GYROCAL_M_INV_HI[3][3] = {{
+{mh}}};
+static const float GYROCAL_M_INV_MID[3][3] = {{
+{mm}}};
+static const float GYROCAL_M_INV_LO[3][3] = {{
+{ml}}};
+static const float GYROCAL_OFFSET_RATE_HI[3] = {bh};
+static const float GYROCAL_OFFSET_RATE_MID[3] = {bm};
+static const float GYROCAL_OFFSET_RATE_LO[3] = {bl};
+/* Proven bound on |hi + lo - (K S)^-1 (raw - v_off)| of gyrocal_apply_split, deg/s, for every
+ * int16 reading (2^(e-19), 2^e >= the largest coefficient of a row). */
+#define GYROCAL_SPLIT_BOUND_DPS {bound:e}
+
+/* The error-free sum below needs float arithmetic evaluated in float, in program order. */
+#include <float.h>
+#if !defined(FLT_EVAL_METHOD) || FLT_EVAL_METHOD != 0
+#error "gyrocal.h needs FLT_EVAL_METHOD == 0 (float evaluated in float, e.g. Cortex-M4F, x86-64 SSE)"
+#endif
+#ifdef __FAST_MATH__
+#error "gyrocal.h: -ffast-math reassociates the error-free sum; compile this file without it"
+#endif
+
+/* The rate vector in the package frame, deg/s, from one raw reading (counts), as the unevaluated
+ * sum hi[i] + lo[i] of two floats (|lo| <= half an ulp of hi): this is what agrees with
+ * `host apply` (double precision) to GYROCAL_SPLIT_BOUND_DPS over the whole int16 range, which
+ * a single float cannot above 256 deg/s (half its ulp is 1.5e-5 deg/s there). Float operations
+ * only: per axis 9 multiplications and 22 additions. */
+static inline void gyrocal_apply_split(const int16_t raw[3], float hi[3], float lo[3])
 {{
     const float x = (float)raw[0], y = (float)raw[1], z = (float)raw[2];
     int i;
     for (i = 0; i < 3; i++) {{
-        const float *h = GYROCAL_M_INV_HI[i], *l = GYROCAL_M_INV_LO[i];
-        const float exact = h[0] * x + h[1] * y + h[2] * z - GYROCAL_OFFSET_RATE_HI[i];
-        const float small = l[0] * x + l[1] * y + l[2] * z - GYROCAL_OFFSET_RATE_LO[i];
-        rate_dps[i] = exact + small;
+        const float *h = GYROCAL_M_INV_HI[i], *m = GYROCAL_M_INV_MID[i], *l = GYROCAL_M_INV_LO[i];
+        /* Exact (multiples of the row's grid below 2^24 steps), in any order, with or without FMA. */
+        const float a = h[0] * x + h[1] * y + h[2] * z - GYROCAL_OFFSET_RATE_HI[i];
+        const float b = m[0] * x + m[1] * y + m[2] * z - GYROCAL_OFFSET_RATE_MID[i];
+        /* The one sum that rounds: its terms are below 2^e. */
+        const float c = l[0] * x + l[1] * y + l[2] * z - GYROCAL_OFFSET_RATE_LO[i];
+        /* TwoSum (Knuth): s + t == a + b exactly; then once more to normalise hi + lo. */
+        float s = a + b, bv = s - a;
+        const float t = (a - (s - bv)) + (b - bv);
+        const float u = t + c;
+        hi[i] = s + u;
+        bv = hi[i] - s;
+        lo[i] = (s - (hi[i] - bv)) + (u - bv);
     }}
 }}
 
-#endif /* GYROCAL_H */"#
+/* The rate vector as floats, deg/s: hi of gyrocal_apply_split, i.e. its sum rounded once. Within
+ * half a float ulp of the rate plus GYROCAL_SPLIT_BOUND_DPS of `host apply`: half an ulp is
+ * 7.6e-6 deg/s below 256 deg/s, 6.1e-5 below 2048 deg/s, 1.2e-4 above. */
+static inline void gyrocal_apply(const int16_t raw[3], float rate_dps[3])
+{{
+    float lo[3];
+    gyrocal_apply_split(raw, rate_dps, lo);
+}}
+
+#endif /* GYROCAL_H */
+"#,
+        mh = rows(&|r| r.m_hi),
+        mm = rows(&|r| r.m_mid),
+        ml = rows(&|r| r.m_lo),
+        bh = vector(&|r| r.b_hi),
+        bm = vector(&|r| r.b_mid),
+        bl = vector(&|r| r.b_lo),
     );
     o
 }

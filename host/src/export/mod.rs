@@ -103,7 +103,7 @@ impl Export {
     }
 
     /// The split of each row of `(K S)⁻¹` and of `(K S)⁻¹ v_off` that lets single precision
-    /// reproduce the double-precision correction to the rounding of the result alone.
+    /// reproduce the double-precision correction ([`SplitRow`]).
     pub fn split(&self) -> SplitRows {
         let b = self.offset_rate_dps();
         let rows = std::array::from_fn(|i| split_row(self.m_inv_dps_per_count[i], b[i]));
@@ -120,34 +120,69 @@ impl Export {
         self.provenance.as_ref().map_or("unknown", |p| p.calibrated_utc.as_str())
     }
 
-    /// The export in `format`.
-    pub fn render(&self, format: Format) -> String {
-        match format {
+    /// The export in `format`. The single-precision exports (C, Rust) refuse offsets beyond
+    /// [`MAX_OFFSET_COUNTS`], where their exactness argument ends.
+    pub fn render(&self, format: Format) -> Result<String> {
+        if matches!(format, Format::C | Format::Rust) {
+            for (axis, v) in ['x', 'y', 'z'].iter().zip(self.calibration.offset_counts) {
+                if v.abs() >= MAX_OFFSET_COUNTS {
+                    anyhow::bail!(
+                        "offset {axis} is {v} counts, beyond the ±{MAX_OFFSET_COUNTS} counts the single-precision \
+                         exports carry exactly (a zero-rate level that large is a broken sensor)"
+                    );
+                }
+            }
+        }
+        Ok(match format {
             Format::C => c::render(self),
             Format::Rust => rust::render(self),
             Format::Kalibr => kalibr::render(self),
             Format::Json => table::render_json(self),
             Format::Csv => table::render_csv(self),
-        }
+        })
     }
 }
 
-/// One row of the correction split in two: `hi` holds at most 7 significant bits on a grid of
-/// quantum `2^q` shared by the row, so that with raw counts (|v| ≤ 2¹⁵) every product
-/// `hi_j · v_j` and every partial sum `Σ hi_j v_j − b_hi` is a multiple of the quantum below
-/// 2²⁴ quanta: exact in `f32`, whatever the compiler's contraction or order. `lo` is the
-/// remainder (≤ half a quantum, 2⁻⁸ of the largest coefficient), whose rounding errors are 2⁻⁸
-/// smaller again. The sum of the two parts is then rounded once.
+/// One row of the correction split in three, for the single-precision exports (C, Rust).
+///
+/// Why: a Cortex-M4F has a single-precision FPU only (`double` is emulated in software), and a
+/// `float` result cannot hold a rate to 1e-5 °/s above 256 °/s (half its ulp is 1.5e-5 °/s
+/// there, 6.1e-5 °/s at 2000 °/s), so the exports give the rate as an unevaluated sum of two
+/// floats, `hi + lo`, computed with float operations only, plus the float nearest to that sum.
+///
+/// How: with `2^e` ≥ the row's largest coefficient, `hi` lies on the grid `2^(e−7)` (|hi| ≤ 128
+/// steps) and `mid` on `2^(e−14)` (|mid| ≤ 64 steps), `lo` is the f32 remainder (|lo| ≤ 2^(e−15)).
+/// With raw counts |v| ≤ 2¹⁵ every product `hi_j v_j` is at most 2²² steps and every partial sum
+/// of `Σ hi_j v_j − b_hi` stays below 2²⁴ steps while |v_off| < [`MAX_OFFSET_COUNTS`]: exact in
+/// f32, whatever the order or an FMA contraction; the same for `mid`. Only the `lo` sum rounds:
+/// its terms are ≤ 2^e, so its error is ≤ 15·2^(e−24) (four roundings of γ₄ on ≤ 3·2^e, and the
+/// f32 rounding of each `lo`). The two exact sums are added by TwoSum (Knuth; exact) and the `lo`
+/// sum joins the low word (one more rounding, ≤ 2⁻²⁴ of it). So `hi + lo` is within
+/// [`SplitRow::bound_dps`] = 2^(e−19) of `(K S)⁻¹ v − (K S)⁻¹ v_off`: 2.4e-7 °/s for an L3G4200D
+/// at ±2000 °/s (70 m°/s per count, e = −3), over the whole int16 range.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplitRow {
     /// High parts of the row of `(K S)⁻¹`, °/s per count (exact in f32).
     pub m_hi: [f64; 3],
+    /// Middle parts, °/s per count (exact in f32).
+    pub m_mid: [f64; 3],
     /// Low parts, °/s per count.
     pub m_lo: [f64; 3],
-    /// High part of `(K S)⁻¹ v_off`, °/s (exact in f32).
+    /// `(K S)⁻¹ v_off` on the same grids, °/s: high part (exact in f32)…
     pub b_hi: f64,
-    /// Low part, °/s.
+    /// …middle part (exact in f32)…
+    pub b_mid: f64,
+    /// …and the remainder.
     pub b_lo: f64,
+    /// The row's exponent `e`: 2^e ≥ its largest coefficient.
+    pub exponent: i32,
+}
+
+impl SplitRow {
+    /// The proven bound on `|hi + lo − exact|`, °/s (see [`SplitRow`]).
+    pub fn bound_dps(&self) -> f64 {
+        2f64.powi(self.exponent - 19)
+    }
 }
 
 /// The three rows.
@@ -157,19 +192,35 @@ pub struct SplitRows {
     pub rows: [SplitRow; 3],
 }
 
-/// Significant bits of the high parts: 7 bits × 15-bit counts = 22 bits per product, three of
-/// them and the offset stay below f32's 24-bit significand.
-const HI_BITS: i32 = 7;
+/// Steps of each of the high and middle grids below the one above: 7 bits × 15-bit counts = 22
+/// bits per product; three of them and the offset stay below f32's 24-bit significand.
+const SPLIT_BITS: i32 = 7;
+
+/// The largest offset, counts, for which the split's high sums stay exact (3·2²² + 3·128·2¹³
+/// < 2²⁴ steps). The L3G4200D's zero-rate level is ±75 °/s at most (datasheet, ±2000 °/s),
+/// ≈ 1070 counts; an offset near this limit is a broken sensor, not a calibration.
+pub const MAX_OFFSET_COUNTS: f64 = 8192.0;
 
 fn split_row(m: [f64; 3], b: f64) -> SplitRow {
     let largest = m.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    let e = largest.log2().ceil() as i32;
-    let quantum = 2f64.powi(e - HI_BITS);
-    let hi = |v: f64| (v / quantum).round() * quantum;
-    let m_hi = m.map(hi);
-    // b is bounded by the offsets (|v_off| ≪ 2¹⁵ counts), so b_hi stays well below 2²⁴ quanta.
-    let b_hi = hi(b);
-    SplitRow { m_hi, m_lo: std::array::from_fn(|j| m[j] - m_hi[j]), b_hi, b_lo: b - b_hi }
+    let exponent = largest.log2().ceil() as i32;
+    let on_grid = |v: f64, bits: i32| {
+        let step = 2f64.powi(exponent - bits);
+        (v / step).round() * step
+    };
+    let m_hi = m.map(|v| on_grid(v, SPLIT_BITS));
+    let m_mid: [f64; 3] = std::array::from_fn(|j| on_grid(m[j] - m_hi[j], 2 * SPLIT_BITS));
+    let b_hi = on_grid(b, SPLIT_BITS);
+    let b_mid = on_grid(b - b_hi, 2 * SPLIT_BITS);
+    SplitRow {
+        m_hi,
+        m_mid,
+        m_lo: std::array::from_fn(|j| m[j] - m_hi[j] - m_mid[j]),
+        b_hi,
+        b_mid,
+        b_lo: b - b_hi - b_mid,
+        exponent,
+    }
 }
 
 /// An `f32` literal that reads back as exactly the `f32` nearest to `v` (Rust's shortest

@@ -1,6 +1,9 @@
 //! Rust source: the correction as a `const` item with an `apply` method, `no_std` and free of
 //! dependencies, to `include!` or copy into a firmware crate. `f32` for the same reason as the C
-//! header (single-precision FPU on Cortex-M4F), with the same split coefficients.
+//! header (single-precision FPU on Cortex-M4F), with the same split coefficients and the same
+//! bound ([`super::SplitRow`]): `apply_split` agrees with `host apply` to 2^(e−19) °/s over the
+//! whole int16 range, `apply` adds its own rounding. Rust neither contracts nor reassociates
+//! float operations, so the error-free sums hold as written.
 
 use super::{f32_literal, sanitise, Export};
 use std::fmt::Write as _;
@@ -54,33 +57,58 @@ pub struct GyroCal {{
     pub offset_counts: [f32; 3],
     /// (K S)⁻¹ times the offsets, °/s.
     pub offset_rate_dps: [f32; 3],
-    /// `m_inv_dps_per_count` split: at most 7 significant bits per row on a shared grid, so
-    /// every product with a raw count and every partial sum is exact in f32…
+    /// `m_inv_dps_per_count` split in three per row: high parts on a grid of 2^(e−7) and…
     pub m_inv_hi: [[f32; 3]; 3],
-    /// …and the remainder.
+    /// …middle parts on 2^(e−14), each with at most 7 significant bits, so every product with a
+    /// raw count and every partial sum is exact in f32…
+    pub m_inv_mid: [[f32; 3]; 3],
+    /// …and the remainder, the only part that rounds.
     pub m_inv_lo: [[f32; 3]; 3],
-    /// `offset_rate_dps` split on the same grids.
+    /// `offset_rate_dps` split on the same grids: high…
     pub offset_rate_hi: [f32; 3],
-    /// The remainder.
+    /// …middle…
+    pub offset_rate_mid: [f32; 3],
+    /// …and the remainder.
     pub offset_rate_lo: [f32; 3],
+    /// Proven bound on `|hi + lo − (K S)⁻¹ (raw − v_off)|` of [`GyroCal::apply_split`], °/s,
+    /// for every raw reading.
+    pub split_bound_dps: f64,
 }}
 
 impl GyroCal {{
-    /// Rate vector in the package frame, °/s, from one raw reading (counts): the exact
-    /// high-part sum plus the small low-part sum, rounded once.
+    /// Rate vector in the package frame, °/s, from one raw reading (counts), as the unevaluated
+    /// sum `hi + lo` of two f32 (|lo| ≤ half an ulp of hi): this is what agrees with `host apply`
+    /// (f64) to `split_bound_dps` over the whole i16 range, which one f32 cannot above 256 °/s.
     #[inline]
-    pub fn apply(&self, raw: [i16; 3]) -> [f32; 3] {{
-        let v = [raw[0] as f32, raw[1] as f32, raw[2] as f32];
-        let mut out = [0.0f32; 3];
+    pub fn apply_split(&self, raw: [i16; 3]) -> ([f32; 3], [f32; 3]) {{
+        let (x, y, z) = (raw[0] as f32, raw[1] as f32, raw[2] as f32);
+        let (mut hi, mut lo) = ([0.0f32; 3], [0.0f32; 3]);
         let mut i = 0;
         while i < 3 {{
-            let (h, l) = (&self.m_inv_hi[i], &self.m_inv_lo[i]);
-            let exact = h[0] * v[0] + h[1] * v[1] + h[2] * v[2] - self.offset_rate_hi[i];
-            let small = l[0] * v[0] + l[1] * v[1] + l[2] * v[2] - self.offset_rate_lo[i];
-            out[i] = exact + small;
+            let (h, m, l) = (&self.m_inv_hi[i], &self.m_inv_mid[i], &self.m_inv_lo[i]);
+            // Exact: multiples of the row's grid below 2^24 steps.
+            let a = h[0] * x + h[1] * y + h[2] * z - self.offset_rate_hi[i];
+            let b = m[0] * x + m[1] * y + m[2] * z - self.offset_rate_mid[i];
+            // The one sum that rounds: its terms are below 2^e.
+            let c = l[0] * x + l[1] * y + l[2] * z - self.offset_rate_lo[i];
+            // TwoSum (Knuth): s + t == a + b exactly; then once more to normalise hi + lo.
+            let s = a + b;
+            let bv = s - a;
+            let t = (a - (s - bv)) + (b - bv);
+            let u = t + c;
+            hi[i] = s + u;
+            let bv = hi[i] - s;
+            lo[i] = (s - (hi[i] - bv)) + (u - bv);
             i += 1;
         }}
-        out
+        (hi, lo)
+    }}
+
+    /// Rate vector in the package frame, °/s: `hi` of [`GyroCal::apply_split`], its sum rounded
+    /// once; within half an f32 ulp plus `split_bound_dps` of `host apply`.
+    #[inline]
+    pub fn apply(&self, raw: [i16; 3]) -> [f32; 3] {{
+        self.apply_split(raw).0
     }}
 }}
 
@@ -95,9 +123,12 @@ pub const GYROCAL: GyroCal = GyroCal {{
     offset_counts: {off},
     offset_rate_dps: {b},
     m_inv_hi: [{h0}, {h1}, {h2}],
+    m_inv_mid: [{d0}, {d1}, {d2}],
     m_inv_lo: [{l0}, {l1}, {l2}],
     offset_rate_hi: {bh},
+    offset_rate_mid: {bd},
     offset_rate_lo: {bl},
+    split_bound_dps: {bound:e},
 }};"#,
         fs = e.calibration.full_scale.range_dps(),
         r0 = row(m[0]),
@@ -108,11 +139,16 @@ pub const GYROCAL: GyroCal = GyroCal {{
         h0 = row(sp.rows[0].m_hi),
         h1 = row(sp.rows[1].m_hi),
         h2 = row(sp.rows[2].m_hi),
+        d0 = row(sp.rows[0].m_mid),
+        d1 = row(sp.rows[1].m_mid),
+        d2 = row(sp.rows[2].m_mid),
         l0 = row(sp.rows[0].m_lo),
         l1 = row(sp.rows[1].m_lo),
         l2 = row(sp.rows[2].m_lo),
         bh = row([sp.rows[0].b_hi, sp.rows[1].b_hi, sp.rows[2].b_hi]),
+        bd = row([sp.rows[0].b_mid, sp.rows[1].b_mid, sp.rows[2].b_mid]),
         bl = row([sp.rows[0].b_lo, sp.rows[1].b_lo, sp.rows[2].b_lo]),
+        bound = sp.rows.iter().map(super::SplitRow::bound_dps).fold(0.0, f64::max),
     );
     o
 }

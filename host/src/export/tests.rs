@@ -1,5 +1,6 @@
 //! The exports compiled and run: the C header with `cc`, the Rust module with `rustc`, each fed
-//! raw readings and compared with [`Calibration::apply`] (what `host apply` prints).
+//! every int16 value on every axis and compared with [`Calibration::apply`] (what `host apply`
+//! prints), at ±500 and at ±2000 °/s.
 
 use super::*;
 use crate::provenance::{CaptureDigest, Identity, Provenance, HOST_VERSION};
@@ -12,8 +13,19 @@ use std::process::{Command, Stdio};
 /// datasheet's 57.14 counts/(°/s), fractional offsets), with provenance.
 fn sample_export() -> Export {
     let m = [[57.3, 0.9, -0.4], [-0.6, 56.8, 1.1], [0.3, -0.7, 58.0]];
-    let off = [12.375, -30.5, 4.25];
-    let cal = Calibration::new("linear: v = K S ω + v_off".into(), FullScale::Dps500, m, off).unwrap();
+    export_of(FullScale::Dps500, m, [12.375, -30.5, 4.25])
+}
+
+/// The same kind of sensor at ±2000 °/s, the L3G4200D's widest range (70 m°/s per count, i.e.
+/// 14.29 counts/(°/s): the int16 range spans ±2340 °/s), with offsets near the datasheet's
+/// ±75 °/s zero-rate level.
+fn wide_export() -> Export {
+    let m = [[14.33, 0.22, -0.1], [-0.15, 14.2, 0.27], [0.08, -0.18, 14.5]];
+    export_of(FullScale::Dps2000, m, [1040.375, -987.5, 12.25])
+}
+
+fn export_of(fs: FullScale, m: [[f64; 3]; 3], off: [f64; 3]) -> Export {
+    let cal = Calibration::new("linear: v = K S ω + v_off".into(), fs, m, off).unwrap();
     let prov = Provenance {
         identity: Identity {
             sensor_serial: Some("G-0042".into()),
@@ -24,7 +36,7 @@ fn sample_export() -> Export {
         session_started_utc: None,
         host_version: HOST_VERSION.into(),
         rig_firmware: Some("0.1.0".into()),
-        gyro: Some(GyroConfig::DEFAULT),
+        gyro: Some(GyroConfig { full_scale: fs, ..GyroConfig::DEFAULT }),
         captures: vec![CaptureDigest { file: "a.cap".into(), bytes: 3, sha256: "ab".into() }],
         die_temperature: None,
     };
@@ -32,174 +44,276 @@ fn sample_export() -> Export {
     Export::from_json(&text).unwrap()
 }
 
-/// Raw readings: the extremes, 1000 across the whole range (up to ±570 °/s here) and 1000 within
-/// ±2800 counts (≈ ±50 °/s, where a bench or a vehicle spends its time). Fixed seed.
+/// Raw readings over the whole int16 range: every value of each axis in turn (65 536 × 3), the
+/// other two axes drawn uniformly from all of int16, and the eight corners. Fixed seed.
 fn readings() -> Vec<[i16; 3]> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-    let mut v = vec![[0, 0, 0], [i16::MAX; 3], [i16::MIN; 3], [i16::MAX, i16::MIN, 0], [1, -1, 2]];
-    v.extend((0..1000).map(|_| [rng.random(), rng.random(), rng.random()]));
-    v.extend((0..1000).map(|_| std::array::from_fn(|_| rng.random_range(-2800..=2800))));
+    let mut v: Vec<[i16; 3]> =
+        (0..8).map(|c| std::array::from_fn(|i| if c >> i & 1 == 1 { i16::MAX } else { i16::MIN })).collect();
+    for axis in 0..3 {
+        for x in i16::MIN..=i16::MAX {
+            let mut r: [i16; 3] = [rng.random(), rng.random(), rng.random()];
+            r[axis] = x;
+            v.push(r);
+        }
+    }
     v
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("host-export-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory for one test, removed when dropped (also when the test fails).
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new().prefix(&format!("host-export-{name}-")).tempdir().expect("temporary directory")
 }
 
-/// Runs `exe`, feeding one `x y z` line per reading, and parses three floats per output line.
-fn run_on_readings(exe: &Path, raw: &[[i16; 3]]) -> Vec<[f64; 3]> {
+/// What an export program prints per reading: the float result, then hi and lo of the split.
+struct Output {
+    rate: [f32; 3],
+    hi: [f32; 3],
+    lo: [f32; 3],
+}
+
+/// Runs `exe`, feeding one `x y z` line per reading; each output line holds the nine floats'
+/// bit patterns in hex (exact, and quick to read back).
+fn run_on_readings(exe: &Path, raw: &[[i16; 3]]) -> Vec<Output> {
     use std::io::Write;
     let mut child = Command::new(exe).stdin(Stdio::piped()).stdout(Stdio::piped()).spawn().expect("runs");
     let input: String = raw.iter().map(|r| format!("{} {} {}\n", r[0], r[1], r[2])).collect();
-    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()).unwrap());
     let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
     assert!(out.status.success());
     String::from_utf8(out.stdout)
         .unwrap()
         .lines()
         .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
+            let v: Vec<f32> =
+                l.split_whitespace().map(|x| f32::from_bits(u32::from_str_radix(x, 16).unwrap())).collect();
+            assert_eq!(v.len(), 9, "{l}");
+            Output { rate: [v[0], v[1], v[2]], hi: [v[3], v[4], v[5]], lo: [v[6], v[7], v[8]] }
         })
         .collect()
 }
 
-/// Compares an export's output with `Calibration::apply`. The split coefficients leave only the
-/// result's own rounding, half an f32 ulp: agreement to 1e-5 °/s is required below 256 °/s
-/// (half-ulp ≤ 7.6e-6 °/s there), and to half an ulp plus 1e-6 °/s everywhere (above 256 °/s
-/// an f32 cannot hold a rate closer than 1.5e-5 °/s). Returns the largest differences (below
-/// 256 °/s, anywhere), °/s.
-fn compare(e: &Export, raw: &[[i16; 3]], got: &[[f64; 3]]) -> (f64, f64) {
+/// Half an f32 ulp of `v`, °/s.
+fn half_ulp(v: f32) -> f64 {
+    f64::from(f32::EPSILON) / 2.0 * 2f64.powf(f64::from(v.abs()).log2().floor())
+}
+
+/// Compares an export's output with `Calibration::apply` (what `host apply` prints) for every
+/// reading and axis: the split `hi + lo` within the row's proven bound (the double-precision
+/// reference adds ≤ 1e-12 °/s of its own) and so within the issue's 1e-5 °/s; `lo` normalised
+/// (≤ half an ulp of `hi`); the float result equal to `hi`, so within half an ulp plus the
+/// bound. Returns the largest differences of the split and of the float, °/s.
+fn compare(e: &Export, raw: &[[i16; 3]], got: &[Output]) -> (f64, f64) {
     assert_eq!(got.len(), raw.len());
-    let (mut below, mut all) = (0.0f64, 0.0f64);
+    let bounds = e.split().rows.map(|r| r.bound_dps());
+    let (mut split, mut float) = (0.0f64, 0.0f64);
     for (r, g) in raw.iter().zip(got) {
         let want = e.calibration.apply(*r);
         for i in 0..3 {
-            let d = (g[i] - want[i]).abs();
-            let half_ulp = f64::from(f32::EPSILON) / 2.0 * 2f64.powf(want[i].abs().log2().floor());
-            assert!(d <= half_ulp + 1e-6, "raw {r:?} axis {i}: {} vs {} ({d:e} °/s apart)", g[i], want[i]);
-            if want[i].abs() < 256.0 {
-                assert!(d <= 1e-5, "raw {r:?} axis {i}: {} vs {}, {d:e} °/s apart", g[i], want[i]);
-                below = below.max(d);
-            }
-            all = all.max(d);
+            let d = (f64::from(g.hi[i]) + f64::from(g.lo[i]) - want[i]).abs();
+            assert!(d <= bounds[i] + 1e-12, "raw {r:?} axis {i}: {}+{} vs {} ({d:e} °/s)", g.hi[i], g.lo[i], want[i]);
+            assert!(d <= 1e-5);
+            assert!(f64::from(g.lo[i].abs()) <= half_ulp(g.hi[i]), "raw {r:?} axis {i}: lo {} hi {}", g.lo[i], g.hi[i]);
+            assert_eq!(g.rate[i].to_bits(), g.hi[i].to_bits(), "raw {r:?} axis {i}");
+            let df = (f64::from(g.rate[i]) - want[i]).abs();
+            assert!(df <= half_ulp(g.rate[i]) + bounds[i] + 1e-12, "raw {r:?} axis {i}: {df:e} °/s");
+            split = split.max(d);
+            float = float.max(df);
         }
     }
-    (below, all)
+    (split, float)
 }
 
-#[test]
-fn c_header_compiles_and_agrees_with_apply() {
-    let e = sample_export();
-    let dir = scratch("c");
-    std::fs::write(dir.join("gyrocal.h"), e.render(Format::C)).unwrap();
+fn compile_c(e: &Export, name: &str) -> (tempfile::TempDir, PathBuf, String) {
+    let dir = scratch(name);
+    let header = e.render(Format::C).unwrap();
+    std::fs::write(dir.path().join("gyrocal.h"), &header).unwrap();
     std::fs::write(
-        dir.join("main.c"),
+        dir.path().join("main.c"),
         r#"#include <stdio.h>
+#include <string.h>
 #include "gyrocal.h"
+static unsigned long bits(float f) { uint32_t u; memcpy(&u, &f, sizeof u); return (unsigned long)u; }
 int main(void) {
-    int a, b, c;
+    int a, b, c, i;
     while (scanf("%d %d %d", &a, &b, &c) == 3) {
         const int16_t raw[3] = {(int16_t)a, (int16_t)b, (int16_t)c};
-        float w[3];
+        float w[3], hi[3], lo[3];
         gyrocal_apply(raw, w);
-        /* %.17g of the float widened to double: its exact value, so the comparison sees the export alone. */
-        printf("%.17g %.17g %.17g\n", (double)w[0], (double)w[1], (double)w[2]);
+        gyrocal_apply_split(raw, hi, lo);
+        for (i = 0; i < 3; i++) printf("%08lx ", bits(w[i]));
+        for (i = 0; i < 3; i++) printf("%08lx ", bits(hi[i]));
+        printf("%08lx %08lx %08lx\n", bits(lo[0]), bits(lo[1]), bits(lo[2]));
     }
     return 0;
 }
 "#,
     )
     .unwrap();
-    let exe = dir.join("apply");
+    let exe = dir.path().join("apply");
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    // -ffp-contract=fast lets the compiler fuse multiply-adds (as GCC does by default outside ISO
+    // mode, and on a Cortex-M4F): the exact sums must not care.
     let o = Command::new(&cc)
-        .args(["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-o"])
+        .args(["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-ffp-contract=fast", "-o"])
         .arg(&exe)
-        .arg(dir.join("main.c"))
+        .arg(dir.path().join("main.c"))
         .output()
         .unwrap_or_else(|err| panic!("cannot run the C compiler {cc:?}: {err}"));
     assert!(o.status.success(), "cc failed:\n{}", String::from_utf8_lossy(&o.stderr));
-    let raw = readings();
-    let (small, all) = compare(&e, &raw, &run_on_readings(&exe, &raw));
-    eprintln!("C export vs apply: max {small:.2e} °/s below 256 °/s, {all:.2e} °/s over the full scale");
-    let header = std::fs::read_to_string(dir.join("gyrocal.h")).unwrap();
-    assert!(header.contains("#define GYROCAL_SENSOR_SERIAL \"G-0042\""), "{header}");
-    assert!(header.contains("#define GYROCAL_FULL_SCALE_DPS 500"));
-    assert!(header.contains("#define GYROCAL_ODR_HZ 800"));
+    (dir, exe, header)
 }
 
 #[test]
-fn rust_export_compiles_no_std_and_agrees_with_apply() {
-    let e = sample_export();
-    let dir = scratch("rust");
-    let module = e.render(Format::Rust);
-    std::fs::write(dir.join("gyrocal.rs"), &module).unwrap();
-    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
-    // no_std: the module alone as a library that links no std.
-    std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
-    let o = Command::new(&rustc)
-        .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
-        .arg(&dir)
-        .arg(dir.join("lib.rs"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
-    std::fs::write(
-        dir.join("main.rs"),
-        r#"include!("gyrocal.rs");
+fn c_header_compiles_and_agrees_with_apply_over_all_of_int16() {
+    let raw = readings();
+    for (e, fs, bound) in
+        [(sample_export(), 500, "5.960464477539063e-8"), (wide_export(), 2000, "2.384185791015625e-7")]
+    {
+        let (_dir, exe, header) = compile_c(&e, &format!("c{fs}"));
+        let (split, float) = compare(&e, &raw, &run_on_readings(&exe, &raw));
+        eprintln!(
+            "C export at ±{fs} °/s vs apply over {} readings: split max {split:.2e} °/s (bound {bound}), float max {float:.2e} °/s",
+            raw.len()
+        );
+        assert!(header.contains("#define GYROCAL_SENSOR_SERIAL \"G-0042\""), "{header}");
+        assert!(header.contains(&format!("#define GYROCAL_FULL_SCALE_DPS {fs}\n")), "{header}");
+        assert!(header.contains("#define GYROCAL_ODR_HZ 800"));
+        assert!(header.contains(&format!("#define GYROCAL_SPLIT_BOUND_DPS {bound}\n")), "{header}");
+        assert!(header.contains("static inline void gyrocal_apply(const int16_t raw[3], float rate_dps[3])"));
+    }
+}
+
+/// Under -ffast-math, or with x87 excess precision (`-mfpmath=387`, FLT_EVAL_METHOD 2), the
+/// header stops the build instead of silently losing its error-free sums. The x87 case is
+/// checked where the compiler targets x86-64 (GCC; the host's `cc` here).
+#[test]
+fn c_header_refuses_fast_math_and_excess_precision() {
+    let dir = scratch("flags");
+    std::fs::write(dir.path().join("gyrocal.h"), sample_export().render(Format::C).unwrap()).unwrap();
+    std::fs::write(dir.path().join("t.c"), "#include \"gyrocal.h\"\nint main(void) { return 0; }\n").unwrap();
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let compile = |flags: &[&str]| {
+        let o = Command::new(&cc)
+            .args(["-std=c99", "-fsyntax-only"])
+            .args(flags)
+            .arg(dir.path().join("t.c"))
+            .output()
+            .unwrap_or_else(|err| panic!("cannot run the C compiler {cc:?}: {err}"));
+        (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    assert!(compile(&[]).0, "{}", compile(&[]).1);
+    let (ok, err) = compile(&["-ffast-math"]);
+    assert!(!ok && err.contains("-ffast-math reassociates the error-free sum"), "{err}");
+    if cfg!(target_arch = "x86_64") {
+        let (ok, err) = compile(&["-mfpmath=387"]);
+        assert!(!ok && err.contains("gyrocal.h needs FLT_EVAL_METHOD == 0"), "{err}");
+    }
+}
+
+#[test]
+fn rust_export_compiles_no_std_and_agrees_with_apply_over_all_of_int16() {
+    let raw = readings();
+    for (e, fs) in [(sample_export(), 500), (wide_export(), 2000)] {
+        let dir = scratch(&format!("rust{fs}"));
+        let dir = dir.path();
+        let module = e.render(Format::Rust).unwrap();
+        std::fs::write(dir.join("gyrocal.rs"), &module).unwrap();
+        let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+        // no_std: the module alone as a library that links no std.
+        std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
+        let o = Command::new(&rustc)
+            .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
+            .arg(dir)
+            .arg(dir.join("lib.rs"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::write(
+            dir.join("main.rs"),
+            r#"include!("gyrocal.rs");
 fn main() {
-    use std::io::BufRead;
+    use std::io::{BufRead, Write};
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     for line in std::io::stdin().lock().lines() {
         let line = line.unwrap();
         let v: Vec<i16> = line.split_whitespace().map(|x| x.parse().unwrap()).collect();
-        let w = GYROCAL.apply([v[0], v[1], v[2]]);
-        // Widened to f64: its exact value (an f32's shortest form would read back as another f64).
-        println!("{:e} {:e} {:e}", f64::from(w[0]), f64::from(w[1]), f64::from(w[2]));
+        let raw = [v[0], v[1], v[2]];
+        let w = GYROCAL.apply(raw);
+        let (hi, lo) = GYROCAL.apply_split(raw);
+        for f in w.iter().chain(&hi).chain(&lo) {
+            write!(out, "{:08x} ", f.to_bits()).unwrap();
+        }
+        writeln!(out).unwrap();
     }
 }
 "#,
-    )
-    .unwrap();
-    let exe = dir.join("apply");
-    let o = Command::new(&rustc)
-        .args(["--edition", "2021", "-O", "-o"])
-        .arg(&exe)
-        .arg(dir.join("main.rs"))
-        .output()
+        )
         .unwrap();
-    assert!(o.status.success(), "rustc failed:\n{}", String::from_utf8_lossy(&o.stderr));
-    let raw = readings();
-    let (small, all) = compare(&e, &raw, &run_on_readings(&exe, &raw));
-    eprintln!("Rust export vs apply: max {small:.2e} °/s below 256 °/s, {all:.2e} °/s over the full scale");
-    assert!(module.contains("sensor_serial: \"G-0042\""));
-    assert!(module.contains("odr_hz: Some(800)"));
+        let exe = dir.join("apply");
+        let o = Command::new(&rustc)
+            .args(["--edition", "2021", "-O", "-o"])
+            .arg(&exe)
+            .arg(dir.join("main.rs"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "rustc failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        let (split, float) = compare(&e, &raw, &run_on_readings(&exe, &raw));
+        eprintln!(
+            "Rust export at ±{fs} °/s vs apply over {} readings: split max {split:.2e} °/s, float max {float:.2e} °/s",
+            raw.len()
+        );
+        assert!(module.contains("sensor_serial: \"G-0042\""));
+        assert!(module.contains("odr_hz: Some(800)"));
+        assert!(module.contains(&format!("full_scale_dps: {fs},")));
+    }
 }
 
-/// The split of every row: high parts on a grid of 2^q with at most 7 significant bits, exact in
-/// f32, and high + low equal to the coefficient to f32 precision of the low part.
+/// The split of every row: high parts on a grid of 2^(e−7) with at most 128 steps, middle parts
+/// on 2^(e−14) with at most 64, both exact in f32, and the three summing back to the coefficient
+/// exactly in f64 (the low part then loses only its f32 rounding).
 #[test]
 fn split_rows_are_exact_in_f32_and_sum_back() {
-    let e = sample_export();
-    let sp = e.split();
-    let b = e.offset_rate_dps();
-    for (i, r) in sp.rows.iter().enumerate() {
-        let largest = e.m_inv_dps_per_count[i].iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let quantum = 2f64.powi(largest.log2().ceil() as i32 - 7);
-        for j in 0..3 {
-            let n = r.m_hi[j] / quantum;
-            assert_eq!(n, n.round());
-            assert!(n.abs() <= 128.0);
-            assert_eq!(f64::from(r.m_hi[j] as f32), r.m_hi[j]);
-            let back = r.m_hi[j] + f64::from(r.m_lo[j] as f32);
-            assert!((back - e.m_inv_dps_per_count[i][j]).abs() <= quantum * 2f64.powi(-24));
+    for e in [sample_export(), wide_export()] {
+        let sp = e.split();
+        let b = e.offset_rate_dps();
+        for (i, r) in sp.rows.iter().enumerate() {
+            let largest = e.m_inv_dps_per_count[i].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            assert_eq!(r.exponent, largest.log2().ceil() as i32);
+            let (hi_step, mid_step) = (2f64.powi(r.exponent - 7), 2f64.powi(r.exponent - 14));
+            let on = |v: f64, step: f64, most: f64| {
+                let n = v / step;
+                assert_eq!(n, n.round(), "{v} on a grid of {step}");
+                assert!(n.abs() <= most, "{v}: {n} steps of {step}");
+                assert_eq!(f64::from(v as f32), v);
+            };
+            for j in 0..3 {
+                on(r.m_hi[j], hi_step, 128.0);
+                on(r.m_mid[j], mid_step, 64.0);
+                assert!(r.m_lo[j].abs() <= mid_step / 2.0);
+                assert_eq!(r.m_hi[j] + r.m_mid[j] + r.m_lo[j], e.m_inv_dps_per_count[i][j]);
+            }
+            on(r.b_hi, hi_step, 2f64.powi(22));
+            on(r.b_mid, mid_step, 64.0);
+            assert!((r.b_hi + r.b_mid + r.b_lo - b[i]).abs() <= 1e-15 * b[i].abs());
         }
-        assert_eq!(f64::from(r.b_hi as f32), r.b_hi);
-        assert!((r.b_hi + r.b_lo - b[i]).abs() < 1e-15);
     }
+}
+
+#[test]
+fn single_precision_exports_refuse_an_offset_they_cannot_carry_exactly() {
+    let m = [[14.33, 0.22, -0.1], [-0.15, 14.2, 0.27], [0.08, -0.18, 14.5]];
+    let e = export_of(FullScale::Dps2000, m, [12.0, -8192.0, 0.0]);
+    for f in [Format::C, Format::Rust] {
+        assert_eq!(
+            e.render(f).unwrap_err().to_string(),
+            "offset y is -8192 counts, beyond the ±8192 counts the single-precision exports carry exactly \
+             (a zero-rate level that large is a broken sensor)"
+        );
+    }
+    assert!(e.render(Format::Json).unwrap().contains("\"offset_y\""));
 }
 
 #[test]
@@ -220,7 +334,7 @@ fn kalibr_factors_reproduce_k_s_over_the_nominal_sensitivity() {
     // M's diagonal is the sensitivity relative to nominal: 57.3/57.142857 = 1.00275, and the
     // YAML carries the factors as written.
     assert!((l[(0, 0)] - (57.3f64.powi(2) + 0.81 + 0.16).sqrt() / nominal).abs() < 1e-12);
-    let yaml = e.render(Format::Kalibr);
+    let yaml = e.render(Format::Kalibr).unwrap();
     assert!(yaml.contains("  update_rate: 800.0\n"), "{yaml}");
     assert!(yaml.contains(&format!("      - [{:.12e}, {:.12e}, {:.12e}]", l[(0, 0)], 0.0, 0.0)), "{yaml}");
 }
@@ -228,12 +342,12 @@ fn kalibr_factors_reproduce_k_s_over_the_nominal_sensitivity() {
 #[test]
 fn json_and_csv_carry_every_parameter_exactly() {
     let e = sample_export();
-    let j: serde_json::Value = serde_json::from_str(&e.render(Format::Json)).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&e.render(Format::Json).unwrap()).unwrap();
     assert_eq!(j["sensor_serial"], "G-0042");
     assert_eq!(j["parameters"]["m_xy"]["value"], 0.9);
     assert_eq!(j["parameters"]["offset_x"]["value"], 12.375);
     assert_eq!(j["parameters"]["m_inv_zz"]["value"].as_f64().unwrap(), e.m_inv_dps_per_count[2][2]);
-    let csv = e.render(Format::Csv);
+    let csv = e.render(Format::Csv).unwrap();
     let line = csv.lines().find(|l| l.starts_with("offset_y,")).unwrap();
     assert_eq!(line, "offset_y,-3.05e1,,counts");
     let v: f64 = csv.lines().find(|l| l.starts_with("m_inv_xy,")).unwrap().split(',').nth(1).unwrap().parse().unwrap();

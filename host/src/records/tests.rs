@@ -8,19 +8,20 @@ use super::views;
 use super::DbSpec;
 use std::collections::HashSet;
 
-/// A test database: an SQLite file in the temp dir, or a fresh schema on the PostgreSQL server.
+/// A test database: an SQLite file in a temporary directory, or a fresh schema on the PostgreSQL
+/// server. Dropping it removes the directory (the file and its -wal/-shm) or the schema, so runs
+/// leave nothing behind, also when an assertion fails.
 struct TestDb {
     spec: DbSpec,
     schema: Option<String>,
+    _dir: Option<tempfile::TempDir>,
 }
 
 impl TestDb {
     fn sqlite(name: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("gyrocal-records-{}-{name}.sqlite", std::process::id()));
-        for ext in ["", "-wal", "-shm"] {
-            let _ = std::fs::remove_file(format!("{}{ext}", p.display()));
-        }
-        Self { spec: DbSpec::Sqlite(p), schema: None }
+        let dir = tempfile::Builder::new().prefix("gyrocal-records-").tempdir().expect("temporary directory");
+        let p = dir.path().join(format!("{name}.sqlite"));
+        Self { spec: DbSpec::Sqlite(p), schema: None, _dir: Some(dir) }
     }
 
     /// The configured server; without one these tests are ignored (build.rs), except under
@@ -34,7 +35,7 @@ impl TestDb {
                 // Created here, before any writer: concurrent CREATE SCHEMA IF NOT EXISTS races in
                 // PostgreSQL (both see it missing, one fails on the catalogue's unique index).
                 c.batch_execute(&format!("DROP SCHEMA IF EXISTS {schema} CASCADE; CREATE SCHEMA {schema}")).unwrap();
-                Self { spec: DbSpec::Postgres(url), schema: Some(schema) }
+                Self { spec: DbSpec::Postgres(url), schema: Some(schema), _dir: None }
             }
             Err(_) => panic!(
                 "{name}: GYROCAL_TEST_PG is not set (CI={:?}): the PostgreSQL records tests must run in CI (.ci/run starts a server)",
@@ -45,6 +46,17 @@ impl TestDb {
 
     fn open(&self) -> Box<dyn Conn> {
         self.spec.open_in_schema(self.schema.as_deref()).expect("opens")
+    }
+}
+
+impl Drop for TestDb {
+    fn drop(&mut self) {
+        if let (DbSpec::Postgres(url), Some(schema)) = (&self.spec, &self.schema) {
+            // Best effort: a server gone away must not turn a passing test into a panic in drop.
+            if let Ok(mut c) = ::postgres::Client::connect(url, ::postgres::NoTls) {
+                let _ = c.batch_execute(&format!("DROP SCHEMA IF EXISTS {schema} CASCADE"));
+            }
+        }
     }
 }
 

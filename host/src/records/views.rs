@@ -259,7 +259,11 @@ pub fn sparkline(values: &[f64], width: usize) -> String {
 /// The production summary.
 pub fn summary(latest: &[Record]) -> String {
     let mut o = String::new();
-    let _ = writeln!(o, "{} sensors (latest calibration of each)\n", latest.len());
+    let _ = writeln!(
+        o,
+        "{} sensors (latest calibration of each; calibrations stored without --sensor are not counted)\n",
+        latest.len()
+    );
     let _ = writeln!(
         o,
         "parameter              unit                 mean        sd         min      median         max  histogram (min..max)"
@@ -313,7 +317,10 @@ pub fn summary_html(latest: &[Record]) -> String {
     use crate::report::plots::{bar_chart, BarSeries, PlotSpec};
     let mut doc = crate::report::Document::new(format!("Calibration records: {} sensors", latest.len()));
     let dists = distributions(latest);
-    doc.paragraph("Latest calibration of each sensor. Outliers: robust z = (x − median)/(1.4826·MAD) beyond ±3.5.");
+    doc.paragraph(
+        "Latest calibration of each sensor (calibrations stored without --sensor are not counted). Outliers: \
+         robust z = (x − median)/(1.4826·MAD) beyond ±3.5.",
+    );
     doc.table(
         "Distributions across sensors",
         &["parameter", "unit", "n", "mean", "sd", "min", "median", "max"],

@@ -292,13 +292,16 @@ fn table(o: &mut String, caption: &str, headers: &[String], rows: &[Vec<String>]
     o.push_str("</tbody></table></div>\n");
 }
 
-/// Screen: a readable column with figures at their native width (shrunk to fit). Print: full
-/// width, figures and tables kept whole, banner and zebra colours kept.
+/// Screen: a 72rem column (1152 px), wide enough for a seven-column table such as the loop's
+/// before/after table at a 1400 px window, while paragraphs, findings and captions keep 46rem
+/// lines; figures at their native width (shrunk to fit). Headers and text cells wrap at spaces,
+/// numbers never (`host/tests/report_layout.rs` checks every table of a real report fits).
+/// Print: full width, figures and tables kept whole, banner and zebra colours kept.
 const CSS: &str = r#":root { --ink: #222; --muted: #555; --rule: #d5d9de; --zebra: #f2f4f7; }
 * { box-sizing: border-box; }
 html { background: #fff; }
 body { margin: 0; color: var(--ink); font: 15px/1.5 system-ui, -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; }
-main { max-width: 56rem; margin: 0 auto; padding: 2rem 1.5rem 4rem; }
+main { max-width: 72rem; margin: 0 auto; padding: 2rem 1.5rem 4rem; }
 h1 { font-size: 1.75rem; line-height: 1.2; margin: 0 0 1.2rem; }
 h2 { font-size: 1.3rem; margin: 2.4rem 0 .7rem; padding-bottom: .25rem; border-bottom: 1px solid var(--rule); }
 h3 { font-size: 1.1rem; margin: 1.8rem 0 .5rem; }
@@ -313,8 +316,9 @@ p { margin: .5rem 0 1rem; max-width: 46rem; }
 table { border-collapse: collapse; font-size: .92rem; font-variant-numeric: tabular-nums; }
 caption { caption-side: top; text-align: left; font-weight: 600; padding: 0 0 .45rem; }
 th, td { padding: .35rem .85rem; text-align: left; vertical-align: top; border-bottom: 1px solid var(--rule); }
-th { font-weight: 600; border-bottom: 2px solid var(--ink); white-space: nowrap; }
-th.num, td.num { text-align: right; white-space: nowrap; }
+th { font-weight: 600; border-bottom: 2px solid var(--ink); }
+th.num, td.num { text-align: right; }
+td.num { white-space: nowrap; }
 tbody tr:nth-child(even) { background: var(--zebra); }
 figure { margin: 1.8rem 0; }
 figure svg { display: block; max-width: 100%; height: auto; margin: 0 auto; }
