@@ -329,8 +329,11 @@ mod tests {
         frames(&out)
     }
 
+    /// Paced by the wall clock, so it runs at 1×: the rig's 2 s link timeout then leaves the host
+    /// thread 40 missed 50-ms heartbeats of slack on a loaded machine, and nothing asserts on
+    /// how long anything took.
     #[test]
-    fn rig_serves_a_run_over_a_pty_at_ten_times_real_time() {
+    fn rig_serves_a_run_over_a_pty_in_real_time() {
         let (mut rig_end, mut host) = TTYPort::pair().expect("pty pair");
         rig_end.set_timeout(Duration::from_millis(5)).unwrap();
         host.set_timeout(Duration::from_millis(5)).unwrap();
@@ -339,7 +342,7 @@ mod tests {
             let stop = Arc::clone(&stop);
             std::thread::spawn(move || {
                 let mut rig = SimRig::new(&SimConfig::with_runs(13, Vec::new()));
-                serve(&mut rig_end, &mut rig, 10.0, &stop).map(|()| rig)
+                serve(&mut rig_end, &mut rig, 1.0, &stop).map(|()| rig)
             })
         };
         let mut captured = Vec::new();
@@ -354,7 +357,7 @@ mod tests {
         let t0 = Instant::now();
         let mut last_beat = Instant::now();
         let mut stopped_sent = false;
-        let deadline = t0 + Duration::from_secs(10);
+        let deadline = t0 + Duration::from_secs(60);
         loop {
             match host.read(&mut buf) {
                 Ok(n) => captured.extend_from_slice(&buf[..n]),
@@ -392,8 +395,8 @@ mod tests {
         assert!(run.stopped && run.faults.is_empty());
         let truth = rig.truth();
         let rt = &truth.runs[0];
-        // ~1 s of wall clock at 10×: 10 s simulated, ± scheduling slack.
-        assert!((7.0..14.0).contains(&rt.duration_s), "{}", rt.duration_s);
+        // Stop came after ≥ 1 s of wall clock, i.e. ≥ 1 s simulated at 1×.
+        assert!(rt.duration_s >= 1.0, "{}", rt.duration_s);
         assert_eq!(run.samples.len() as u64, rt.samples);
         assert!((rt.samples as f64 - rt.duration_s * truth.odr_hz_actual).abs() <= 1.0);
         // Identify, Start and Stop were all acknowledged Ok.
