@@ -62,8 +62,9 @@ pub enum Effect {
     /// Earth's rotation with its vertical part known from the latitude the user gave: only the
     /// two horizontal components (the heading) are fitted.
     EarthRotationAtLatitude,
-    /// A ripple of the sensor table's speed at n× its rate that the base encoder cannot see
-    /// (the magnetic gears are compliant), seen by every axis through M R_qᵀ.
+    /// A periodic angle error of the sensor table at n× θ2 that encoder and index cannot see
+    /// (magnetic-gear pole pass, eccentricity), with its derivative in θ2'; seen by every axis
+    /// through M R_qᵀ, one coefficient pair per pose.
     TableHarmonic(u32),
     /// The pose-2 fixture turned about the table axis z2 against pose 1's (the operator
     /// re-mounts the sensor between poses): an index offset of pose 2's own. Relative, since a

@@ -370,6 +370,20 @@ fn undeclared_table_tilt_is_found_named_and_corrected() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
+/// The pose-2 fixture turned 0.1° about the table axis, not declared: a single index offset
+/// cannot hold both poses, and the directions are 0.05° off until it is found; then within 3σ
+/// at the floor.
+#[test]
+fn undeclared_pose_fixture_is_found_named_and_corrected() {
+    let (r, _) = run_loop(6, &BAR_RATES_DPS, SHORT_S, &["pose_fixture", "index_offset_deg"]);
+    assert!(r.effects().contains(&Effect::PoseFixture), "{}", r.summary());
+    let before = truth_of(&r.steps[0]).max_direction_deg();
+    let after = truth_of(r.steps.last().expect("steps"));
+    assert!(after.max_direction_deg() * 10.0 <= before, "{before} → {}\n{}", after.max_direction_deg(), r.summary());
+    assert_within_3_sigma(&after, "pose_fixture");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
 /// Earth rotation with no latitude given and runs at one speed, where it cannot be fitted: the
 /// sensitivities' σ carries it (Type B), so the calibration is never confidently wrong.
 #[test]

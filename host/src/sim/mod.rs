@@ -28,7 +28,7 @@ mod tests;
 
 pub use effects::{
     EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission, IndexOffset,
-    MysteryHarmonic, Nonlinearity, OffsetDrift, RippleHarmonic, SpeedRipple, TableTilt,
+    MysteryHarmonic, Nonlinearity, OffsetDrift, PoseFixture, RippleHarmonic, SpeedRipple, TableTilt,
 };
 pub use rig::{serve, Port, SimRig};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;

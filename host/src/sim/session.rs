@@ -240,7 +240,8 @@ impl Session {
         }))?;
         self.motor.set_target(t_s, rate_dps, self.spin_up_s);
         let next_k = ((t_s - self.clock_phase_s) / self.period_s).floor().max(0.0) as u64 + 1;
-        let chain = SenseChain::new(&self.sensor, &pose.rotation(), self.gyro.full_scale, &self.effects);
+        let mount = self.effects.pose_fixture.map_or_else(|| pose.rotation(), |f| f.rotation(pose));
+        let chain = SenseChain::new(&self.sensor, &mount, self.gyro.full_scale, &self.effects);
         let base_done = self.motor.state(t_s);
         let mut run = ActiveRun {
             pose,
