@@ -580,7 +580,7 @@ fn calibrate(
         runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
+    let lr = calib::close_loop_owned(runs, opts, truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let noise = static_noise(&caps, &lr.final_report().calibration());

@@ -171,10 +171,10 @@ pub fn summary(r: &LoopReport) -> String {
         }
     }
     let _ = writeln!(o, "\nResidual of the final model:");
-    if r.final_diagnostics.findings.is_empty() {
+    if r.final_diagnostics().findings.is_empty() {
         let _ = writeln!(o, "  no structure found.");
     }
-    for f in &r.final_diagnostics.findings {
+    for f in &r.final_diagnostics().findings {
         let _ = writeln!(o, "  - {}", f.text);
     }
     let tag = match r.verdict {
