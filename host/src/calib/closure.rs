@@ -171,11 +171,6 @@ impl LoopReport {
     pub fn effects(&self) -> Vec<Effect> {
         self.steps.last().map(|s| s.effects.clone()).unwrap_or_default()
     }
-
-    /// The readable account: findings, the before/after table, the final calibration, verdict.
-    pub fn summary(&self) -> String {
-        super::loop_summary::summary(self)
-    }
 }
 
 /// Indices of the 12 base parameters in a fit's covariance, `CalReport` order.

@@ -4,6 +4,14 @@
 use super::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
+impl LoopReport {
+    /// The readable account: findings, the before/after table, the final calibration, verdict.
+    /// (Here rather than beside the type: the computation does not depend on its presentation.)
+    pub fn summary(&self) -> String {
+        summary(self)
+    }
+}
+
 fn step_name(s: &StepReport) -> String {
     match s.effect {
         None if s.effects.is_empty() => "linear model".into(),
