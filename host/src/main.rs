@@ -330,10 +330,20 @@ fn main() -> ExitCode {
             // turn a clean failure into a panic.
             use std::io::Write as _;
             let _ = writeln!(std::io::stderr(), "error: {e:#}");
-            ExitCode::FAILURE
+            if e.downcast_ref::<Usage>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }
+
+/// Wrong usage found after parsing: a configuration the command line names is unusable. Exit 2,
+/// as for clap's own usage errors.
+#[derive(Debug, thiserror::Error)]
+#[error("{0:#}")]
+struct Usage(anyhow::Error);
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
@@ -431,7 +441,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 Some(path) => {
                     let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
                     serde_json::from_str(&text)
-                        .with_context(|| format!("{} is not a simulation config", path.display()))?
+                        .with_context(|| format!("{} is not a simulation config", path.display()))
+                        .map_err(Usage)?
                 }
                 None => {
                     let mut cfg = sim::SimConfig::with_runs(
@@ -447,7 +458,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         _ => protocol::FullScale::Dps500,
                     };
                     for e in &effects {
-                        cfg.effects.enable(e)?;
+                        cfg.effects.enable(e).map_err(|e| Usage(e.into()))?;
                     }
                     cfg
                 }
@@ -641,7 +652,7 @@ fn calibrate(
         runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop(&runs, opts, truth.as_ref()).context("calibration failed")?;
+    let lr = calib::close_loop_owned(runs, opts, truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
@@ -738,7 +749,7 @@ fn truth_path(capture: &Path) -> PathBuf {
 }
 
 fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {
-    cfg.validate().map_err(|e| anyhow::anyhow!("invalid simulation: {e}"))?;
+    cfg.validate().map_err(|e| Usage(anyhow::Error::new(e).context("invalid simulation")))?;
     let file = fs::File::create(out).with_context(|| format!("cannot create {}", out.display()))?;
     let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file))
         .with_context(|| format!("writing {}", out.display()))?;

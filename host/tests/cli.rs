@@ -95,7 +95,7 @@ fn simulate_refuses_a_rate_the_rig_refuses() {
     let tmp = scratch("fast");
     let out = tmp.path().join("fast.cap");
     let o = host(&["simulate", "--rates-dps", "500", "--out", out.to_str().unwrap()]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert_eq!(
         stderr(&o),
         "error: invalid simulation: runs[0].rate_dps must be within ±360 °/s, the rig's limit (0: a static run, for noise figures)\n"
@@ -377,12 +377,45 @@ fn an_unknown_effect_is_refused_with_the_list() {
     let tmp = scratch("effect");
     let dir = tmp.path();
     let o = host(&["simulate", "--out", dir.join("x.cap").to_str().unwrap(), "--effect", "wobble"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert!(
         stderr(&o).starts_with("error: unknown effect \"wobble\"; known: filter_delay, delay_ms, "),
         "{}",
         stderr(&o)
     );
+}
+
+/// A simulation config that cannot be read or simulated is a usage error (exit 2) with one
+/// `error:` line naming the file or the field, never a panic; nothing is written.
+#[test]
+fn a_bad_simulation_config_is_a_usage_error_naming_the_field() {
+    let tmp = scratch("bad-config");
+    let dir = tmp.path();
+    let out = dir.join("x.cap");
+    let config = dir.join("c.json");
+    let gyro = r#""gyro":{"full_scale":"Dps500","odr":"Hz800","bandwidth":"Bw3"}"#;
+    let cases = [
+        (
+            format!(
+                r#"{{"seed":1,"runs":[{{"pose":"One","rate_dps":180.0,"duration_s":-1.0}}],{gyro},"noise_dps_per_sqrt_hz":0.03,"effects":{{}},"spin_up_s":1.0,"gap_s":0.5,"start_t_us":0,"start_encoder":0,"index_plate_width_deg":10.0}}"#
+            ),
+            "error: invalid simulation: runs[0].duration_s must be > 0\n".to_string(),
+        ),
+        (
+            r#"{"seed":1,"runs":[]}"#.to_string(),
+            format!(
+                "error: {} is not a simulation config: missing field `gyro` at line 1 column 20\n",
+                config.display()
+            ),
+        ),
+    ];
+    for (text, expected) in cases {
+        std::fs::write(&config, text).unwrap();
+        let o = host(&["simulate", "--out", out.to_str().unwrap(), "--config", config.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert_eq!(stderr(&o), expected);
+        assert!(!out.exists());
+    }
 }
 
 /// F10: a duration or rate that is not a finite number is a usage error (exit 2) naming it:

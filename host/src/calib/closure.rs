@@ -12,7 +12,7 @@ use super::lsq::AXES;
 use super::report::{Autocorrelation, AxisResidual, RunResidualReport};
 use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score, Skipped};
 use super::truth_check::TruthErrors;
-use super::{calibrate, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
+use super::{calibrate_kinematics, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -143,8 +143,10 @@ pub struct LoopReport {
     pub skipped: Vec<Skipped>,
     /// Diagnostics of the linear model (with its plot data).
     pub initial: Diagnostics,
-    /// Diagnostics of the final model (with its plot data).
-    pub final_diagnostics: Diagnostics,
+    /// Diagnostics of the final model (with its plot data); `None` when no effect was added, the
+    /// final model being the linear one of `initial` (loop.json then holds them once).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_diagnostics: Option<Diagnostics>,
     /// The final model's calibration report (linear part: M, offsets, with σ).
     pub final_report: CalReport,
 }
@@ -160,14 +162,14 @@ impl LoopReport {
         &self.final_report
     }
 
+    /// Diagnostics of the final model.
+    pub fn final_diagnostics(&self) -> &Diagnostics {
+        self.final_diagnostics.as_ref().unwrap_or(&self.initial)
+    }
+
     /// Effects added, in order.
     pub fn effects(&self) -> Vec<Effect> {
         self.steps.last().map(|s| s.effects.clone()).unwrap_or_default()
-    }
-
-    /// The readable account: findings, the before/after table, the final calibration, verdict.
-    pub fn summary(&self) -> String {
-        super::loop_summary::summary(self)
     }
 }
 
@@ -540,10 +542,37 @@ fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
 /// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
 pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::Truth>) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
-    let base_report = calibrate(runs, &opts.cal)?;
     let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
+    let base_report = calibrate_kinematics(runs, &kin, &opts.cal)?;
+    loop_on(kin, base_report, runs[0].gyro, opts, truth)
+}
+
+/// [`close_loop`] on runs it may consume: each run's raw samples are freed once its kinematics
+/// are reconstructed, so the two copies of a long capture are never held together with the
+/// loop's own data (what `host calibrate` runs).
+pub fn close_loop_owned(
+    mut runs: Vec<Run>,
+    opts: &LoopOptions,
+    truth: Option<&crate::sim::Truth>,
+) -> Result<LoopReport, CalError> {
+    check_runs(&runs)?;
+    let kin = kinematics::reconstruct(&runs, &opts.cal.kinematics)?;
+    for r in &mut runs {
+        r.samples = Vec::new();
+    }
+    let base_report = calibrate_kinematics(&runs, &kin, &opts.cal)?;
+    loop_on(kin, base_report, runs[0].gyro, opts, truth)
+}
+
+/// The loop proper, on reconstructed kinematics and the linear pipeline's report.
+fn loop_on(
+    kin: kinematics::Kinematics,
+    base_report: CalReport,
+    gyro: protocol::GyroConfig,
+    opts: &LoopOptions,
+    truth: Option<&crate::sim::Truth>,
+) -> Result<LoopReport, CalError> {
     let data = LoopData::new(kin);
-    let gyro = runs[0].gyro;
     let ctx = Context {
         data: &data,
         opts,
@@ -638,6 +667,7 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
         }
     };
     let final_report = final_cal_report(&base_report, &state, &data);
+    let added = steps.len() > 1;
     Ok(LoopReport {
         steps,
         verdict,
@@ -646,7 +676,7 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
         notes,
         skipped,
         initial,
-        final_diagnostics: state.diag,
+        final_diagnostics: added.then_some(state.diag),
         final_report,
     })
 }

@@ -327,6 +327,16 @@ impl Bins {
 }
 
 impl OrderSums {
+    /// Adds one sample's sin nθ, cos nθ and `y` (into es, ec).
+    #[inline]
+    fn add(&mut self, sn: f64, cn: f64, y: f64) {
+        self.ss += sn * sn;
+        self.cc += cn * cn;
+        self.sc += sn * cn;
+        self.es += y * sn;
+        self.ec += y * cn;
+    }
+
     /// Least-squares (a, b) of a·sin + b·cos (for n = 0, (mean, 0) with cos = 1).
     fn solve(&self) -> (f64, f64) {
         if self.ss == 0.0 {
@@ -346,63 +356,69 @@ fn harmonic_coefficients(o: &[OrderSums; MAX_ORDER + 1]) -> [(f64, f64); MAX_ORD
     std::array::from_fn(|n| o[n].solve())
 }
 
-/// Σ over orders `0..=max` of a·sin nθ + b·cos nθ.
-fn harmonic_fit(coefs: &[(f64, f64)], theta: f64, max: usize) -> f64 {
-    let (s1, c1) = theta.sin_cos();
-    let (mut sn, mut cn) = (0.0, 1.0);
-    let mut sum = 0.0;
-    for (n, &(a, b)) in coefs.iter().enumerate().take(max + 1) {
-        if n > 0 {
-            (sn, cn) = (sn * c1 + cn * s1, cn * c1 - sn * s1);
+/// Orders 0..=MAX_ORDER as one flat vector: (sin 0θ, cos 0θ, sin θ, cos θ, …) for the harmonics,
+/// (a₀, b₀, a₁, b₁, …) for a fit's coefficients, so a fit's value is their dot product.
+type Flat = [f64; 2 * (MAX_ORDER + 1)];
+
+fn flatten(v: &[(f64, f64); MAX_ORDER + 1]) -> Flat {
+    std::array::from_fn(|i| if i % 2 == 0 { v[i / 2].0 } else { v[i / 2].1 })
+}
+
+/// Σ x·y over the first `len` elements, in eight partial sums so that the additions do not wait
+/// on each other (one running sum was a chain of 66 dependent additions per call).
+#[inline]
+fn dot_prefix(x: &Flat, y: &Flat, len: usize) -> f64 {
+    let (x, y) = (&x[..len], &y[..len]);
+    let mut acc = [0.0f64; 8];
+    let whole = len / 8 * 8;
+    for (a, b) in x[..whole].chunks_exact(8).zip(y[..whole].chunks_exact(8)) {
+        for j in 0..8 {
+            acc[j] += a[j] * b[j];
         }
-        sum += a * sn + b * cn;
     }
-    sum
+    let rest: f64 = x[whole..].iter().zip(&y[whole..]).map(|(a, b)| a * b).sum();
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + rest
 }
 
 /// The tests that would otherwise repeat the harmonic ones: the rate-magnitude bins of the
 /// residual without its 0× and 1× parts (offset and phase misfits, reported as such), and the
 /// slope against the speed deviation with every harmonic 0…8× removed from both (ripple at
 /// harmonics of the table is indistinguishable from them; what is left is the ripple at other
-/// frequencies, which only a wrong rate reconstruction would echo).
+/// frequencies, which only a wrong rate reconstruction would echo). One pass over the run's
+/// samples for all three axes; `coefs` and `dev_coefs` are the per-axis harmonic fits of the
+/// residual and of the speed deviation from the first pass.
 fn partial_tests(
-    e: &[f64],
+    e: &[Vec<f64>; 3],
     thetas: &[f64],
-    devs: &[f64],
-    abs_rates: &[f64],
-    coefs: &[(f64, f64); MAX_ORDER + 1],
-    rate_max: f64,
-) -> (Bins, SlopeSums) {
-    let mut dev_orders = [OrderSums::default(); MAX_ORDER + 1];
-    for ((&v, &th), &d) in e.iter().zip(thetas).zip(devs) {
-        if v.is_nan() {
-            continue;
-        }
-        let (s1, c1) = th.sin_cos();
-        let (mut sn, mut cn) = (0.0, 1.0);
-        for (n, o) in dev_orders.iter_mut().enumerate() {
-            if n > 0 {
-                (sn, cn) = (sn * c1 + cn * s1, cn * c1 - sn * s1);
+    devs: impl Iterator<Item = f64>,
+    rate_bin: &[Vec<u8>; 3],
+    coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
+    dev_coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
+) -> ([Bins; 3], [SlopeSums; 3]) {
+    let mut bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(RATE_BINS));
+    let mut ripple = [SlopeSums::default(); 3];
+    let coefs = coefs.map(|c| flatten(&c));
+    let dev_coefs = dev_coefs.map(|c| flatten(&c));
+    let all = 2 * (MAX_ORDER + 1);
+    for (i, (&th, d)) in thetas.iter().zip(devs).enumerate() {
+        let h = flatten(&harmonics_of(th));
+        for a in 0..3 {
+            let v = e[a][i];
+            if v.is_nan() {
+                continue;
             }
-            o.ss += sn * sn;
-            o.cc += cn * cn;
-            o.sc += sn * cn;
-            o.es += d * sn;
-            o.ec += d * cn;
+            // Orders 0 and 1: the first four elements.
+            bins[a].add(usize::from(rate_bin[a][i]), v - dot_prefix(&coefs[a], &h, 4), 0.0);
+            ripple[a].add(d - dot_prefix(&dev_coefs[a], &h, all), v - dot_prefix(&coefs[a], &h, all));
         }
-    }
-    let dev_coefs = harmonic_coefficients(&dev_orders);
-    let mut bins = Bins::new(RATE_BINS);
-    let mut ripple = SlopeSums::default();
-    for (((&v, &th), &d), &r) in e.iter().zip(thetas).zip(devs).zip(abs_rates) {
-        if v.is_nan() {
-            continue;
-        }
-        let rb = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
-        bins.add(rb, v - harmonic_fit(coefs, th, 1), 0.0);
-        ripple.add(d - harmonic_fit(&dev_coefs, th, MAX_ORDER), v - harmonic_fit(coefs, th, MAX_ORDER));
     }
     (bins, ripple)
+}
+
+/// The speed deviation θ1'/steady − 1 in %.
+#[inline]
+fn speed_deviation_percent(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
+    (theta1_rate_dps / steady_rate_dps - 1.0) * 100.0
 }
 
 /// White-noise variance from the remainder of a centred moving average of half-width `w`
@@ -477,7 +493,13 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
         let base_hz = rk.steady_rate_dps.abs() / 360.0;
         let mut e: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
-        let mut orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
+        // Σ e·sin nθ, Σ e·cos nθ per axis; the sums that do not involve e (sin², cos², sin·cos,
+        // and the speed deviation's Σ d·sin, Σ d·cos) are shared by the axes, less what an
+        // axis's clipped samples contributed (`clipped_sums`), so each order costs two
+        // products per axis rather than five, and the deviation's fit needs no second pass.
+        let mut e_sums = [[(0.0f64, 0.0f64); MAX_ORDER + 1]; 3];
+        let mut shared = [OrderSums::default(); MAX_ORDER + 1];
+        let mut clipped_sums = [[OrderSums::default(); MAX_ORDER + 1]; 3];
         let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
         let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s) - rk.samples.first().map_or(0.0, |s| s.t_s))
             / TIME_BIN_S)
@@ -485,10 +507,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             .max(1.0) as usize;
         let mut time_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(n_time));
         let mut temp = [SlopeSums::default(); 3];
-        // Per used sample: θ2, speed deviation, |rate along each axis|, for the partial tests.
+        // Per used sample, for the partial tests: θ2, and the bin of |rate along each axis| (the
+        // speed deviation they need is recomputed from the kinematics).
         let mut thetas: Vec<f64> = Vec::with_capacity(rd.n_valid);
-        let mut devs: Vec<f64> = Vec::with_capacity(rd.n_valid);
-        let mut abs_rates: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
+        let mut rate_bin: [Vec<u8>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
         let mut clipped = [0u64; 3];
         let mut dev_sq = 0.0;
         let t_first = rk.samples.first().map_or(0.0, |s| s.t_s);
@@ -504,28 +526,31 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let tb = (((s.t_s - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
             let dev = s.theta1_rate_dps / rk.steady_rate_dps - 1.0;
             dev_sq += dev * dev;
+            let dev_pct = speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps);
             thetas.push(p.theta2_rad);
-            devs.push(dev * 100.0);
             let mut row = [f64::NAN; 3];
             let harmonics = harmonics_of(p.theta2_rad);
+            for (o, &(sn, cn)) in shared.iter_mut().zip(&harmonics) {
+                o.add(sn, cn, dev_pct);
+            }
             for a in 0..3 {
-                abs_rates[a].push(ev.axis_rate(&p, a).abs());
+                let r = ev.axis_rate(&p, a).abs();
+                rate_bin[a].push(((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1) as u8);
                 if is_clipped(s.rate_counts[a]) {
                     clipped[a] += 1;
                     e[a].push(f64::NAN);
+                    for (o, &(sn, cn)) in clipped_sums[a].iter_mut().zip(&harmonics) {
+                        o.add(sn, cn, dev_pct);
+                    }
                     continue;
                 }
                 let pred = ev.predict(&p, a);
                 let ea = f64::from(s.rate_counts[a]) - pred;
                 row[a] = ea;
                 e[a].push(ea);
-                for (nn, o) in orders[a].iter_mut().enumerate() {
-                    let (sn, cn) = harmonics[nn];
-                    o.ss += sn * sn;
-                    o.cc += cn * cn;
-                    o.sc += sn * cn;
-                    o.es += ea * sn;
-                    o.ec += ea * cn;
+                for (o, &(sn, cn)) in e_sums[a].iter_mut().zip(&harmonics) {
+                    o.0 += ea * sn;
+                    o.1 += ea * cn;
                 }
                 theta_bins[a].add(bin, ea, pred);
                 time_bins[a].add(tb, ea, 0.0);
@@ -541,6 +566,29 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             }
         }
         blocking.end_segment();
+        // Per axis: the residual's order sums, and the speed deviation's over the same samples.
+        let axis_sums = |a: usize, with: &dyn Fn(usize) -> (f64, f64)| -> [OrderSums; MAX_ORDER + 1] {
+            std::array::from_fn(|n| {
+                let (sh, cl) = (&shared[n], &clipped_sums[a][n]);
+                let (es, ec) = with(n);
+                OrderSums { ss: sh.ss - cl.ss, cc: sh.cc - cl.cc, sc: sh.sc - cl.sc, es, ec }
+            })
+        };
+        let orders: [[OrderSums; MAX_ORDER + 1]; 3] = std::array::from_fn(|a| axis_sums(a, &|n| e_sums[a][n]));
+        let dev_coefs: [[(f64, f64); MAX_ORDER + 1]; 3] = std::array::from_fn(|a| {
+            harmonic_coefficients(&axis_sums(a, &|n| {
+                (shared[n].es - clipped_sums[a][n].es, shared[n].ec - clipped_sums[a][n].ec)
+            }))
+        });
+        let coefs: [[(f64, f64); MAX_ORDER + 1]; 3] = std::array::from_fn(|a| harmonic_coefficients(&orders[a]));
+        let devs = rk
+            .samples
+            .iter()
+            .zip(&rd.valid)
+            .filter(|(_, &v)| v)
+            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps));
+        let (mut rate_bins, mut ripples) = partial_tests(&e, &thetas, devs, &rate_bin, &coefs, &dev_coefs);
+        drop((thetas, rate_bin));
         let n_used = e[0].len().max(1);
         let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
         let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);
@@ -552,12 +600,9 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let mut spectrum = Vec::with_capacity(3);
         for a in 0..3 {
             let ea = &e[a];
-            let good: Vec<f64> = ea.iter().copied().filter(|v| !v.is_nan()).collect();
-            let n = good.len();
-            let ss: f64 = good.iter().map(|v| v * v).sum();
+            let (n, ss) = ea.iter().filter(|v| !v.is_nan()).fold((0usize, 0.0), |(n, ss), v| (n + 1, ss + v * v));
             let floor_var = high_pass_variance(ea, w);
-            let filled: Vec<f64> = ea.iter().map(|v| if v.is_nan() { 0.0 } else { *v }).collect();
-            let pg = Periodogram::new(&filled, fs);
+            let pg = Periodogram::new(ea, fs);
             let noise_var = pg
                 .noise_variance(band_lo, band_hi, table_hz)
                 .filter(|v| v.is_finite() && *v > 0.0)
@@ -599,8 +644,8 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                     }
                 })
                 .collect();
-            let coefs = harmonic_coefficients(&orders[a]);
-            let (rate_bins, ripple) = partial_tests(ea, &thetas, &devs, &abs_rates[a], &coefs, rate_max);
+            let rate_bins = std::mem::replace(&mut rate_bins[a], Bins::new(0));
+            let ripple = std::mem::take(&mut ripples[a]);
             let (q, lags) = ljung_box(ea, block, LJUNG_BOX_LAGS);
             let test = |chi2: f64, dof: usize| Test {
                 chi2,
@@ -866,4 +911,30 @@ fn notes(d: &Diagnostics) -> Vec<String> {
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The interleaved recurrences stay within 1e-13 of sin nθ, cos nθ up to the last order,
+    /// and the split dot product gives the plain sum.
+    #[test]
+    fn harmonics_and_their_fit_match_direct_evaluation() {
+        // (Angles a few radians: at large θ the direct sin(nθ) carries the rounding of nθ.)
+        for theta in [0.0, 0.3, -2.0, 5.5] {
+            let h = harmonics_of(theta);
+            for (n, &(s, c)) in h.iter().enumerate() {
+                let (ds, dc) = (n as f64 * theta).sin_cos();
+                assert!((s - ds).abs() < 1e-13 && (c - dc).abs() < 1e-13, "θ {theta}, order {n}: {s} {c}");
+            }
+            let coefs: [(f64, f64); MAX_ORDER + 1] =
+                std::array::from_fn(|n| (0.1 * n as f64 - 1.0, 1.0 / (n + 1) as f64));
+            let (x, y) = (flatten(&coefs), flatten(&h));
+            let plain: f64 = coefs.iter().zip(&h).map(|(a, b)| a.0 * b.0 + a.1 * b.1).sum();
+            assert!((dot_prefix(&x, &y, x.len()) - plain).abs() < 1e-12, "θ {theta}");
+            let first_two = coefs[0].1 * h[0].1 + coefs[1].0 * h[1].0 + coefs[1].1 * h[1].1;
+            assert!((dot_prefix(&x, &y, 4) - first_two).abs() < 1e-15);
+        }
+    }
 }

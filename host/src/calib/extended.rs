@@ -192,9 +192,9 @@ impl LoopData {
                 t_lo = t_lo.min(a.t_s);
                 t_hi = t_hi.max(b.t_s);
             }
-            for s in &r.samples {
-                if s.temp_counts.is_finite() {
-                    temp_sum += f64::from(s.temp_counts);
+            for t in r.temperatures_counts() {
+                if t.is_finite() {
+                    temp_sum += f64::from(t);
                     temp_n += 1;
                 }
             }
@@ -229,8 +229,8 @@ impl LoopData {
             let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
             let mut prefix = Vec::with_capacity(s.len() + 1);
             prefix.push(0.0f64);
-            for x in s {
-                let v = if x.temp_counts.is_finite() { f64::from(x.temp_counts) } else { temp_mean };
+            for t in r.temperatures_counts() {
+                let v = if t.is_finite() { f64::from(t) } else { temp_mean };
                 prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
             }
             let temp_c = (0..s.len())
@@ -716,15 +716,22 @@ fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| a[i] - b[i])
 }
 
-/// sin and cos of n·θ for n = 0..=MAX_HARMONIC_ORDER, by the angle-addition recurrence (one
-/// sin_cos; the rounding grows by an ulp per order, 1e-14 at 32×). Only the diagnostics need all
-/// of them, so the fit's passes do not pay for them.
+/// sin and cos of n·θ for n = 0..=MAX_HARMONIC_ORDER (one sin_cos): orders 2-4 from double and
+/// triple angles, then four interleaved angle-addition recurrences h[n] = h[n−4]·h[4], which the
+/// CPU runs side by side (a single chain of 32 dependent rotations was 16 % of `host calibrate`);
+/// the rounding grows by an ulp per step, ~1e-14 at 32×. Only the diagnostics need all of them,
+/// so the fit's passes do not pay for them.
 pub fn harmonics_of(theta_rad: f64) -> [(f64, f64); MAX_HARMONIC_ORDER + 1] {
+    const { assert!(MAX_HARMONIC_ORDER >= 4) };
     let (s1, c1) = theta_rad.sin_cos();
+    let (s2, c2) = (2.0 * s1 * c1, c1 * c1 - s1 * s1);
+    let (s3, c3) = (s2 * c1 + c2 * s1, c2 * c1 - s2 * s1);
+    let (s4, c4) = (2.0 * s2 * c2, c2 * c2 - s2 * s2);
     let mut h = [(0.0, 1.0); MAX_HARMONIC_ORDER + 1];
-    for n in 1..=MAX_HARMONIC_ORDER {
-        let (sp, cp) = h[n - 1];
-        h[n] = (sp * c1 + cp * s1, cp * c1 - sp * s1);
+    h[1..=4].copy_from_slice(&[(s1, c1), (s2, c2), (s3, c3), (s4, c4)]);
+    for n in 5..=MAX_HARMONIC_ORDER {
+        let (sp, cp) = h[n - 4];
+        h[n] = (sp * c4 + cp * s4, cp * c4 - sp * s4);
     }
     h
 }

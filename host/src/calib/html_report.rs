@@ -176,13 +176,13 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
         doc.findings(lr.notes.iter().cloned());
     }
     doc.heading(2, "Residual of the final model");
-    if lr.final_diagnostics.findings.is_empty() {
+    if lr.final_diagnostics().findings.is_empty() {
         doc.paragraph("No structure found.");
     } else {
-        doc.findings(lr.final_diagnostics.findings.iter().map(|f| f.text.clone()));
+        doc.findings(lr.final_diagnostics().findings.iter().map(|f| f.text.clone()));
     }
     doc.heading(2, "Fit and residual against θ2, residual spectra");
-    figures(&mut doc, &lr.initial, &lr.final_diagnostics, lr.steps.len() > 1);
+    figures(&mut doc, &lr.initial, lr.final_diagnostics(), lr.steps.len() > 1);
     doc.heading(2, "Full account");
     doc.preformatted(lr.summary());
     Ok(doc.write_with_svgs(dir, "report")?.html)

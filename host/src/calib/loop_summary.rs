@@ -4,6 +4,14 @@
 use super::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
+impl LoopReport {
+    /// The readable account: findings, the before/after table, the final calibration, verdict.
+    /// (Here rather than beside the type: the computation does not depend on its presentation.)
+    pub fn summary(&self) -> String {
+        summary(self)
+    }
+}
+
 fn step_name(s: &StepReport) -> String {
     match s.effect {
         None if s.effects.is_empty() => "linear model".into(),
@@ -171,10 +179,10 @@ pub fn summary(r: &LoopReport) -> String {
         }
     }
     let _ = writeln!(o, "\nResidual of the final model:");
-    if r.final_diagnostics.findings.is_empty() {
+    if r.final_diagnostics().findings.is_empty() {
         let _ = writeln!(o, "  no structure found.");
     }
-    for f in &r.final_diagnostics.findings {
+    for f in &r.final_diagnostics().findings {
         let _ = writeln!(o, "  - {}", f.text);
     }
     let tag = match r.verdict {

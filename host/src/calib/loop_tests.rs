@@ -192,7 +192,7 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
     let (r, _) = run_loop(5, &BAR_RATES_DPS, SHORT_S, &["mystery_harmonic=0.3", "delay_ms=5"]);
     assert_eq!(r.verdict(), Verdict::UnexplainedStructure, "{}", r.summary());
     let f = r
-        .final_diagnostics
+        .final_diagnostics()
         .findings
         .iter()
         .find(|f| f.kind == FindingKind::Harmonic(3))

@@ -38,7 +38,7 @@ mod tests;
 
 pub use apply::{Calibration, CalibrationFileError};
 pub use catalogue::Effect;
-pub use closure::{close_loop, LoopOptions, LoopReport, Verdict};
+pub use closure::{close_loop, close_loop_owned, LoopOptions, LoopReport, Verdict};
 pub use error::CalError;
 pub use html_report::write_report;
 pub use kinematics::KinOptions;
@@ -101,9 +101,15 @@ fn check_runs(runs: &[Run]) -> Result<(), CalError> {
 pub fn calibrate(runs: &[Run], opts: &CalOptions) -> Result<CalReport, CalError> {
     check_runs(runs)?;
     let kin = kinematics::reconstruct(runs, &opts.kinematics)?;
+    calibrate_kinematics(runs, &kin, opts)
+}
+
+/// [`calibrate`] from kinematics already reconstructed from `runs` (the loop reconstructs once
+/// and shares them).
+fn calibrate_kinematics(runs: &[Run], kin: &kinematics::Kinematics, opts: &CalOptions) -> Result<CalReport, CalError> {
     let model = LinearRate;
-    let fit = lsq::fit(&model, &kin)?;
-    let res = residuals::residual_pass(&model, &fit, &kin, opts.noise_window_s)?;
+    let fit = lsq::fit(&model, kin)?;
+    let res = residuals::residual_pass(&model, &fit, kin, opts.noise_window_s)?;
 
     // Long-run residual covariance between axes: each axis's long-run variance, coupled by the
     // contemporaneous correlation (the axes' noise shares no filter dynamics worth more).
@@ -132,7 +138,7 @@ pub fn calibrate(runs: &[Run], opts: &CalOptions) -> Result<CalReport, CalError>
         [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts]
     });
     let inflation = std::array::from_fn(|i| res.long_run[i].inflation());
-    let paper = paper::paper_check(&fit, &kin, inflation, joint);
+    let paper = paper::paper_check(&fit, kin, inflation, joint);
 
     let axis_residual = |r: &residuals::RunResidual, a: usize| {
         let k = axes[a].k_counts_per_dps;

@@ -34,8 +34,8 @@ impl Columns<4> for LinearRate {
     }
 
     #[inline]
-    fn row(&self, _run: &RunKinematics, s: &KinSample) -> [f64; 4] {
-        let w = &s.omega_package_dps;
+    fn row(&self, run: &RunKinematics, s: &KinSample) -> [f64; 4] {
+        let w = run.omega_package_dps(s);
         [w[0], w[1], w[2], 1.0]
     }
 }

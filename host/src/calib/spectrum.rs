@@ -1,84 +1,73 @@
-//! Residual spectra: an in-place radix-2 FFT (a few lines here beat a dependency for one
-//! periodogram per run and axis), the amplitude spectrum for the plots, and the noise level of a
-//! band clear of the table harmonics, which is the long-run noise variance the loop's χ² tests
+//! Residual spectra: the periodogram of a run's residual by segments (Welch's method with
+//! rectangular windows, `realfft`), the amplitude spectrum for the plots, and the noise level of
+//! a band clear of the table harmonics, which is the long-run noise variance the loop's χ² tests
 //! and covariances use (white or low-pass-coloured, the low-frequency noise is what biases a fit).
 
+use realfft::RealFftPlanner;
 use serde::{Deserialize, Serialize};
-use std::f64::consts::PI;
 
 /// Bins either side of a table harmonic left out of the noise band: the spectral leakage of a
 /// rectangular window falls below 1/(π·3)² ≈ 1 % of the peak power three bins away.
 const HARMONIC_GUARD_BINS: usize = 3;
 
-/// In-place iterative radix-2 FFT (Cooley–Tukey, decimation in time) of `re + i·im`; the length
-/// a power of two. Plain f64 arithmetic: generic complex code is left unoptimised by the test
-/// profile.
-pub fn fft(re: &mut [f64], im: &mut [f64]) {
-    let n = re.len();
-    assert!(n.is_power_of_two() && im.len() == n, "FFT length {n} is not a power of two");
-    let mut j = 0;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let mut len = 2;
-    while len <= n {
-        let half = len / 2;
-        let twiddles: Vec<(f64, f64)> = (0..half)
-            .map(|k| {
-                let (s, c) = (-2.0 * PI * k as f64 / len as f64).sin_cos();
-                (c, s)
-            })
-            .collect();
-        for start in (0..n).step_by(len) {
-            for (k, &(wr, wi)) in twiddles.iter().enumerate() {
-                let (a, b) = (start + k, start + k + half);
-                let tr = re[b] * wr - im[b] * wi;
-                let ti = re[b] * wi + im[b] * wr;
-                re[b] = re[a] - tr;
-                im[b] = im[a] - ti;
-                re[a] += tr;
-                im[a] += ti;
-            }
-        }
-        len <<= 1;
-    }
-}
+/// Longest FFT, samples: 2^17 is 164 s at 800 Hz, a bin of 0.006 Hz, so the guard bands about
+/// the table harmonics (every 0.25-0.5 Hz at 90-180 °/s) leave most of the band to the noise
+/// estimate. A longer series is cut into segments of this length (Welch), so memory stays flat
+/// and cost linear in the run's length; a series up to this length is one zero-padded segment.
+pub const MAX_SEGMENT: usize = 1 << 17;
 
 /// The periodogram of one series.
 #[derive(Debug, Clone)]
 pub struct Periodogram {
     /// Bin spacing, Hz.
     pub df_hz: f64,
-    /// |X_k|²/N for k = 0..=N_fft/2, N the samples before padding: a white series of variance
-    /// σ² has E[|X_k|²/N] = σ² in every bin.
+    /// Mean over segments of |X_k|²/N_seg for k = 0..=N_fft/2, N_seg the samples in the segment
+    /// before padding: a white series of variance σ² has E[|X_k|²/N_seg] = σ² in every bin.
     pub power: Vec<f64>,
-    /// Samples in the series.
+    /// Samples per segment (before padding).
     pub n: usize,
     /// FFT length (zero-padded).
     pub n_fft: usize,
+    /// Segments averaged.
+    pub segments: usize,
 }
 
 impl Periodogram {
-    /// Of `x` sampled at `fs_hz`, mean removed, zero-padded to a power of two.
+    /// Of `x` sampled at `fs_hz`, a NaN (a clipped sample) taken as 0, the mean removed.
+    /// Up to [`MAX_SEGMENT`] samples: one segment zero-padded to a power of two. Longer: the
+    /// average over consecutive segments of [`MAX_SEGMENT`] samples, the last one ending at the
+    /// last sample (it overlaps its neighbour rather than leave samples out).
     pub fn new(x: &[f64], fs_hz: f64) -> Self {
         let n = x.len();
-        let n_fft = n.next_power_of_two().max(2);
-        let mean = x.iter().sum::<f64>() / n.max(1) as f64;
-        let mut re: Vec<f64> = x.iter().map(|&v| v - mean).collect();
-        re.resize(n_fft, 0.0);
-        let mut im = vec![0.0; n_fft];
-        fft(&mut re, &mut im);
-        let power = re[..=n_fft / 2].iter().zip(&im).map(|(r, i)| (r * r + i * i) / n as f64).collect();
-        Self { df_hz: fs_hz / n_fft as f64, power, n, n_fft }
+        let mean = x.iter().filter(|v| !v.is_nan()).sum::<f64>() / n.max(1) as f64;
+        let (seg, n_fft) =
+            if n <= MAX_SEGMENT { (n, n.next_power_of_two().max(2)) } else { (MAX_SEGMENT, MAX_SEGMENT) };
+        let starts: Vec<usize> = if n <= MAX_SEGMENT {
+            vec![0]
+        } else {
+            let mut s: Vec<usize> = (0..n / seg).map(|i| i * seg).collect();
+            if !n.is_multiple_of(seg) {
+                s.push(n - seg);
+            }
+            s
+        };
+        let fft = RealFftPlanner::<f64>::new().plan_fft_forward(n_fft);
+        let mut input = fft.make_input_vec();
+        let mut output = fft.make_output_vec();
+        let mut power = vec![0.0; n_fft / 2 + 1];
+        for &s0 in &starts {
+            for (dst, &v) in input.iter_mut().zip(&x[s0..s0 + seg]) {
+                *dst = if v.is_nan() { 0.0 } else { v } - mean;
+            }
+            input[seg..].fill(0.0);
+            fft.process(&mut input, &mut output).expect("buffers made by the plan have its lengths");
+            for (p, c) in power.iter_mut().zip(&output) {
+                *p += c.norm_sqr() / seg as f64;
+            }
+        }
+        let segments = starts.len();
+        power.iter_mut().for_each(|p| *p /= segments as f64);
+        Self { df_hz: fs_hz / n_fft as f64, power, n: seg, n_fft, segments }
     }
 
     /// Amplitude a sinusoid at bin k would have, 2|X_k|/N.
@@ -141,24 +130,45 @@ impl AmplitudeSpectrum {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Complex;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
     use rand_distr::StandardNormal;
+    use std::f64::consts::PI;
 
     #[test]
-    fn fft_matches_a_direct_dft() {
-        let x: Vec<Complex<f64>> = (0..16).map(|i| Complex::new((i * i % 7) as f64, (i % 3) as f64)).collect();
-        let (mut re, mut im): (Vec<f64>, Vec<f64>) = x.iter().map(|c| (c.re, c.im)).unzip();
-        fft(&mut re, &mut im);
-        for k in 0..16 {
-            let direct: Complex<f64> = x
-                .iter()
-                .enumerate()
-                .map(|(n, xn)| xn * Complex::from_polar(1.0, -2.0 * PI * (k * n) as f64 / 16.0))
-                .sum();
-            assert!((Complex::new(re[k], im[k]) - direct).norm() < 1e-9, "bin {k}");
+    fn one_segment_matches_a_direct_dft() {
+        // 12 samples: one segment, zero-padded to 16.
+        let x: Vec<f64> = (0..12).map(|i| ((i * i) % 7) as f64 - 1.5 * (i % 3) as f64).collect();
+        let p = Periodogram::new(&x, 16.0);
+        assert_eq!((p.n, p.n_fft, p.segments), (12, 16, 1));
+        let mean = x.iter().sum::<f64>() / 12.0;
+        for k in 0..=8 {
+            let (mut re, mut im) = (0.0, 0.0);
+            for (n, v) in x.iter().enumerate() {
+                let a = -2.0 * PI * (k * n) as f64 / 16.0;
+                re += (v - mean) * a.cos();
+                im += (v - mean) * a.sin();
+            }
+            assert!((p.power[k] - (re * re + im * im) / 12.0).abs() < 1e-9, "bin {k}");
         }
+    }
+
+    #[test]
+    fn long_series_average_segments_and_clipped_samples_count_as_zero() {
+        // 2.5 segments: three segments, the last ending at the last sample.
+        let n = 2 * MAX_SEGMENT + MAX_SEGMENT / 2;
+        let mut x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin() + 0.25).collect();
+        let p = Periodogram::new(&x, 800.0);
+        assert_eq!((p.n, p.n_fft, p.segments), (MAX_SEGMENT, MAX_SEGMENT, 3));
+        // A clipped (NaN) sample counts as 0, as the explicit 0 does.
+        x[10] = 0.0;
+        let zero = Periodogram::new(&x, 800.0);
+        x[10] = f64::NAN;
+        let q = Periodogram::new(&x, 800.0);
+        let peak = |p: &Periodogram| (1..p.power.len()).max_by(|&a, &b| p.power[a].total_cmp(&p.power[b])).unwrap();
+        assert_eq!(peak(&p), peak(&q));
+        assert!((q.power[peak(&q)] / p.power[peak(&p)] - 1.0).abs() < 1e-4);
+        assert_eq!(q.power, zero.power);
     }
 
     #[test]

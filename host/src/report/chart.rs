@@ -3,8 +3,8 @@
 //! the plotting area nor dashes lines in SVG, and its built-in legend sits on top of the data;
 //! doing those here keeps every figure inside its frame and its legend off the curves.
 
+use super::error::PlotError;
 use super::palette::{self, GRID, GRID_MINOR, INK};
-use super::plots::PlotError;
 use super::scale::Axis;
 use plotters::coord::ranged1d::{KeyPointHint, NoDefaultFormatting, Ranged, ValueFormatter};
 use plotters::coord::Shift;

@@ -14,6 +14,7 @@
 //! ```
 
 mod chart;
+mod error;
 pub mod html;
 pub mod palette;
 pub mod plots;

@@ -2,7 +2,7 @@
 //! (a single point, constant values, NaN) and log axes get sensible, predictable ranges, and so
 //! that the layout code knows every tick label before drawing.
 
-use super::plots::PlotError;
+use super::error::PlotError;
 
 /// One axis, ready to draw. Log axes are drawn as a linear axis over log10 of the data, so
 /// `lo`, `hi` and the ticks are in plotted units (log10 for a log axis).

@@ -116,47 +116,56 @@ impl SimConfig {
         }
     }
 
-    /// Checks that every number is usable; the message names the offending field.
-    pub fn validate(&self) -> Result<(), String> {
-        let check = |ok: bool, what: &str| if ok { Ok(()) } else { Err(what.to_string()) };
+    /// Checks that every number is usable; the error names the offending field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let check = |ok: bool, field: &str, requirement: &str| {
+            if ok {
+                Ok(())
+            } else {
+                Err(ConfigError { field: field.to_string(), requirement: requirement.to_string() })
+            }
+        };
         check(
             self.noise_dps_per_sqrt_hz.is_finite() && self.noise_dps_per_sqrt_hz >= 0.0,
-            "noise_dps_per_sqrt_hz must be finite and ≥ 0",
+            "noise_dps_per_sqrt_hz",
+            "must be finite and ≥ 0",
         )?;
-        check(self.spin_up_s.is_finite() && self.spin_up_s >= 0.0, "spin_up_s must be finite and ≥ 0")?;
-        check(self.gap_s.is_finite() && self.gap_s >= 0.0, "gap_s must be finite and ≥ 0")?;
+        check(self.spin_up_s.is_finite() && self.spin_up_s >= 0.0, "spin_up_s", "must be finite and ≥ 0")?;
+        check(self.gap_s.is_finite() && self.gap_s >= 0.0, "gap_s", "must be finite and ≥ 0")?;
         check(
             self.index_plate_width_deg > 0.0 && self.index_plate_width_deg < 180.0,
-            "index_plate_width_deg must be in (0, 180)",
+            "index_plate_width_deg",
+            "must be in (0, 180)",
         )?;
         for (i, r) in self.runs.iter().enumerate() {
             // The rig's limit: the simulator must not promise what the firmware refuses.
             let max_dps = protocol::units::dps_from_mdps(protocol::MAX_RATE_MDPS);
             check(
                 r.rate_dps.is_finite() && r.rate_dps.abs() <= max_dps,
-                &format!(
-                    "runs[{i}].rate_dps must be within ±{max_dps} °/s, the rig's limit (0: a static run, for noise figures)"
-                ),
+                &format!("runs[{i}].rate_dps"),
+                &format!("must be within ±{max_dps} °/s, the rig's limit (0: a static run, for noise figures)"),
             )?;
-            check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s must be > 0"))?;
+            check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s"), "must be > 0")?;
         }
         let e = &self.effects;
         if let Some(f) = e.filter_delay {
-            check(f.pure_delay_ms.is_finite() && f.pure_delay_ms >= 0.0, "filter_delay.pure_delay_ms must be ≥ 0")?;
+            check(f.pure_delay_ms.is_finite() && f.pure_delay_ms >= 0.0, "filter_delay.pure_delay_ms", "must be ≥ 0")?;
         }
         if let Some(d) = e.offset_drift {
             check(
                 d.tau_s.is_finite() && d.tau_s > 0.0 && d.rise_c.is_finite(),
-                "offset_drift needs tau_s > 0 and a finite rise_c",
+                "offset_drift",
+                "needs tau_s > 0 and a finite rise_c",
             )?;
         }
         if let Some(m) = e.mystery_harmonic {
-            check(m.axis < 3, "mystery_harmonic.axis must be 0, 1 or 2")?;
+            check(m.axis < 3, "mystery_harmonic.axis", "must be 0, 1 or 2")?;
         }
         if let Some(r) = e.speed_ripple {
             check(
                 r.harmonics.iter().map(|h| h.amplitude.abs()).sum::<f64>() < 0.5,
-                "speed_ripple amplitudes must sum below 0.5",
+                "speed_ripple",
+                "amplitudes must sum below 0.5",
             )?;
         }
         Ok(())
@@ -167,6 +176,16 @@ impl SimConfig {
         let s: f64 = self.runs.iter().map(|r| r.duration_s).sum();
         (s * f64::from(self.gyro.odr.hz())).round() as u64
     }
+}
+
+/// A simulation setting that cannot be simulated: which field, and what it must be.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{field} {requirement}")]
+pub struct ConfigError {
+    /// The field, as in the JSON (`runs[1].duration_s`).
+    pub field: String,
+    /// What it must be.
+    pub requirement: String,
 }
 
 /// A simulated capture held in memory.
