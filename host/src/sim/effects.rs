@@ -36,6 +36,9 @@ pub struct Effects {
     /// The pose-2 fixture turned about the table axis against pose 1's.
     #[serde(default)]
     pub pose_fixture: Option<PoseFixture>,
+    /// A rate random walk of the offset on every axis.
+    #[serde(default)]
+    pub bias_random_walk: Option<BiasRandomWalk>,
 }
 
 /// Physical source: a MEMS gyro's proof masses are accelerometers too; typical parts show
@@ -95,6 +98,22 @@ impl PoseFixture {
                     * pose.rotation()
             }
         }
+    }
+}
+
+/// Physical source: the offset of a MEMS gyro wanders as a rate random walk of
+/// 0.001-0.005 °/s/√s (the range the realistic-physics issue gives; IEEE Std 952 calls its
+/// coefficient K, the +1/2 slope of the Allan deviation). Default 0.002 °/s/√s.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BiasRandomWalk {
+    /// K, °/s/√s: the offset's standard deviation grows as K·√t.
+    pub k_dps_per_sqrt_s: f64,
+}
+
+impl Default for BiasRandomWalk {
+    fn default() -> Self {
+        Self { k_dps_per_sqrt_s: 0.002 }
     }
 }
 
@@ -342,7 +361,7 @@ impl std::error::Error for EffectSpecError {}
 
 impl Effects {
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 13] = [
+    pub const NAMES: [(&'static str, &'static str); 14] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -356,6 +375,7 @@ impl Effects {
         ("g_sensitivity", "bias from gravity, largest coefficient in °/s/g (default 0.05)"),
         ("table_tilt", "sensor-table axis off perpendicular, degrees (default 0.3)"),
         ("pose_fixture", "pose-2 fixture turned about the table axis, degrees (default 0.1)"),
+        ("bias_random_walk", "rate random walk of the offset, °/s/√s (default 0.002)"),
     ];
 
     /// True when no effect is on.
@@ -442,6 +462,13 @@ impl Effects {
                     g.dps_per_g = g.dps_per_g.map(|row| row.map(|x| x * scale));
                 }
                 self.g_sensitivity = Some(g);
+            }
+            "bias_random_walk" => {
+                let k = value.unwrap_or(BiasRandomWalk::default().k_dps_per_sqrt_s);
+                if k < 0.0 {
+                    return Err(EffectSpecError(format!("bias_random_walk must be ≥ 0 °/s/√s, not {k}")));
+                }
+                self.bias_random_walk = Some(BiasRandomWalk { k_dps_per_sqrt_s: k })
             }
             "pose_fixture" => {
                 self.pose_fixture = Some(PoseFixture { z2_deg: value.unwrap_or(PoseFixture::default().z2_deg) })

@@ -53,6 +53,7 @@ enum Stream {
     Rig = 1,
     Noise = 2,
     Jitter = 3,
+    RandomWalk = 4,
 }
 
 fn rng(seed: u64, stream: Stream) -> ChaCha8Rng {
@@ -106,6 +107,10 @@ pub struct Session {
     noise_counts: [f64; 3],
     lowpass_coef: Option<Butterworth2>,
     noise_rng: ChaCha8Rng,
+    /// The offset's random walk, °/s per axis, and when it was last advanced, s.
+    walk_dps: [f64; 3],
+    walk_t_s: f64,
+    walk_rng: ChaCha8Rng,
     jitter_rng: ChaCha8Rng,
     jitter: Normal<f64>,
     samples_read: u32,
@@ -150,6 +155,9 @@ impl Session {
             noise_counts: [0.0; 3],
             lowpass_coef: None,
             noise_rng: rng(cfg.seed, Stream::Noise),
+            walk_dps: [0.0; 3],
+            walk_t_s: 0.0,
+            walk_rng: rng(cfg.seed, Stream::RandomWalk),
             jitter_rng: rng(cfg.seed, Stream::Jitter),
             jitter: Normal::new(0.0, TIMESTAMP_JITTER_US).expect("finite σ"),
             samples_read: 0,
@@ -448,7 +456,18 @@ impl Session {
             None if delay_s == 0.0 => self.sensed_counts_at(&run.chain, &run.base_done),
             None => self.sensed_counts(&run.chain, t_s - delay_s),
         };
-        let drift = self.thermal.offset_drift_dps(t_s);
+        let mut drift = self.thermal.offset_drift_dps(t_s);
+        if let Some(w) = self.effects.bias_random_walk {
+            // The walk advances by K·√Δt over the time since it last moved, so gaps between
+            // runs count as they would on a powered rig.
+            let step = w.k_dps_per_sqrt_s * (t_s - self.walk_t_s).max(0.0).sqrt();
+            for (d, walk) in drift.iter_mut().zip(&mut self.walk_dps) {
+                let z: f64 = StandardNormal.sample(&mut self.walk_rng);
+                *walk += step * z;
+                *d += *walk;
+            }
+            self.walk_t_s = t_s;
+        }
         let k = self.sensor.k_counts_per_dps(self.gyro.full_scale);
         let mut rate_counts = [0i16; 3];
         for i in 0..3 {
