@@ -370,21 +370,27 @@ fn end_of_input_at_the_prompt_is_an_abort() {
     assert!(!dir.join("pose1-p180dps.cap").exists(), "no run was started");
 }
 
-/// `host virtual-rig`: the pty path is the first line of standard output, and the rig behind it
-/// answers the host (here `record`, listening only: Identify, then the idle stream).
-#[test]
-fn virtual_rig_subcommand_prints_its_pty_and_serves_it() {
+/// Starts `host virtual-rig ARGS` and returns it with the pty path it prints first.
+fn spawn_virtual_rig(args: &[&str]) -> (std::process::Child, String) {
     use std::io::BufRead;
     let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["virtual-rig", "--speedup", "1"])
+        .arg("virtual-rig")
+        .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
     let mut line = String::new();
     std::io::BufReader::new(rig.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let path = line.trim().to_string();
-    assert!(path.starts_with("/dev/pts/"), "{line:?}");
+    (rig, line.trim().to_string())
+}
+
+/// `host virtual-rig`: the pty path is the first line of standard output, and the rig behind it
+/// answers the host (here `record`, listening only: Identify, then the idle stream).
+#[test]
+fn virtual_rig_subcommand_prints_its_pty_and_serves_it() {
+    let (mut rig, path) = spawn_virtual_rig(&["--speedup", "1"]);
+    assert!(path.starts_with("/dev/pts/"), "{path:?}");
     let dir = scratch("virtual-rig");
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("idle.cap");
@@ -417,16 +423,8 @@ fn virtual_rig_subcommand_refuses_bad_options() {
 /// Ack. Both captures are kept, each one run without a fault, and the session calibrates.
 #[test]
 fn calibrate_against_host_virtual_rig_with_an_operator_at_the_keyboard() {
-    use std::io::{BufRead, Write};
-    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
-        .args(["virtual-rig", "--speedup", &SPEEDUP.to_string(), "--loss", "1e-3", "--drop", "Ack:2"])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    std::io::BufReader::new(rig.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let path = line.trim().to_string();
+    use std::io::Write;
+    let (mut rig, path) = spawn_virtual_rig(&["--speedup", &SPEEDUP.to_string(), "--loss", "1e-3", "--drop", "Ack:2"]);
     let dir = scratch("keyboard");
     let mut host = Running::start(
         &[
