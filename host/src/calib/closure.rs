@@ -589,7 +589,7 @@ fn loop_on(
     // the drift models and costs 10-20 ppm of σ in every sensitivity, so it is a candidate like
     // the others, and while it is not in the model the σ of every k carries what it may do
     // (`earth_type_b_rel`). Its Jacobian goes through M, so it starts from the fitted linear model.
-    let mut first = fit(&data, Model::base_for(&data.poses), [1.0; 3])?;
+    let mut first = fit(&data, Model::for_data(&data), [1.0; 3])?;
     if let Some(lat) = opts.latitude_deg {
         let mut with_earth = first.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
         with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();

@@ -70,6 +70,57 @@ pub enum LinCol {
     /// Component k of the specific force from gravity in the package frame, g: gravity holds
     /// the lab's −z1, so a table at rest feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2.
     Gravity(usize),
+    /// The hat function of knot `knot` of run `run` (index into the data's runs) on the grid of
+    /// `Effect::DriftKnots(spacing_s)`: 1 at the knot, falling linearly to 0 at its neighbours,
+    /// 0 in every other run (`Layout::knots`).
+    DriftKnot {
+        /// Run index.
+        run: u16,
+        /// Knot index within the run, from 0 at its first used sample.
+        knot: u16,
+        /// Nominal knot spacing, s.
+        spacing_s: u16,
+    },
+}
+
+/// Intervals between knots over `span_s` at nominal spacing `spacing_s`: the span divided
+/// evenly, at least one.
+fn knot_intervals(span_s: (f64, f64), spacing_s: u16) -> usize {
+    (((span_s.1 - span_s.0) / f64::from(spacing_s.max(1))).round() as usize).max(1)
+}
+
+/// What of the data an effect's columns depend on: the poses present (a parameter set per
+/// pose) and each run's used time span (the free drift's knots).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Layout {
+    /// Poses, in order of first appearance.
+    pub poses: Vec<Pose>,
+    /// Per run, the first and last used sample's time, s (each capture's clock starts at 0).
+    pub run_spans_s: Vec<(f64, f64)>,
+}
+
+impl Layout {
+    /// Intervals between knots of run `r` at nominal spacing `spacing_s`: the span divided
+    /// evenly, at least one.
+    pub fn intervals(&self, r: usize, spacing_s: u16) -> usize {
+        knot_intervals(self.run_spans_s[r], spacing_s)
+    }
+
+    /// The knot columns of `Effect::DriftKnots(spacing_s)`: every knot of every run but the
+    /// first run's first, whose level is the offset column's (the hats of a run sum to 1, so
+    /// one knot overall must go for the offset to stay identifiable). The reported offset is
+    /// therefore the level at the first used sample of the first run.
+    pub fn knots(&self, spacing_s: u16) -> Vec<LinCol> {
+        (0..self.run_spans_s.len())
+            .flat_map(|r| {
+                (0..=self.intervals(r, spacing_s)).filter(move |&k| r > 0 || k > 0).map(move |k| LinCol::DriftKnot {
+                    run: r as u16,
+                    knot: k as u16,
+                    spacing_s,
+                })
+            })
+            .collect()
+    }
 }
 
 /// A parameter shared by all axes.
@@ -123,9 +174,11 @@ pub enum Col {
     Shared(SharedPar),
 }
 
-/// The columns an effect adds, for data holding `poses`.
-pub fn effect_columns(e: Effect, poses: &[Pose]) -> (Vec<LinCol>, Vec<SharedPar>) {
+/// The columns an effect adds, for data laid out as `layout`.
+pub fn effect_columns(e: Effect, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+    let poses = &layout.poses;
     match e {
+        Effect::DriftKnots(spacing_s) => (layout.knots(spacing_s), vec![]),
         Effect::Delay => (vec![], vec![SharedPar::Delay]),
         Effect::IndexOffset => (vec![], vec![SharedPar::IndexOffset]),
         Effect::Phase => (vec![], vec![SharedPar::Phase]),
@@ -162,6 +215,8 @@ pub struct RunData {
     pub temp_c: Vec<f32>,
     /// Samples used.
     pub n_valid: usize,
+    /// Time of the first and last used sample, s.
+    pub span_s: (f64, f64),
 }
 
 /// The cached kinematics and what the loop derives from them once.
@@ -179,6 +234,13 @@ pub struct LoopData {
     pub t_half_s: f64,
     /// The poses the runs are in, in order of first appearance.
     pub poses: Vec<Pose>,
+}
+
+impl LoopData {
+    /// What the effects' columns depend on.
+    pub fn layout(&self) -> Layout {
+        Layout { poses: self.poses.clone(), run_spans_s: self.runs.iter().map(|r| r.span_s).collect() }
+    }
 }
 
 impl LoopData {
@@ -240,7 +302,9 @@ impl LoopData {
                     (-((prefix[b] - prefix[a]) / (b - a) as f64 - temp_mean)) as f32
                 })
                 .collect();
-            runs.push(RunData { valid, temp_c, n_valid });
+            let first = valid.iter().position(|&v| v).map_or(0.0, |i| s[i].t_s);
+            let last = valid.iter().rposition(|&v| v).map_or(first, |i| s[i].t_s);
+            runs.push(RunData { valid, temp_c, n_valid, span_s: (first, last) });
         }
         let mut poses: Vec<Pose> = Vec::new();
         for r in &kin.runs {
@@ -270,8 +334,8 @@ pub struct Model {
     pub s_hat: [Vector3<f64>; 3],
     /// Earth's vertical rate when it is known (from a latitude) rather than fitted, °/s.
     pub earth_vertical_known_dps: f64,
-    /// Poses of the data, for the effects with a parameter set per pose.
-    pub poses: Vec<Pose>,
+    /// What of the data the effects' columns depend on.
+    pub layout: Layout,
 }
 
 impl Model {
@@ -280,7 +344,12 @@ impl Model {
         Self::base_for(&Pose::ALL)
     }
 
-    /// The linear model for data holding `poses`.
+    /// The linear model for `data`.
+    pub fn for_data(data: &LoopData) -> Self {
+        Self { layout: data.layout(), ..Self::base_for(&data.poses) }
+    }
+
+    /// The linear model for data holding `poses` (and no free drift).
     pub fn base_for(poses: &[Pose]) -> Self {
         Self {
             effects: Vec::new(),
@@ -290,7 +359,7 @@ impl Model {
             theta: Vec::new(),
             s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
             earth_vertical_known_dps: 0.0,
-            poses: poses.to_vec(),
+            layout: Layout { poses: poses.to_vec(), run_spans_s: Vec::new() },
         }
     }
 
@@ -317,7 +386,7 @@ impl Model {
     /// The model with `effect` added, its linear coefficients and shared parameters set from
     /// `init_lin` (per axis, one per new linear column) and `init_shared`.
     pub fn with(&self, effect: Effect, init_lin: [Vec<f64>; 3], init_shared: Vec<f64>) -> Self {
-        let (lin, shared) = effect_columns(effect, &self.poses);
+        let (lin, shared) = effect_columns(effect, &self.layout);
         let mut m = self.clone();
         m.effects.push(effect);
         m.lin.extend(lin);
@@ -380,6 +449,10 @@ pub struct Point {
     pub theta1_rate_rad_s: f64,
     /// θ1', °/s.
     pub theta1_rate_dps: f64,
+    /// The run's index in the data.
+    pub run: usize,
+    /// The sample's time on its capture's clock, s.
+    pub t_s: f64,
 }
 
 /// Values derived from a model once per pass.
@@ -599,6 +672,8 @@ impl<'a> Evaluator<'a> {
             d_fixture,
             theta1_rate_rad_s,
             theta1_rate_dps: rate1,
+            run: r,
+            t_s: s.t_s,
         }
     }
 
@@ -626,6 +701,15 @@ impl<'a> Evaluator<'a> {
             }
             // z1 in the package frame is the vertical column of Earth's basis.
             LinCol::Gravity(k) => p.d_earth[0][k],
+            LinCol::DriftKnot { run, knot, spacing_s } => {
+                if usize::from(run) != p.run {
+                    return 0.0;
+                }
+                let (a, b) = self.data.runs[p.run].span_s;
+                let n = knot_intervals((a, b), spacing_s);
+                let h = ((b - a) / n as f64).max(1e-9);
+                (1.0 - ((p.t_s - a) / h - f64::from(knot)).abs()).max(0.0)
+            }
         }
     }
 
@@ -806,6 +890,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
     let ev = Evaluator::new(data, model);
     let l = cols.len();
     let mut z = vec![0.0; 3 * l];
+    let mut nz: Vec<(usize, f64)> = Vec::with_capacity(l);
     data.kin
         .runs
         .iter()
@@ -826,11 +911,15 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                         }
                         let e = f64::from(count) - ev.predict(&p, a);
                         let x = &z[a * l..(a + 1) * l];
+                        // Only the non-zero columns: the free drift's knots are 2 of dozens
+                        // per sample, so the Gram update costs what the dense part does.
+                        nz.clear();
+                        nz.extend(x.iter().enumerate().filter(|(_, &v)| v != 0.0).map(|(j, &v)| (j, v)));
                         let g = &mut local.xtx[a];
-                        for (ii, &xi) in x.iter().enumerate() {
+                        for (k, &(ii, xi)) in nz.iter().enumerate() {
                             local.xte[a][ii] += xi * e;
                             let row = &mut g[ii * l..(ii + 1) * l];
-                            for (jj, &xj) in x.iter().enumerate().skip(ii) {
+                            for &(jj, xj) in &nz[k..] {
                                 row[jj] += xi * xj;
                             }
                         }

@@ -10,7 +10,7 @@
 //! Among those that pass, the one with the largest Δχ² − k·ln n (BIC) is taken, which prefers the
 //! effect with fewer parameters when two explain the same structure.
 
-use super::catalogue::Effect;
+use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S};
 use super::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
 use super::error::CalError;
 use super::extended::{
@@ -134,7 +134,7 @@ impl Evidence {
 pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> Vec<Candidate> {
     let has = |e: Effect| current.contains(&e);
     let plain = |effect: Effect| {
-        let (lin, shared) = effect_columns(effect, &data.poses);
+        let (lin, shared) = effect_columns(effect, &data.layout());
         Candidate {
             effect,
             cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
@@ -162,6 +162,9 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
         out.push(plain(Effect::DriftPolynomial));
         if temperature_spread_c(data) >= MIN_TEMPERATURE_SPREAD_C {
             out.push(plain(Effect::DriftTemperature));
+        }
+        for t in DRIFT_KNOT_SPACINGS_S {
+            out.push(plain(Effect::DriftKnots(t)));
         }
     }
     let has_transmission = current.iter().any(|e| matches!(e, Effect::TableHarmonic(_)));
@@ -239,7 +242,7 @@ pub struct DriftChoice {
 /// warm-up's time constant is not in that solution (its grid value stands).
 fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
     let ns = state.model.shared.len();
-    let (lin, shared) = effect_columns(c.effect, &state.model.poses);
+    let (lin, shared) = effect_columns(c.effect, &state.model.layout);
     let mut model = state.model.with(
         c.effect,
         std::array::from_fn(|_| vec![0.0; lin.len()]),
@@ -351,7 +354,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 match fit_of(i) {
                     Ok(f) => {
                         seen.push(sc.effect);
-                        let (lin, shared) = effect_columns(sc.effect, &data.poses);
+                        let (lin, shared) = effect_columns(sc.effect, &data.layout());
                         let k = 3 * lin.len() + shared.len();
                         let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
                         choices.push((i, f, bic));
