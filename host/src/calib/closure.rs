@@ -261,7 +261,7 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
                 (format!("pose-2 fixture rotation about {}2", ['x', 'y', 'z'][k]), 180.0 / std::f64::consts::PI, "°")
             }
             SharedPar::EarthVertical => ("Earth rate, vertical".to_string(), 3600.0, "°/h"),
-            SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at encoder zero".to_string(), 3600.0, "°/h"),
+            SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at θ2 = 0".to_string(), 3600.0, "°/h"),
             SharedPar::EarthWestAtZero => ("Earth rate, horizontal 90° on".to_string(), 3600.0, "°/h"),
             SharedPar::Harmonic { order, quadrature, pose } => (
                 format!("table-speed ripple {order}× {}, {pose}", if quadrature { "sin" } else { "cos" }),
@@ -614,6 +614,36 @@ fn loop_on(
         let next = ctx.state(fitted);
         steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), outcome.scores, outcome.drift_choice));
         state = next;
+    }
+    // Earth rotation is in every lab: once the loop has explained what it can, a model without
+    // it gets it (fitted freely: only the lab's orientation is unknown), when the runs separate
+    // its vertical part from the sensitivities (two speeds or directions). Its σ then replaces
+    // the Type-B bound of `earth_type_b_rel`, and its bias (13 ppm at 180 °/s) is gone.
+    let has_earth =
+        |m: &Model| m.effects.iter().any(|e| matches!(e, Effect::EarthRotation | Effect::EarthRotationAtLatitude));
+    if !has_earth(&state.fitted.model) && separates_delay_and_index(&data) {
+        let weights = state.diag.weights();
+        let start = state.fitted.model.with(Effect::EarthRotation, Default::default(), vec![0.0; 3]);
+        let before = state.fitted.model.clone();
+        match (fit(&data, start, weights), fit(&data, before, weights)) {
+            (Ok(fitted), Ok(without)) => {
+                let delta_chi2 = without.solution.chi2 - fitted.solution.chi2;
+                let n: u64 = fitted.solution.n.iter().sum();
+                let score = Score {
+                    effect: Effect::EarthRotation,
+                    drift_tau_s: None,
+                    delta_chi2,
+                    dof: 3,
+                    threshold: 0.0,
+                    delta_bic: delta_chi2 - 3.0 * (n as f64).ln(),
+                    known_physics: true,
+                };
+                let next = ctx.state(fitted);
+                steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), Vec::new(), Vec::new()));
+                state = next;
+            }
+            (Err(e), _) | (_, Err(e)) => skipped.push(Skipped { effect: Effect::EarthRotation, why: e.to_string() }),
+        }
     }
     let effects = &state.fitted.model.effects;
     let mut notes = state.diag.notes.clone();

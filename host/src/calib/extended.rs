@@ -146,8 +146,8 @@ pub enum SharedPar {
     Fixture(usize),
     /// Earth's rate along the base axis z1 (vertical), °/s.
     EarthVertical,
-    /// Earth's horizontal rate, the component along the base-frame direction the encoder's zero
-    /// points to, °/s.
+    /// Earth's horizontal rate, the component along the direction the base points to when the
+    /// index reads θ2 = 0, °/s.
     EarthNorthAtZero,
     /// The horizontal component 90° further on, °/s.
     EarthWestAtZero,
@@ -590,7 +590,6 @@ impl<'a> Evaluator<'a> {
         // against the index (1:1 gears): the index-referenced θ2, lagging by the gear lag. The
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
-        let theta1_rad = rk.theta1_at_index_rad + theta2 / rk.gear_ratio;
         let mesh_rad = theta2 + sh.gear_lag_s * theta1_rate_rad_s;
         let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
         for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == rk.pose) {
@@ -624,11 +623,15 @@ impl<'a> Evaluator<'a> {
         let filter_dw2 = dw2;
         // Earth's rate in the table frame O2, per unit of each component (module docs of
         // `earth_basis`), added to ω2.
-        let basis = earth_basis(theta1_rad, th_eff);
+        // The base's heading in the lab: the sensor table is geared to a shaft fixed to the
+        // ground (EXCITER.md, "Mechanism"), so θ2 = ratio·θ1_lab + const and the index fixes the
+        // heading for every run, while the encoder's count restarts with each capture.
+        let heading_rad = theta2 / rk.gear_ratio;
+        let basis = earth_basis(heading_rad, th_eff);
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
         // The lab-fixed rate turns with θ2 too: ∂(basis)/∂θ2.
-        let (s1, c1) = theta1_rad.sin_cos();
+        let (s1, c1) = heading_rad.sin_cos();
         let d_basis = [[ce, -se, 0.0], [s1 * se, s1 * ce, 0.0], [-c1 * se, -c1 * ce, 0.0]];
         for (i, d) in dw2.iter_mut().enumerate() {
             *d += ev * d_basis[0][i] + en * d_basis[1][i] + ew * d_basis[2][i];
@@ -775,12 +778,12 @@ impl<'a> Evaluator<'a> {
 }
 
 /// A lab-fixed rate in the table frame O2, per unit of its components: along the base axis z1
-/// (vertical), and the two horizontal directions at the encoder's zero and 90° on about z1.
+/// (vertical), and the two horizontal directions where the base points at θ2 = 0 and 90° on.
 /// EXCITER.md eq. 1 puts z1 at (sin θ2, cos θ2, 0) in O2; the base's horizontal pair there is
 /// e_z2 = (0, 0, 1) and u = z1 × z2 = (cos θ2, −sin θ2, 0), right-handed as (e_z2, u, z1). A
 /// lab-fixed horizontal vector at azimuth ψ lies at ψ − θ1 in the base frame, cos(ψ−θ1)·e_z2 +
 /// sin(ψ−θ1)·u; expanding in cos ψ and sin ψ gives the two horizontal columns. θ1 is the
-/// encoder's angle, θ2 the index-referenced table angle.
+/// base's heading, θ2/ratio (the ground-geared table ties it to the index), θ2 the table angle.
 #[inline]
 fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
     let (s1, c1) = theta1_rad.sin_cos();

@@ -59,17 +59,29 @@ pub fn summary(r: &LoopReport) -> String {
     }
     for s in r.steps.iter().skip(1) {
         let Some(sc) = &s.score else { continue };
-        let _ = writeln!(
-            o,
-            "\nStep {}: {} — Δχ² = {:.1} for {} parameters (threshold {:.1}), ΔBIC {:.1}. Means: {}.",
-            s.number,
-            step_name(s),
-            sc.delta_chi2,
-            sc.dof,
-            sc.threshold,
-            sc.delta_bic,
-            sc.effect.meaning()
-        );
+        if sc.known_physics {
+            let _ = writeln!(
+                o,
+                "\nStep {}: {} — added without a test (Δχ² = {:.1} for {} parameters): present in every lab, only its orientation is unknown. Means: {}.",
+                s.number,
+                step_name(s),
+                sc.delta_chi2,
+                sc.dof,
+                sc.effect.meaning()
+            );
+        } else {
+            let _ = writeln!(
+                o,
+                "\nStep {}: {} — Δχ² = {:.1} for {} parameters (threshold {:.1}), ΔBIC {:.1}. Means: {}.",
+                s.number,
+                step_name(s),
+                sc.delta_chi2,
+                sc.dof,
+                sc.threshold,
+                sc.delta_bic,
+                sc.effect.meaning()
+            );
+        }
         let others: Vec<String> = s
             .alternatives
             .iter()

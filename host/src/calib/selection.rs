@@ -18,6 +18,7 @@ use super::extended::{
     Fitted, Gram, LinCol, LoopData, Selection, SharedPar,
 };
 use crate::geometry::Pose;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// Candidate warm-up time constants, s, spaced by 2×: the exponential's shape changes slowly
@@ -59,6 +60,10 @@ pub struct Score {
     pub threshold: f64,
     /// Δχ² − k·ln n.
     pub delta_bic: f64,
+    /// Added without a test because the physics is certain to be there (Earth rotation): only
+    /// its parameters are unknown.
+    #[serde(default)]
+    pub known_physics: bool,
 }
 
 /// Whether the runs contain two distinct signed θ2' (speeds or directions).
@@ -308,6 +313,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 dof,
                 threshold,
                 delta_bic: delta_chi2 - dof as f64 * (n_total as f64).ln(),
+                known_physics: false,
             },
             ci,
             sol,
@@ -387,6 +393,27 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), skipped, accepted, drift_choice })
 }
 
+/// How much fitting the columns `own` of axis `a` to the residual left by `delta` (a step
+/// of selection `sel`) lowers the residual sum of squares of the sums `g`: bᵀA⁻¹b with A the
+/// columns' Gram matrix and b their correlation with that residual.
+fn own_level_gain(g: &Gram, a: usize, own: &[usize], sel: &Selection, delta: &DVector<f64>) -> f64 {
+    let l = g.l;
+    let nl = sel.lin.len();
+    let step: Vec<(usize, f64)> = sel
+        .lin
+        .iter()
+        .enumerate()
+        .map(|(p, &c)| (c, delta[a * nl + p]))
+        .chain(sel.shared.iter().enumerate().map(|(q, &c)| (c, delta[3 * nl + q])))
+        .collect();
+    let b = DVector::from_iterator(
+        own.len(),
+        own.iter().map(|&i| g.xte[a][i] - step.iter().map(|&(j, d)| g.xtx[a][i * l + j] * d).sum::<f64>()),
+    );
+    let m = DMatrix::from_fn(own.len(), own.len(), |i, j| g.xtx[a][own[i] * l + own[j]]);
+    m.cholesky().map_or(0.0, |c| b.dot(&c.solve(&b)))
+}
+
 /// Prediction of one held-out run from a fit to the others.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HeldOut {
@@ -411,10 +438,21 @@ pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses
         let Some(others) = Gram::sum(fitted.per_run.iter().enumerate().filter(|(i, _)| *i != r).map(|(_, g)| g)) else {
             continue;
         };
-        let Some(sol) = solve_joint(&others, &sel, weights) else {
+        // The free drift's knots of the held-out run are its own level, which no other run can
+        // predict: they are left out of the fit to the others and fitted to the run itself.
+        let own = |c: usize| matches!(fitted.model.lin[c], LinCol::DriftKnot { run, .. } if usize::from(run) == r);
+        let others_sel =
+            Selection { lin: sel.lin.iter().copied().filter(|&c| !own(c)).collect(), shared: sel.shared.clone() };
+        let Some(sol) = solve_joint(&others, &others_sel, weights) else {
             continue;
         };
-        let rss = residual_after(g, &sel, &sol.delta);
+        let mut rss = residual_after(g, &others_sel, &sol.delta);
+        let own_cols: Vec<usize> = sel.lin.iter().copied().filter(|&c| own(c)).collect();
+        if !own_cols.is_empty() {
+            for (a, rss_a) in rss.iter_mut().enumerate() {
+                *rss_a -= own_level_gain(g, a, &own_cols, &others_sel, &sol.delta);
+            }
+        }
         out.push(HeldOut {
             run: run_numbers[r],
             rms_counts: std::array::from_fn(|a| (rss[a] / g.n[a].max(1) as f64).sqrt()),

@@ -122,13 +122,13 @@ impl Default for BiasRandomWalk {
 pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
 
 /// Earth's rotation as the lab feels it: vertical component Ω·sin(latitude), horizontal
-/// Ω·cos(latitude) towards north, at `heading_deg` from the base's encoder zero.
+/// Ω·cos(latitude) towards north, at `heading_deg` from where the base points at θ2 = 0.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct EarthRotation {
     /// Latitude, degrees (default 45°, a mid-latitude lab).
     pub latitude_deg: f64,
-    /// Azimuth of north from the base table's encoder zero, degrees (default 30°).
+    /// Azimuth of north from where the base points when θ2 = 0, degrees (default 30°).
     pub heading_deg: f64,
 }
 
@@ -148,7 +148,7 @@ impl EarthRotation {
 
     /// The lab-fixed rate in the table frame O2 (EXCITER.md eq. 1 conventions: z1 = (sin θ2,
     /// cos θ2, 0), the base's horizontal pair e_z2 and u = z1 × z2 = (cos θ2, −sin θ2, 0)) for a
-    /// base angle θ1 from the encoder zero and table angle θ2, °/s.
+    /// base heading θ1 (from where it points at θ2 = 0) and table angle θ2, °/s.
     pub fn in_table_frame_dps(&self, theta1_rad: f64, theta2_rad: f64) -> [f64; 3] {
         let (v, h) = self.components_dps();
         let psi = self.heading_deg.to_radians() - theta1_rad;

@@ -429,11 +429,10 @@ impl Session {
             w2[2] += st.theta1_rate_dps * t.tilt_deg.to_radians().sin();
         }
         if let Some(e) = &self.effects.earth_rotation {
-            // θ1 on the encoder's scale: the heading is measured from the encoder's zero.
-            let theta1 = (st.theta1_deg
-                + units::deg_from_counts(f64::from(self.encoder.start_counts), self.encoder.counts_per_rev))
-            .to_radians();
-            w2 += nalgebra::Vector3::from(e.in_table_frame_dps(theta1, theta2));
+            // The base's heading in the lab: the table is geared to a ground-fixed shaft, so
+            // θ2 = ratio·θ1_lab + const; the heading is measured from where θ2 = 0.
+            let heading = theta2 / self.gear_ratio;
+            w2 += nalgebra::Vector3::from(e.in_table_frame_dps(heading, theta2));
         }
         chain.counts(&w2, theta2)
     }
