@@ -30,13 +30,18 @@ use defmt_rtt as _;
 /// A panic: the motor is made safe before anything else (printing the message over RTT takes
 /// time, a debug probe may not even be attached), then the message, then a HardFault (`udf`),
 /// which makes the motor safe again and which probe-rs reports; the watchdog resets the MCU.
-/// The QEMU image has no motor pins: it only prints and faults.
+/// The QEMU image has no bridge: its stand-ins report the same action on USART1.
 #[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();
     #[cfg(not(feature = "qemu"))]
     board::force_motor_safe();
+    #[cfg(feature = "qemu")]
+    {
+        qemu::force_motor_safe("panic");
+        qemu::report_panic(info);
+    }
     defmt::error!("panic: {}", defmt::Display2Format(info));
     // SAFETY: SHCSR (0xE000_ED24) is the System Handler Control and State Register; clearing
     // USGFAULTENA (bit 18) makes `udf` a HardFault rather than a UsageFault (as panic-probe does).
@@ -59,6 +64,16 @@ fn main() {}
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     board::force_motor_safe();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// The QEMU image's HardFault: the same safe action, reported on USART1.
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    qemu::force_motor_safe("HardFault");
     loop {
         cortex_m::asm::nop();
     }
