@@ -41,18 +41,54 @@ pub fn drdy_level() -> bool {
     unsafe { (*pac::GPIOA::ptr()).idr().read().idr(3).bit_is_set() }
 }
 
-/// Makes the motor safe without owning the peripherals, from any context (HardFault, which a
-/// panic ends in): bridge enable (PE11, nSLEEP) low, PWM compare 0, TIM1 main output off. The
-/// motor then coasts; the watchdog resets the MCU 34-94 ms later and the EN pull-down holds the
-/// bridge off through the reset.
+/// Makes the motor safe without owning the peripherals, from any context (the panic handler,
+/// HardFault): [`firmware::safe_state::make_motor_safe`] on the bare registers (bridge enable
+/// PE11, nSLEEP, low; TIM1 compare 0), then TIM1's main output off. The motor then coasts; the
+/// watchdog resets the MCU 34-94 ms later and the EN pull-down holds the bridge off through the
+/// reset.
 pub fn force_motor_safe() {
-    // SAFETY: BSRR is a write-only set/reset register (one atomic write touches PE11 only);
-    // TIM1's CCR1 and BDTR are written only by the PWM channel, whose owner is no longer running.
-    unsafe {
-        (*pac::GPIOE::ptr()).bsrr().write(|w| w.br(11).set_bit());
-        let tim1 = &*pac::TIM1::ptr();
-        tim1.ccr1().write(|w| w.ccr().set(0));
-        tim1.bdtr().modify(|_, w| w.moe().clear_bit());
+    firmware::safe_state::make_motor_safe(&mut RawEnable, &mut RawPwm);
+    // SAFETY: TIM1's BDTR is written only by the PWM channel, whose owner is no longer running.
+    unsafe { (*pac::TIM1::ptr()).bdtr().modify(|_, w| w.moe().clear_bit()) };
+}
+
+/// The bridge enable (PE11) through GPIOE's BSRR, without owning the pin.
+struct RawEnable;
+
+impl embedded_hal::digital::ErrorType for RawEnable {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for RawEnable {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        // SAFETY: BSRR is a write-only set/reset register: one atomic write touches PE11 only.
+        unsafe { (*pac::GPIOE::ptr()).bsrr().write(|w| w.br(11).set_bit()) };
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        // SAFETY: as `set_low`.
+        unsafe { (*pac::GPIOE::ptr()).bsrr().write(|w| w.bs(11).set_bit()) };
+        Ok(())
+    }
+}
+
+/// TIM1 channel 1's compare register, without owning the timer.
+struct RawPwm;
+
+impl embedded_hal::pwm::ErrorType for RawPwm {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::pwm::SetDutyCycle for RawPwm {
+    fn max_duty_cycle(&self) -> u16 {
+        PWM_PERIOD_TICKS
+    }
+
+    fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
+        // SAFETY: CCR1 is written only by the PWM channel, whose owner is no longer running.
+        unsafe { (*pac::TIM1::ptr()).ccr1().write(|w| w.ccr().set(duty.min(PWM_PERIOD_TICKS))) };
+        Ok(())
     }
 }
 
@@ -75,8 +111,7 @@ impl Motor {
             self.pwm.set_duty(cmd.compare.min(PWM_PERIOD_TICKS));
             self.en.set_high();
         } else {
-            self.en.set_low();
-            self.pwm.set_duty(0);
+            firmware::safe_state::make_motor_safe(&mut self.en, &mut self.pwm);
         }
     }
 }

@@ -15,6 +15,7 @@ pub mod l3g4200d;
 pub mod link;
 pub mod pwm;
 pub mod rig;
+pub mod safe_state;
 pub mod speed_loop;
 pub mod supervisor;
 pub mod tx_queue;

@@ -25,20 +25,55 @@ mod qemu;
 use stm32f4xx_hal::pac;
 
 #[cfg(target_os = "none")]
-use {defmt_rtt as _, panic_probe as _};
+use defmt_rtt as _;
+
+/// A panic: the motor is made safe before anything else (printing the message over RTT takes
+/// time, a debug probe may not even be attached), then the message, then a HardFault (`udf`),
+/// which makes the motor safe again and which probe-rs reports; the watchdog resets the MCU.
+/// The QEMU image has no bridge: its stand-ins report the same action on USART1.
+#[cfg(target_os = "none")]
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    #[cfg(not(feature = "qemu"))]
+    board::force_motor_safe();
+    #[cfg(feature = "qemu")]
+    {
+        qemu::force_motor_safe("panic");
+        qemu::report_panic(info);
+    }
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    // SAFETY: SHCSR (0xE000_ED24) is the System Handler Control and State Register; clearing
+    // USGFAULTENA (bit 18) makes `udf` a HardFault rather than a UsageFault (as panic-probe does).
+    unsafe {
+        let shcsr = 0xE000_ED24 as *mut u32;
+        core::ptr::write_volatile(shcsr, core::ptr::read_volatile(shcsr) & !(1 << 18));
+    }
+    cortex_m::asm::udf()
+}
 
 /// The firmware only runs on the MCU; on the host, `cargo build --workspace` builds this stub
 /// and the logic is exercised through the library's tests and the virtual rig.
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
-/// A panic (panic-probe ends every panic in a HardFault) or a fault: the motor is made safe
+/// A fault (and every panic, which ends here): the motor is made safe
 /// before anything else, then the watchdog resets the MCU. Without this the bridge kept its
 /// last duty until the reset (34-94 ms: the LSI is 17-47 kHz).
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     board::force_motor_safe();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// The QEMU image's HardFault: the same safe action, reported on USART1.
+#[cfg(all(target_os = "none", feature = "qemu"))]
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    qemu::force_motor_safe("HardFault");
     loop {
         cortex_m::asm::nop();
     }

@@ -12,6 +12,11 @@
 //! - speaks the protocol on USART1 (QEMU's first `-serial`): host bytes in by RXNE interrupt,
 //!   frames out by polled writes, at most one period's worth of UART bytes per period.
 //!
+//! The panic and HardFault handlers make the motor safe as on the board, through the same
+//! [`firmware::safe_state::make_motor_safe`]; this chip has no bridge, so the image's "pins"
+//! report each write on USART1 instead (`safe state (panic): enable low, pwm 0`), for the boot
+//! test to read (feature `qemu-panic-test` panics on purpose 100 ms in).
+//!
 //! | Priority | Source             | Work                                              |
 //! |----------|--------------------|---------------------------------------------------|
 //! | 2        | USART1 RXNE        | host byte into the receive queue                  |
@@ -128,6 +133,9 @@ mod app {
         cx.local.tim3.sr().write(|w| w.uif().clear_bit());
         let rig = cx.local.rig;
         let end_ns = rig.now_ns() + TICK_NS;
+        if cfg!(feature = "qemu-panic-test") && end_ns > 100_000_000 {
+            panic!("qemu-panic-test: a deliberate panic");
+        }
         rig.run_until(end_ns, cx.local.uart, |_| {});
         let tag = rig.rig.run_tag();
         if tag != *cx.local.mounted {
@@ -162,4 +170,72 @@ mod app {
             }
         }
     }
+}
+
+/// USART1, written by polling without owning it: the panic and HardFault handlers' only voice.
+struct FaultUart;
+
+impl core::fmt::Write for FaultUart {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        // SAFETY: called with interrupts disabled (panic) or from HardFault, when no task runs;
+        // SR is only read and DR only written, as the transmit path of the app does.
+        let usart = unsafe { &*stm32f4xx_hal::pac::USART1::ptr() };
+        for byte in s.bytes() {
+            while usart.sr().read().txe().bit_is_clear() {}
+            usart.dr().write(|w| w.dr().set(byte.into()));
+        }
+        Ok(())
+    }
+}
+
+/// The image's stand-in for the bridge enable: reports the level it is set to.
+struct ReportedEnable;
+
+impl embedded_hal::digital::ErrorType for ReportedEnable {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for ReportedEnable {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        let _ = core::fmt::Write::write_str(&mut FaultUart, "enable low, ");
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        let _ = core::fmt::Write::write_str(&mut FaultUart, "enable high, ");
+        Ok(())
+    }
+}
+
+/// The image's stand-in for the PWM compare: reports the duty it is set to.
+struct ReportedPwm;
+
+impl embedded_hal::pwm::ErrorType for ReportedPwm {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::pwm::SetDutyCycle for ReportedPwm {
+    fn max_duty_cycle(&self) -> u16 {
+        firmware::pwm::PWM_PERIOD_TICKS
+    }
+
+    fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Self::Error> {
+        let _ = core::fmt::write(&mut FaultUart, format_args!("pwm {duty}"));
+        Ok(())
+    }
+}
+
+/// The board's `force_motor_safe` for this image: the same action, on the reporting stand-ins,
+/// as one line `safe state (<context>): enable low, pwm 0`.
+pub fn force_motor_safe(context: &str) {
+    use core::fmt::Write;
+    let _ = write!(FaultUart, "\nsafe state ({context}): ");
+    firmware::safe_state::make_motor_safe(&mut ReportedEnable, &mut ReportedPwm);
+    let _ = FaultUart.write_str("\n");
+}
+
+/// The panic's message on USART1, `panic: <message>` (RTT has no reader under QEMU).
+pub fn report_panic(info: &core::panic::PanicInfo) {
+    use core::fmt::Write;
+    let _ = writeln!(FaultUart, "panic: {}", info.message());
 }

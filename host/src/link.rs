@@ -53,6 +53,12 @@ impl Clock for WallClock {
     }
 }
 
+/// Anything a [`Link`] can talk through: a serial port, or a lockstep virtual rig's pty
+/// ([`crate::virtual_rig::LockstepPort`]).
+pub trait Port: Read + Write {}
+
+impl<T: Read + Write + ?Sized> Port for T {}
+
 /// Opens a serial port by path, with a one-line error that names it.
 pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort>> {
     serialport::new(path, baud)

@@ -50,6 +50,10 @@ enum Cmd {
         /// Baud rate (ignored by USB CDC-ACM).
         #[arg(long, default_value_t = link::DEFAULT_BAUD)]
         baud: u32,
+        /// Tests: the link's time is a lockstep virtual rig's simulated time, stepped through
+        /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
+        #[arg(long, hide = true, value_name = "SOCKET")]
+        lockstep_clock: Option<PathBuf>,
     },
     /// Calibrate: live against the rig (--port) or from recorded captures (--replay).
     #[command(group(clap::ArgGroup::new("source").required(true).args(["port", "replay"])))]
@@ -104,6 +108,10 @@ enum Cmd {
         /// Baud rate (ignored by USB CDC-ACM).
         #[arg(long, default_value_t = link::DEFAULT_BAUD)]
         baud: u32,
+        /// Tests: the link's time is a lockstep virtual rig's simulated time, stepped through
+        /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
+        #[arg(long, hide = true, requires = "port", value_name = "SOCKET")]
+        lockstep_clock: Option<PathBuf>,
     },
     /// Convert raw counts to rate vectors in the package frame with a calibration.
     Apply {
@@ -347,8 +355,8 @@ struct Usage(anyhow::Error);
 
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
-        Cmd::Record { port, out, pose, rate_dps, duration, baud } => {
-            record(&port, &out, pose, rate_dps, duration, baud)
+        Cmd::Record { port, out, pose, rate_dps, duration, baud, lockstep_clock } => {
+            record(open_link(&port, baud, lockstep_clock.as_deref())?, &out, pose, rate_dps, duration)
         }
         Cmd::Calibrate {
             port,
@@ -365,6 +373,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             yes,
             latitude_deg,
             baud,
+            lockstep_clock,
         } => {
             // Resolved first: a wrong --db must not cost a session.
             let db = records::DbSpec::resolve(db.as_deref())?;
@@ -379,7 +388,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     }
                     let serial = identity.sensor_serial.clone().unwrap_or_default();
                     let mut manifest = start_manifest(&out_dir, identity)?;
-                    let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
+                    let mut link = open_link(&port, baud, lockstep_clock.as_deref())?;
                     link.watch_interrupt(interrupted.clone());
                     let mut operator: Box<dyn session::Operator> =
                         if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
@@ -533,9 +542,27 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
     Ok(flag)
 }
 
-fn record(port: &str, out: &Path, pose: Option<Pose>, rate_dps: f64, duration_s: f64, baud: u32) -> Result<ExitCode> {
+/// The link to the rig on `port`: a serial port in wall-clock time, or with `lockstep` (tests)
+/// a lockstep virtual rig's pty in its simulated time.
+fn open_link(port: &str, baud: u32, lockstep: Option<&Path>) -> Result<Link<Box<dyn link::Port>>> {
+    Ok(match lockstep {
+        None => Link::new(Box::new(link::open_port(port, baud)?), port),
+        Some(socket) => {
+            let p = host::virtual_rig::LockstepPort::connect(port, socket)?;
+            let clock = p.clock();
+            Link::with_clock(Box::new(p), port, Box::new(clock))
+        }
+    })
+}
+
+fn record(
+    mut link: Link<Box<dyn link::Port>>,
+    out: &Path,
+    pose: Option<Pose>,
+    rate_dps: f64,
+    duration_s: f64,
+) -> Result<ExitCode> {
     let interrupted = interrupt_flag()?;
-    let mut link = Link::new(link::open_port(port, baud)?, port);
     link.watch_interrupt(interrupted.clone());
     match pose {
         Some(pose) => {

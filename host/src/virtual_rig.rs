@@ -13,6 +13,8 @@
 //! rig sends (`Hello`, `Ack`, `RunStarted`, `RunStopped`, `Sample`, `Motor`, `Index`,
 //! `Counters`, `Temperature`, `Fault`), repeatable. `--seed` fixes the randomness (default 1).
 //! `--watchdog-reset` starts the rig as after a watchdog reset (it reports `WatchdogReset`).
+//! Every command but `Heartbeat` that reaches the rig intact is logged on standard error,
+//! `virtual rig: received Stop (seq 12) at 14.210 s` (simulated time).
 //!
 //! `--lockstep` hands the clock to the client (tests): simulated time only advances when a line
 //! `step <ns> <bytes>` arrives on standard input; the rig first waits until it has received
@@ -20,6 +22,9 @@
 //! of simulated time, then answers `at <now_ns> <bytes>` on standard output, `<bytes>` being
 //! the total it has queued to the pty so far. A client that reads the pty up to that total has
 //! seen exactly what the rig said until then, however loaded the machine: no wall-clock race.
+//! [`LockstepPort`] is that client; `host calibrate --port PTY --lockstep-clock SOCKET` (a
+//! hidden option, for tests) runs the live session through it, the control lines relayed by
+//! whoever listens on the Unix socket.
 //!
 //! Prints the pty's device path (e.g. `/dev/pts/7`) as the first line on stdout, then serves
 //! until killed (or until `--duration` seconds of simulated time). Simulated time runs `N` times
@@ -30,12 +35,13 @@
 //! `--seed`); without it, the table-speed jitter of the speed loop, which the encoder cannot
 //! resolve, stands above the gyro's 1-LSB rounding and the calibration finds it unexplained.
 
+use crate::link::command_name;
 use anyhow::{bail, Context, Result};
 use firmware::plant::l3g4200d_model::L3g4200dModel;
 use firmware::plant::{Plant, Pose};
 use firmware::virtual_rig::{VirtualRig, Wire};
 use protocol::frame::decode_frame;
-use protocol::{RigMsg, MAX_FRAME_LEN};
+use protocol::{Command, RigMsg, StreamDecoder, MAX_FRAME_LEN};
 use serialport::{SerialPort, TTYPort};
 use std::io::{BufRead, ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
@@ -152,6 +158,7 @@ pub fn serve(opts: &Options) -> Result<()> {
         queued: 0,
         mounted_tag: None,
         line: Line::new(line),
+        commands: StreamDecoder::new(),
     };
     if opts.lockstep {
         lockstep(&mut server)?;
@@ -191,6 +198,8 @@ struct Server {
     queued: u64,
     mounted_tag: Option<u8>,
     line: Line,
+    /// The host's frames as the rig receives them, for the command log.
+    commands: StreamDecoder,
 }
 
 impl Server {
@@ -202,7 +211,9 @@ impl Server {
                 Ok(n) => {
                     self.received += n as u64;
                     let line = &mut self.line;
-                    self.wire.to_rig.extend(rx[..n].iter().filter(|_| !line.lose()));
+                    let kept: Vec<u8> = rx[..n].iter().copied().filter(|_| !line.lose()).collect();
+                    self.log_commands(&kept);
+                    self.wire.to_rig.extend(kept);
                 }
                 Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => return Ok(()),
                 Err(e) if e.raw_os_error() == Some(5) => return Ok(()), // EIO: no host has the pty open
@@ -232,6 +243,19 @@ impl Server {
             self.queued -= excess as u64;
             self.backlog.truncate(PTY_BACKLOG);
         }
+    }
+
+    /// Says on standard error every command but `Heartbeat` that reached the rig intact (after
+    /// the line's losses), with the simulated time: how a test sees that `Stop` was sent.
+    fn log_commands(&mut self, bytes: &[u8]) {
+        let now_s = self.vr.now_ns() as f64 * 1e-9;
+        self.commands.feed::<Command>(bytes, |ev| match ev {
+            protocol::Event::Frame { msg: Command::Heartbeat, .. } => {}
+            protocol::Event::Frame { seq, msg, .. } => {
+                eprintln!("virtual rig: received {} (seq {seq}) at {now_s:.3} s", command_name(&msg))
+            }
+            protocol::Event::Error { .. } => {}
+        });
     }
 
     fn write_host(&mut self) -> Result<()> {
@@ -395,5 +419,149 @@ impl Line {
                 }
             }
         }
+    }
+}
+
+/// Simulated time per lockstep step: 5 ms, like a host polling its port every few milliseconds.
+pub const LOCKSTEP_STEP_NS: u64 = 5_000_000;
+
+/// The client's end of a rig in `--lockstep` (module documentation): its pty, plus the control
+/// channel that steps simulated time. Simulated time advances only when a read finds nothing
+/// waiting, so a loaded machine slows the session down but never changes what happens in it:
+/// the host's timeouts and heartbeats ([`Self::clock`] as the link's clock) and the rig's link
+/// watchdog are measured in the same time.
+pub struct LockstepPort {
+    control_in: Box<dyn BufRead>,
+    control_out: Box<dyn Write>,
+    pty: Box<dyn serialport::SerialPort>,
+    /// Bytes written to the pty, in total.
+    sent: u64,
+    /// Bytes read from the pty, in total.
+    received: u64,
+    /// Read from the pty, not yet returned.
+    pending: std::collections::VecDeque<u8>,
+    now_ns: std::rc::Rc<std::cell::Cell<u64>>,
+    /// Simulated time per step.
+    pub step_ns: u64,
+}
+
+/// The simulated clock of a [`LockstepPort`], for [`crate::link::Link::with_clock`].
+#[derive(Clone)]
+pub struct SimClock(std::rc::Rc<std::cell::Cell<u64>>);
+
+impl crate::link::Clock for SimClock {
+    fn now(&self) -> Duration {
+        Duration::from_nanos(self.0.get())
+    }
+}
+
+/// How long the pty may take to deliver bytes the rig said it sent: only a dead rig takes this
+/// long (a hang guard, not a timing assumption).
+const LOCKSTEP_PTY_TIMEOUT: Duration = Duration::from_secs(60);
+
+impl LockstepPort {
+    /// Opens the rig's pty `path`; `control_in`/`control_out` carry its `at`/`step` lines.
+    pub fn open(path: &str, control_in: Box<dyn BufRead>, control_out: Box<dyn Write>) -> Result<Self> {
+        let pty = serialport::new(path, 115_200)
+            .timeout(Duration::from_millis(50))
+            .open()
+            .with_context(|| format!("cannot open the virtual rig's pty {path}"))?;
+        Ok(Self {
+            control_in,
+            control_out,
+            pty,
+            sent: 0,
+            received: 0,
+            pending: Default::default(),
+            now_ns: Default::default(),
+            step_ns: LOCKSTEP_STEP_NS,
+        })
+    }
+
+    /// Opens the rig's pty `path`, the control lines going through the Unix socket `socket`
+    /// (where a test relays them to the rig's standard input and output, and so knows the
+    /// simulated time the host lives in).
+    pub fn connect(path: &str, socket: &std::path::Path) -> Result<Self> {
+        let stream = std::os::unix::net::UnixStream::connect(socket)
+            .with_context(|| format!("cannot connect to the lockstep clock {}", socket.display()))?;
+        let reader = std::io::BufReader::new(stream.try_clone().context("cloning the lockstep socket")?);
+        Self::open(path, Box::new(reader), Box::new(stream))
+    }
+
+    /// The rig's simulated time.
+    pub fn clock(&self) -> SimClock {
+        SimClock(self.now_ns.clone())
+    }
+
+    /// Simulated time now, ns.
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns.get()
+    }
+
+    /// Advances the rig by `ns` once it has received everything written so far, and reads all
+    /// it sent meanwhile.
+    pub fn step(&mut self, ns: u64) -> std::io::Result<()> {
+        use std::io::Error;
+        writeln!(self.control_out, "step {ns} {}", self.sent)?;
+        self.control_out.flush()?;
+        let mut line = String::new();
+        if self.control_in.read_line(&mut line)? == 0 {
+            return Err(Error::new(ErrorKind::UnexpectedEof, "the virtual rig's lockstep control closed"));
+        }
+        let mut words = line.split_whitespace();
+        let parsed = match (words.next(), words.next(), words.next()) {
+            (Some("at"), Some(now), Some(total)) => now.parse::<u64>().ok().zip(total.parse::<u64>().ok()),
+            _ => None,
+        };
+        let Some((now, total)) = parsed else {
+            return Err(Error::new(ErrorKind::InvalidData, format!("the virtual rig answered {line:?}")));
+        };
+        self.now_ns.set(now);
+        let mut buf = [0u8; 4096];
+        let since = Instant::now();
+        while self.received < total {
+            if since.elapsed() > LOCKSTEP_PTY_TIMEOUT {
+                return Err(Error::new(ErrorKind::TimedOut, "the pty never delivered the virtual rig's bytes"));
+            }
+            match self.pty.read(&mut buf) {
+                Ok(n) => {
+                    self.pending.extend(&buf[..n]);
+                    self.received += n as u64;
+                }
+                Err(e) if e.kind() == ErrorKind::TimedOut => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Read for LockstepPort {
+    /// Returns what the rig has sent; when nothing is waiting, first runs one step of simulated
+    /// time, and times out (`ErrorKind::TimedOut`) if the rig said nothing in it.
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.pending.is_empty() {
+            self.step(self.step_ns)?;
+        }
+        if self.pending.is_empty() {
+            return Err(ErrorKind::TimedOut.into());
+        }
+        let n = buf.len().min(self.pending.len());
+        for (d, s) in buf.iter_mut().zip(self.pending.drain(..n)) {
+            *d = s;
+        }
+        Ok(n)
+    }
+}
+
+impl Write for LockstepPort {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.pty.write(buf)?;
+        self.sent += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.pty.flush()
     }
 }

@@ -14,39 +14,22 @@ pub const Z_2D: f64 = 3.44;
 /// The virtual rig's device under test and offsets (`host::virtual_rig`, one place).
 pub use host::virtual_rig::{VIRTUAL_GYRO_KS, VIRTUAL_GYRO_OFFSET_DPS};
 
-/// Simulated time per lockstep step: 5 ms, like a host polling its port every few milliseconds.
-pub const LOCKSTEP_STEP_NS: u64 = 5_000_000;
+/// Simulated time per lockstep step (`host::virtual_rig::LOCKSTEP_STEP_NS`).
+pub use host::virtual_rig::LOCKSTEP_STEP_NS;
+
+/// The simulated clock of a [`LockstepRig`], for `host::link::Link::with_clock`.
+pub use host::virtual_rig::SimClock;
 
 /// The firmware's virtual rig on a pty in lockstep (`virtual_rig --lockstep`): simulated time
 /// advances only when this end reads, so a loaded machine slows the test down but never changes
-/// what happens in it. Reading and writing it is reading and writing the pty; [`Self::clock`]
-/// is the rig's simulated time. Killed when dropped.
+/// what happens in it. Reading and writing it is reading and writing the pty
+/// (`host::virtual_rig::LockstepPort`, the rig's standard input and output as its control
+/// lines); [`Self::clock`] is the rig's simulated time. Killed when dropped.
 pub struct LockstepRig {
     child: std::process::Child,
-    stdin: std::process::ChildStdin,
-    stdout: std::io::BufReader<std::process::ChildStdout>,
+    port: host::virtual_rig::LockstepPort,
     /// The pty device, e.g. `/dev/pts/3`.
     pub path: String,
-    pty: Box<dyn serialport::SerialPort>,
-    /// Bytes written to the pty, in total.
-    sent: u64,
-    /// Bytes read from the pty, in total.
-    received: u64,
-    /// Read from the pty, not yet returned.
-    pending: std::collections::VecDeque<u8>,
-    now_ns: std::rc::Rc<std::cell::Cell<u64>>,
-    /// Simulated time per step.
-    pub step_ns: u64,
-}
-
-/// The simulated clock of a [`LockstepRig`], for `host::link::Link::with_clock`.
-#[derive(Clone)]
-pub struct SimClock(std::rc::Rc<std::cell::Cell<u64>>);
-
-impl host::link::Clock for SimClock {
-    fn now(&self) -> std::time::Duration {
-        std::time::Duration::from_nanos(self.0.get())
-    }
 }
 
 impl LockstepRig {
@@ -68,61 +51,25 @@ impl LockstepRig {
         stdout.read_line(&mut line).expect("pty path");
         let path = line.trim().to_string();
         assert!(path.starts_with("/dev/"), "unexpected first line {path:?}");
-        let pty = serialport::new(&path, 115_200)
-            .timeout(std::time::Duration::from_millis(50))
-            .open()
+        let port = host::virtual_rig::LockstepPort::open(&path, Box::new(stdout), Box::new(stdin))
             .expect("open the virtual rig's pty");
-        Self {
-            child,
-            stdin,
-            stdout,
-            path,
-            pty,
-            sent: 0,
-            received: 0,
-            pending: Default::default(),
-            now_ns: Default::default(),
-            step_ns: LOCKSTEP_STEP_NS,
-        }
+        Self { child, port, path }
     }
 
     /// The rig's simulated time.
     pub fn clock(&self) -> SimClock {
-        SimClock(self.now_ns.clone())
+        self.port.clock()
     }
 
     /// Simulated time now, ns.
     pub fn now_ns(&self) -> u64 {
-        self.now_ns.get()
+        self.port.now_ns()
     }
 
     /// Advances the rig by `ns` after it has received everything written so far, and reads all
     /// it sent meanwhile.
     pub fn step(&mut self, ns: u64) {
-        use std::io::{BufRead, Read, Write};
-        writeln!(self.stdin, "step {ns} {}", self.sent).and_then(|()| self.stdin.flush()).expect("virtual_rig stdin");
-        let mut line = String::new();
-        self.stdout.read_line(&mut line).expect("virtual_rig answers");
-        let mut words = line.split_whitespace();
-        let (Some("at"), Some(now), Some(total)) = (words.next(), words.next(), words.next()) else {
-            panic!("virtual_rig answered {line:?}");
-        };
-        self.now_ns.set(now.parse().expect("time"));
-        let total: u64 = total.parse().expect("byte count");
-        let mut buf = [0u8; 4096];
-        let since = std::time::Instant::now();
-        while self.received < total {
-            // Only a dead rig takes this long: not a timing assumption, a hang guard.
-            assert!(since.elapsed() < std::time::Duration::from_secs(60), "the pty never delivered the rig's bytes");
-            match self.pty.read(&mut buf) {
-                Ok(n) => {
-                    self.pending.extend(&buf[..n]);
-                    self.received += n as u64;
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => panic!("pty read: {e}"),
-            }
-        }
+        self.port.step(ns).expect("the virtual rig steps");
     }
 }
 
@@ -130,29 +77,17 @@ impl std::io::Read for LockstepRig {
     /// Returns what the rig has sent; when nothing is waiting, first runs one step of simulated
     /// time, and times out (`ErrorKind::TimedOut`) if the rig said nothing in it.
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        if self.pending.is_empty() {
-            self.step(self.step_ns);
-        }
-        if self.pending.is_empty() {
-            return Err(std::io::ErrorKind::TimedOut.into());
-        }
-        let n = buf.len().min(self.pending.len());
-        for (d, s) in buf.iter_mut().zip(self.pending.drain(..n)) {
-            *d = s;
-        }
-        Ok(n)
+        self.port.read(buf)
     }
 }
 
 impl std::io::Write for LockstepRig {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let n = self.pty.write(buf)?;
-        self.sent += n as u64;
-        Ok(n)
+        self.port.write(buf)
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        self.pty.flush()
+        self.port.flush()
     }
 }
 

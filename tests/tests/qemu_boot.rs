@@ -53,15 +53,19 @@ fn missing_prerequisite() -> Option<String> {
     }
 }
 
-/// Builds the QEMU image with the same cargo that runs this test.
-fn build_image() -> PathBuf {
+/// Builds the QEMU image with `features` (the same cargo that runs this test) and copies it to
+/// `firmware-<features>.elf`: the tests of this file share one target directory, and the build
+/// writes one path whatever the features, so building and copying hold a lock.
+fn build_image(features: &str) -> PathBuf {
+    static BUILD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root");
     let target_dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("qemu-image");
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let out = Process::new(cargo)
         .current_dir(workspace)
         .args(["build", "-p", "firmware", "--release", "--target", "thumbv7em-none-eabihf"])
-        .args(["--features", "qemu"])
+        .args(["--features", features])
         .env("CARGO_TARGET_DIR", &target_dir)
         .output()
         .expect("run cargo");
@@ -70,7 +74,9 @@ fn build_image() -> PathBuf {
         "building the QEMU image failed (needs `rustup target add thumbv7em-none-eabihf`):\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    target_dir.join("thumbv7em-none-eabihf/release/firmware")
+    let image = target_dir.join(format!("firmware-{features}.elf"));
+    std::fs::copy(target_dir.join("thumbv7em-none-eabihf/release/firmware"), &image).expect("copy the image");
+    image
 }
 
 /// QEMU with the image, USART1 on its stdin/stdout. `-icount shift=0,sleep=off` derives QEMU's
@@ -198,7 +204,7 @@ fn qemu_image_boots_and_speaks_the_protocol() {
         eprintln!("qemu_image_boots_and_speaks_the_protocol NOT RUN: {missing}; {how}");
         return;
     }
-    let image = build_image();
+    let image = build_image("qemu");
     let mut qemu = Qemu::boot(&image);
     let mut stream = Stream::default();
     let mut next_cmd = 1u16;
@@ -364,4 +370,46 @@ fn qemu_image_boots_and_speaks_the_protocol() {
         edges.len(),
         f64::from(samples.last().unwrap().t_us.wrapping_sub(samples[0].t_us)) * 1e-6,
     );
+}
+
+/// B5 on the emulated MCU: a panic makes the motor safe before anything else, through
+/// `firmware::safe_state::make_motor_safe` (enable low, then PWM 0), and the HardFault it ends in
+/// does it again. The image built with `qemu-panic-test` panics 100 ms into its simulated time;
+/// QEMU's STM32F405 has no GPIO or TIM1 model, so the image's stand-ins for the bridge enable
+/// and the PWM report each write on USART1, which is what this test reads.
+#[test]
+#[cfg_attr(
+    not(has_qemu),
+    ignore = "needs qemu-system-arm and the thumbv7em-none-eabihf target (.ci/run installs both)"
+)]
+fn qemu_panic_and_hardfault_make_the_motor_safe() {
+    if let Some(missing) = missing_prerequisite() {
+        if std::env::var_os("CI").is_some() {
+            panic!("{missing}");
+        }
+        eprintln!("qemu_panic_and_hardfault_make_the_motor_safe NOT RUN: {missing}");
+        return;
+    }
+    let image = build_image("qemu-panic-test");
+    let qemu = Qemu::boot(&image);
+    const EXPECTED: &str = "\nsafe state (panic): enable low, pwm 0\npanic: qemu-panic-test: a deliberate panic\n\
+                            \nsafe state (HardFault): enable low, pwm 0\n";
+    let mut seen = Vec::new();
+    let started = Instant::now();
+    let text = loop {
+        let text = String::from_utf8_lossy(&seen).into_owned();
+        if text.contains("safe state (HardFault)") && text.ends_with('\n') {
+            break text;
+        }
+        // A hang guard: the panic comes 100 ms into the image's simulated time.
+        assert!(started.elapsed() < SESSION_LIMIT, "no safe-state report after {:?}: {text:?}", started.elapsed());
+        match qemu.bytes.recv_timeout(Duration::from_millis(10)) {
+            Ok(bytes) => seen.extend(bytes),
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => panic!("qemu exited: {text:?}"),
+        }
+    };
+    let report = &text[text.find("\nsafe state (panic)").expect("the panic's report")..];
+    assert_eq!(report, EXPECTED);
+    eprintln!("qemu: {report:?} after {:?}", started.elapsed());
 }
