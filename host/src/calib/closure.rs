@@ -556,10 +556,7 @@ pub fn close_loop_owned(
     truth: Option<&crate::sim::Truth>,
 ) -> Result<LoopReport, CalError> {
     check_runs(&runs)?;
-    let kin = kinematics::reconstruct(&runs, &opts.cal.kinematics)?;
-    for r in &mut runs {
-        r.samples = Vec::new();
-    }
+    let kin = kinematics::reconstruct_consuming(&mut runs, &opts.cal.kinematics)?;
     let base_report = calibrate_kinematics(&runs, &kin, &opts.cal)?;
     loop_on(kin, base_report, runs[0].gyro, opts, truth)
 }

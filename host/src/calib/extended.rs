@@ -551,11 +551,12 @@ impl<'a> Evaluator<'a> {
         let filter_dw2 = dw2;
         // Earth's rate in the table frame O2, per unit of each component (module docs of
         // `earth_basis`), added to ω2.
-        let basis = earth_basis(theta1_rad, th_eff);
+        // (Each angle's sine and cosine once: they were 4 of the 5 libm calls a point made.)
+        let (s1, c1) = theta1_rad.sin_cos();
+        let basis = earth_basis((s1, c1), (se, ce));
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
         // The lab-fixed rate turns with θ2 too: ∂(basis)/∂θ2.
-        let (s1, c1) = theta1_rad.sin_cos();
         let d_basis = [[ce, -se, 0.0], [s1 * se, s1 * ce, 0.0], [-c1 * se, -c1 * ce, 0.0]];
         for (i, d) in dw2.iter_mut().enumerate() {
             *d += ev * d_basis[0][i] + en * d_basis[1][i] + ew * d_basis[2][i];
@@ -696,11 +697,9 @@ impl<'a> Evaluator<'a> {
 /// e_z2 = (0, 0, 1) and u = z1 × z2 = (cos θ2, −sin θ2, 0), right-handed as (e_z2, u, z1). A
 /// lab-fixed horizontal vector at azimuth ψ lies at ψ − θ1 in the base frame, cos(ψ−θ1)·e_z2 +
 /// sin(ψ−θ1)·u; expanding in cos ψ and sin ψ gives the two horizontal columns. θ1 is the
-/// encoder's angle, θ2 the index-referenced table angle.
+/// encoder's angle, θ2 the index-referenced table angle. Takes (sin, cos) of θ1 and of θ2.
 #[inline]
-fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
-    let (s1, c1) = theta1_rad.sin_cos();
-    let (s2, c2) = theta2_rad.sin_cos();
+fn earth_basis((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> [[f64; 3]; 3] {
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
 }
 

@@ -357,8 +357,7 @@ fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f3
 }
 
 /// Everything about a run that does not depend on the pooled gear ratio.
-struct RunPrep<'a> {
-    run: &'a Run,
+struct RunPrep {
     number: usize,
     line: IndexLine,
     fit: (f64, f64, f64, f64, f64),
@@ -366,6 +365,31 @@ struct RunPrep<'a> {
 
 /// Reconstructs θ2, θ1', θ2' and temperature at every usable sample of every run.
 pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let (preps, cpr, period, gear) = prepare(runs)?;
+    let out = preps
+        .into_iter()
+        .zip(runs)
+        .map(|(p, run)| run_kinematics(p, run, cpr, period, gear.estimated, opts))
+        .collect::<Result<_, _>>()?;
+    Ok(Kinematics { runs: out, gear })
+}
+
+/// [`reconstruct`] on runs it may consume: each run's raw samples are freed as soon as its own
+/// kinematics are made, so a long capture's raw samples and kinematics are held together for
+/// one run at most (issue 7's memory bar); the runs keep their index edges and temperatures.
+pub fn reconstruct_consuming(runs: &mut [Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let (preps, cpr, period, gear) = prepare(runs)?;
+    let mut out = Vec::with_capacity(runs.len());
+    for (p, run) in preps.into_iter().zip(runs.iter_mut()) {
+        out.push(run_kinematics(p, run, cpr, period, gear.estimated, opts)?);
+        run.samples = Vec::new();
+    }
+    Ok(Kinematics { runs: out, gear })
+}
+
+/// The index lines of every run and the pooled gear ratio: (per-run preparations, encoder
+/// counts per revolution, pooled index period in counts, gear estimate).
+fn prepare(runs: &[Run]) -> Result<(Vec<RunPrep>, f64, f64, GearEstimate), CalError> {
     let first = runs.first().ok_or(CalError::NoRuns)?;
     let cpr = f64::from(first.hello.encoder_counts_per_rev);
     let nominal = f64::from(first.hello.gear_ratio.num) / f64::from(first.hello.gear_ratio.den);
@@ -379,7 +403,7 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
         }
         let line = IndexLine::new(&p, nominal_period);
         let fit = line.fit(nominal_period);
-        preps.push(RunPrep { run, number: i + 1, line, fit });
+        preps.push(RunPrep { number: i + 1, line, fit });
     }
 
     // Pool the per-run periods, weighted by 1/σ²; runs with a single pulse carry no period.
@@ -400,19 +424,17 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
         sigma: ratio * period_sigma / period,
         deviation_ppm: (ratio - nominal) / nominal * 1e6,
     };
-
-    let out = preps.into_iter().map(|p| run_kinematics(p, cpr, period, ratio, opts)).collect::<Result<_, _>>()?;
-    Ok(Kinematics { runs: out, gear })
+    Ok((preps, cpr, period, gear))
 }
 
 fn run_kinematics(
-    p: RunPrep<'_>,
+    p: RunPrep,
+    run: &Run,
     cpr: f64,
     period: f64,
     ratio: f64,
     opts: &KinOptions,
 ) -> Result<RunKinematics, CalError> {
-    let run = p.run;
     let centre_sigma = if p.line.points.len() > 2 {
         p.fit.2 * (p.line.points.len() as f64 / (p.line.points.len() as f64 - 2.0)).sqrt()
     } else {
