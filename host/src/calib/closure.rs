@@ -492,7 +492,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts.",
         drift.name(),
         data.kin.runs[r].label,
-        data.kin.runs[r].samples[i].t_s,
+        data.kin.runs[r].samples[i].t_s(),
         at_start.join(" / ")
     ))
 }

@@ -540,7 +540,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let mut shared = [OrderSums::default(); MAX_ORDER + 1];
         let mut clipped_sums = [[OrderSums::default(); MAX_ORDER + 1]; 3];
         let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
-        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s) - rk.samples.first().map_or(0.0, |s| s.t_s))
+        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s()) - rk.samples.first().map_or(0.0, |s| s.t_s()))
             / TIME_BIN_S)
             .ceil()
             .max(1.0) as usize;
@@ -554,7 +554,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let mut clipped = [0u64; 3];
         let mut dev_sq = 0.0;
         let (mut n_axis, mut ss_axis) = ([0usize; 3], [0.0f64; 3]);
-        let t_first = rk.samples.first().map_or(0.0, |s| s.t_s);
+        let t_first = rk.samples.first().map_or(0.0, |s| s.t_s());
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         for (i, s) in rk.samples.iter().enumerate() {
@@ -564,10 +564,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let p = ev.point(r, i);
             let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
             let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);
-            let tb = (((s.t_s - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
-            let dev = s.theta1_rate_dps / rk.steady_rate_dps - 1.0;
+            let tb = (((s.t_s() - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
+            let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
             dev_sq += dev * dev;
-            let dev_pct = speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps);
+            let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             thetas.push(th as f32);
             let mut row = [f64::NAN; 3];
             let harmonics = harmonics_of(p.theta2_rad);
@@ -630,7 +630,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             .iter()
             .zip(&rd.valid)
             .filter(|(_, &v)| v)
-            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps));
+            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps));
         let mut ripples = ripple_tests(&e, &thetas, devs, &coefs, &dev_coefs);
         drop(thetas);
         let n_used = e[0].len().max(1);

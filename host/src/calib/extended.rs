@@ -189,8 +189,8 @@ impl LoopData {
         let (mut temp_sum, mut temp_n) = (0.0, 0usize);
         for r in &kin.runs {
             if let (Some(a), Some(b)) = (r.samples.first(), r.samples.last()) {
-                t_lo = t_lo.min(a.t_s);
-                t_hi = t_hi.max(b.t_s);
+                t_lo = t_lo.min(a.t_s());
+                t_hi = t_hi.max(b.t_s());
             }
             for t in r.temperatures_counts() {
                 if t.is_finite() {
@@ -211,14 +211,14 @@ impl LoopData {
             let mut gaps_after = vec![usize::MAX; s.len()];
             let mut next_gap = usize::MAX;
             for i in (0..s.len()).rev() {
-                if i + 1 < s.len() && s[i + 1].t_s - s[i].t_s > gap {
+                if i + 1 < s.len() && s[i + 1].t_s() - s[i].t_s() > gap {
                     next_gap = i;
                 }
                 gaps_after[i] = next_gap;
             }
             let mut n_valid = 0;
             for i in 0..s.len() {
-                if i > 0 && s[i].t_s - s[i - 1].t_s > gap {
+                if i > 0 && s[i].t_s() - s[i - 1].t_s() > gap {
                     last_gap = Some(i);
                 }
                 let clear_before = i >= guard && last_gap.is_none_or(|g| i >= g + guard);
@@ -444,25 +444,25 @@ impl Shifts {
 /// sample is valid, so they exist within [`MAX_DELAY_S`]).
 fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
     if delay_s == 0.0 {
-        return (s[i].theta2_rad, s[i].theta1_rate_dps);
+        return (s[i].theta2_rad(), s[i].theta1_rate_dps());
     }
-    let target = s[i].t_s - delay_s;
+    let target = s[i].t_s() - delay_s;
     let mut j = i;
     if delay_s > 0.0 {
-        while j > 0 && s[j].t_s > target {
+        while j > 0 && s[j].t_s() > target {
             j -= 1;
         }
     } else {
-        while j + 1 < s.len() && s[j + 1].t_s <= target {
+        while j + 1 < s.len() && s[j + 1].t_s() <= target {
             j += 1;
         }
     }
     let k = (j + 1).min(s.len() - 1);
-    let span = s[k].t_s - s[j].t_s;
-    let w = if span > 0.0 { ((target - s[j].t_s) / span).clamp(0.0, 1.0) } else { 0.0 };
+    let span = s[k].t_s() - s[j].t_s();
+    let w = if span > 0.0 { ((target - s[j].t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
     (
-        s[j].theta2_rad + w * (s[k].theta2_rad - s[j].theta2_rad),
-        s[j].theta1_rate_dps + w * (s[k].theta1_rate_dps - s[j].theta1_rate_dps),
+        s[j].theta2_rad() + w * (s[k].theta2_rad() - s[j].theta2_rad()),
+        s[j].theta1_rate_dps() + w * (s[k].theta1_rate_dps() - s[j].theta1_rate_dps()),
     )
 }
 
@@ -590,8 +590,8 @@ impl<'a> Evaluator<'a> {
             rate2_eff_dps: rate2_eff,
             dtheta_eff: ripple,
             drate_eff_dps: rate2 * dripple,
-            t_rel_s: s.t_s - self.data.t0_s,
-            t_scaled: (s.t_s - self.data.t_mid_s) / self.data.t_half_s,
+            t_rel_s: s.t_s() - self.data.t0_s,
+            t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
             temp_c: f64::from(self.data.runs[r].temp_c[i]),
             mesh_rad,
             pose: rk.pose,
