@@ -413,14 +413,15 @@ impl RateBinSums {
     }
 }
 
-/// The test that would otherwise repeat the harmonic ones: the slope against the speed deviation with every harmonic 0…8× removed from both (ripple at
-/// harmonics of the table is indistinguishable from them; what is left is the ripple at other
-/// frequencies, which only a wrong rate reconstruction would echo). One pass over the run's
-/// samples for all three axes; `coefs` and `dev_coefs` are the per-axis harmonic fits of the
-/// residual and of the speed deviation from the first pass.
+/// The test that would otherwise repeat the harmonic ones: the slope against the speed
+/// deviation with every harmonic 0…32× removed from both (ripple at harmonics of the table is
+/// indistinguishable from them; what is left is the ripple at other frequencies, which only a
+/// wrong rate reconstruction would echo). A second pass over the run's samples for all three
+/// axes (`thetas` the used samples' θ2, `devs` their speed deviations); `coefs` and `dev_coefs`
+/// are the per-axis harmonic fits of the residual and of the speed deviation from the first pass.
 fn ripple_tests(
     e: &[Vec<f32>; 3],
-    thetas: &[f32],
+    thetas: impl Iterator<Item = f64>,
     devs: impl Iterator<Item = f64>,
     coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
     dev_coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
@@ -432,8 +433,8 @@ fn ripple_tests(
     // Axes whose speed-deviation fit is the same (no clipped sample set them apart) share its
     // evaluation: usually one dot product per sample instead of three.
     let same_dev: [Option<usize>; 3] = std::array::from_fn(|a| (0..a).find(|&b| dev_coefs[b] == dev_coefs[a]));
-    for (i, (&th, d)) in thetas.iter().zip(devs).enumerate() {
-        let h = flatten(&harmonics_of(f64::from(th)));
+    for (i, (th, d)) in thetas.zip(devs).enumerate() {
+        let h = flatten(&harmonics_of(th));
         let mut dev_fit = [0.0f64; 3];
         for a in 0..3 {
             dev_fit[a] = match same_dev[a] {
@@ -546,10 +547,6 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             .max(1.0) as usize;
         let mut time_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(n_time));
         let mut temp = [SlopeSums::default(); 3];
-        // θ2 per used sample, for the ripple test's second pass (the speed deviation it needs is
-        // recomputed from the kinematics), wrapped to [0, 2π) in f32: 5e-7 rad at most, 40×
-        // finer than an encoder count.
-        let mut thetas: Vec<f32> = Vec::with_capacity(rd.n_valid);
         let mut rate_sums: [RateBinSums; 3] = Default::default();
         let mut clipped = [0u64; 3];
         let mut dev_sq = 0.0;
@@ -568,7 +565,6 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
             dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
-            thetas.push(th as f32);
             let mut row = [f64::NAN; 3];
             let harmonics = harmonics_of(p.theta2_rad);
             for (o, &(sn, cn)) in shared.iter_mut().zip(&harmonics) {
@@ -631,8 +627,9 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             .zip(&rd.valid)
             .filter(|(_, &v)| v)
             .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps));
-        let mut ripples = ripple_tests(&e, &thetas, devs, &coefs, &dev_coefs);
-        drop(thetas);
+        // θ2 of the used samples again, from the kinematics (not kept per sample: memory bar).
+        let thetas = (0..rk.samples.len()).filter(|&i| rd.valid[i]).map(|i| ev.theta2_at(r, i));
+        let mut ripples = ripple_tests(&e, thetas, devs, &coefs, &dev_coefs);
         let n_used = e[0].len().max(1);
         let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
         let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);

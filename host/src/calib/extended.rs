@@ -603,6 +603,12 @@ impl<'a> Evaluator<'a> {
         }
     }
 
+    /// θ2 at sample `i` of run `r` as [`Evaluator::point`] gives it (`Point::theta2_rad`),
+    /// without the rest of the point (the diagnostics' second pass needs only this).
+    pub fn theta2_at(&self, r: usize, i: usize) -> f64 {
+        interpolate(&self.data.kin.runs[r].samples, i, self.shifts.delay_s).0 + self.shifts.theta2_offset_rad
+    }
+
     /// Rate along axis `a`, °/s.
     #[inline]
     pub fn axis_rate(&self, p: &Point, a: usize) -> f64 {
