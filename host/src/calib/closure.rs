@@ -492,7 +492,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts.",
         drift.name(),
         data.kin.runs[r].label,
-        data.kin.runs[r].samples[i].t_s,
+        data.kin.runs[r].samples[i].t_s(),
         at_start.join(" / ")
     ))
 }
@@ -556,10 +556,7 @@ pub fn close_loop_owned(
     truth: Option<&crate::sim::Truth>,
 ) -> Result<LoopReport, CalError> {
     check_runs(&runs)?;
-    let kin = kinematics::reconstruct(&runs, &opts.cal.kinematics)?;
-    for r in &mut runs {
-        r.samples = Vec::new();
-    }
+    let kin = kinematics::reconstruct_consuming(&mut runs, &opts.cal.kinematics)?;
     let base_report = calibrate_kinematics(&runs, &kin, &opts.cal)?;
     loop_on(kin, base_report, runs[0].gyro, opts, truth)
 }

@@ -380,39 +380,75 @@ fn dot_prefix(x: &Flat, y: &Flat, len: usize) -> f64 {
     ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + rest
 }
 
-/// The tests that would otherwise repeat the harmonic ones: the rate-magnitude bins of the
-/// residual without its 0× and 1× parts (offset and phase misfits, reported as such), and the
-/// slope against the speed deviation with every harmonic 0…8× removed from both (ripple at
-/// harmonics of the table is indistinguishable from them; what is left is the ripple at other
-/// frequencies, which only a wrong rate reconstruction would echo). One pass over the run's
-/// samples for all three axes; `coefs` and `dev_coefs` are the per-axis harmonic fits of the
-/// residual and of the speed deviation from the first pass.
-fn partial_tests(
-    e: &[Vec<f64>; 3],
-    thetas: &[f64],
+/// Sums of the residual per bin of |rate along the axis|, for the rate-magnitude test of the
+/// residual without its 0× and 1× parts (offset and phase misfits, reported as such). Those parts
+/// are b₀ + a₁ sin θ + b₁ cos θ, so the bin sums of the residual, of sin θ and of cos θ, taken in
+/// the first pass, give the bin means without them once the first pass has fitted a₁, b₁, b₀:
+/// no per-sample bin number is kept for a second pass.
+#[derive(Debug, Clone, Default)]
+struct RateBinSums {
+    e: [f64; RATE_BINS],
+    sin: [f64; RATE_BINS],
+    cos: [f64; RATE_BINS],
+    count: [f64; RATE_BINS],
+}
+
+impl RateBinSums {
+    #[inline]
+    fn add(&mut self, k: usize, e: f64, (sin, cos): (f64, f64)) {
+        self.e[k] += e;
+        self.sin[k] += sin;
+        self.cos[k] += cos;
+        self.count[k] += 1.0;
+    }
+
+    /// The bins of the residual less its orders 0 and 1 (`coefs` of the first pass).
+    fn without_orders_0_and_1(&self, coefs: &[(f64, f64); MAX_ORDER + 1]) -> Bins {
+        let mut b = Bins::new(RATE_BINS);
+        for k in 0..RATE_BINS {
+            b.sum[k] = self.e[k] - (coefs[0].1 * self.count[k] + coefs[1].0 * self.sin[k] + coefs[1].1 * self.cos[k]);
+            b.count[k] = self.count[k];
+        }
+        b
+    }
+}
+
+/// The test that would otherwise repeat the harmonic ones: the slope against the speed
+/// deviation with every harmonic 0…32× removed from both (ripple at harmonics of the table is
+/// indistinguishable from them; what is left is the ripple at other frequencies, which only a
+/// wrong rate reconstruction would echo). A second pass over the run's samples for all three
+/// axes (`thetas` the used samples' θ2, `devs` their speed deviations); `coefs` and `dev_coefs`
+/// are the per-axis harmonic fits of the residual and of the speed deviation from the first pass.
+fn ripple_tests(
+    e: &[Vec<f32>; 3],
+    thetas: impl Iterator<Item = f64>,
     devs: impl Iterator<Item = f64>,
-    rate_bin: &[Vec<u8>; 3],
     coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
     dev_coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
-) -> ([Bins; 3], [SlopeSums; 3]) {
-    let mut bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(RATE_BINS));
+) -> [SlopeSums; 3] {
     let mut ripple = [SlopeSums::default(); 3];
     let coefs = coefs.map(|c| flatten(&c));
     let dev_coefs = dev_coefs.map(|c| flatten(&c));
     let all = 2 * (MAX_ORDER + 1);
-    for (i, (&th, d)) in thetas.iter().zip(devs).enumerate() {
+    // Axes whose speed-deviation fit is the same (no clipped sample set them apart) share its
+    // evaluation: usually one dot product per sample instead of three.
+    let same_dev: [Option<usize>; 3] = std::array::from_fn(|a| (0..a).find(|&b| dev_coefs[b] == dev_coefs[a]));
+    for (i, (th, d)) in thetas.zip(devs).enumerate() {
         let h = flatten(&harmonics_of(th));
+        let mut dev_fit = [0.0f64; 3];
         for a in 0..3 {
-            let v = e[a][i];
+            dev_fit[a] = match same_dev[a] {
+                Some(b) => dev_fit[b],
+                None => dot_prefix(&dev_coefs[a], &h, all),
+            };
+            let v = f64::from(e[a][i]);
             if v.is_nan() {
                 continue;
             }
-            // Orders 0 and 1: the first four elements.
-            bins[a].add(usize::from(rate_bin[a][i]), v - dot_prefix(&coefs[a], &h, 4), 0.0);
-            ripple[a].add(d - dot_prefix(&dev_coefs[a], &h, all), v - dot_prefix(&coefs[a], &h, all));
+            ripple[a].add(d - dev_fit[a], v - dot_prefix(&coefs[a], &h, all));
         }
     }
-    (bins, ripple)
+    ripple
 }
 
 /// The speed deviation θ1'/steady − 1 in %.
@@ -423,7 +459,7 @@ fn speed_deviation_percent(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
 
 /// White-noise variance from the remainder of a centred moving average of half-width `w`
 /// (see `residuals::high_pass_power`); windows holding a clipped (NaN) value are skipped.
-fn high_pass_variance(e: &[f64], w: usize) -> f64 {
+fn high_pass_variance(e: &[f32], w: usize) -> f64 {
     let n = e.len();
     let width = 2 * w + 1;
     if n < width {
@@ -434,6 +470,7 @@ fn high_pass_variance(e: &[f64], w: usize) -> f64 {
     prefix.push(0.0);
     nan_prefix.push(0u32);
     for &v in e {
+        let v = f64::from(v);
         prefix.push(prefix.last().copied().unwrap_or(0.0) + if v.is_nan() { 0.0 } else { v });
         nan_prefix.push(nan_prefix.last().copied().unwrap_or(0) + u32::from(v.is_nan()));
     }
@@ -444,18 +481,18 @@ fn high_pass_variance(e: &[f64], w: usize) -> f64 {
             continue;
         }
         let mean = (prefix[i + w + 1] - prefix[i - w]) * inv;
-        power += (e[i] - mean).powi(2);
+        power += (f64::from(e[i]) - mean).powi(2);
         used += 1;
     }
     power / (used as f64 * (1.0 - inv))
 }
 
 /// Ljung–Box statistic of the block means of `e` (blocks with a NaN dropped).
-fn ljung_box(e: &[f64], block: usize, lags: usize) -> (f64, usize) {
+fn ljung_box(e: &[f32], block: usize, lags: usize) -> (f64, usize) {
     let means: Vec<f64> = e
         .chunks_exact(block.max(1))
         .filter(|c| c.iter().all(|v| !v.is_nan()))
-        .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+        .map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>() / c.len() as f64)
         .collect();
     let n = means.len();
     if n <= lags + 2 {
@@ -492,7 +529,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let fs = rk.sample_rate_hz;
         let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
         let base_hz = rk.steady_rate_dps.abs() / 360.0;
-        let mut e: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
+        // The residual per used sample, f32 (its rounding, 6e-8 of a residual, is far below the
+        // noise it measures): the floor, spectrum and whiteness need the series, and it is the
+        // largest thing the diagnostics hold (issue 7's memory bar).
+        let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
         // Σ e·sin nθ, Σ e·cos nθ per axis; the sums that do not involve e (sin², cos², sin·cos,
         // and the speed deviation's Σ d·sin, Σ d·cos) are shared by the axes, less what an
         // axis's clipped samples contributed (`clipped_sums`), so each order costs two
@@ -501,19 +541,17 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let mut shared = [OrderSums::default(); MAX_ORDER + 1];
         let mut clipped_sums = [[OrderSums::default(); MAX_ORDER + 1]; 3];
         let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
-        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s) - rk.samples.first().map_or(0.0, |s| s.t_s))
+        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s()) - rk.samples.first().map_or(0.0, |s| s.t_s()))
             / TIME_BIN_S)
             .ceil()
             .max(1.0) as usize;
         let mut time_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(n_time));
         let mut temp = [SlopeSums::default(); 3];
-        // Per used sample, for the partial tests: θ2, and the bin of |rate along each axis| (the
-        // speed deviation they need is recomputed from the kinematics).
-        let mut thetas: Vec<f64> = Vec::with_capacity(rd.n_valid);
-        let mut rate_bin: [Vec<u8>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
+        let mut rate_sums: [RateBinSums; 3] = Default::default();
         let mut clipped = [0u64; 3];
         let mut dev_sq = 0.0;
-        let t_first = rk.samples.first().map_or(0.0, |s| s.t_s);
+        let (mut n_axis, mut ss_axis) = ([0usize; 3], [0.0f64; 3]);
+        let t_first = rk.samples.first().map_or(0.0, |s| s.t_s());
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         for (i, s) in rk.samples.iter().enumerate() {
@@ -523,11 +561,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let p = ev.point(r, i);
             let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
             let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);
-            let tb = (((s.t_s - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
-            let dev = s.theta1_rate_dps / rk.steady_rate_dps - 1.0;
+            let tb = (((s.t_s() - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
+            let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
             dev_sq += dev * dev;
-            let dev_pct = speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps);
-            thetas.push(p.theta2_rad);
+            let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
             let harmonics = harmonics_of(p.theta2_rad);
             for (o, &(sn, cn)) in shared.iter_mut().zip(&harmonics) {
@@ -535,10 +572,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             }
             for a in 0..3 {
                 let r = ev.axis_rate(&p, a).abs();
-                rate_bin[a].push(((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1) as u8);
+                let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
                 if is_clipped(s.rate_counts[a]) {
                     clipped[a] += 1;
-                    e[a].push(f64::NAN);
+                    e[a].push(f32::NAN);
                     for (o, &(sn, cn)) in clipped_sums[a].iter_mut().zip(&harmonics) {
                         o.add(sn, cn, dev_pct);
                     }
@@ -547,7 +584,9 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                 let pred = ev.predict(&p, a);
                 let ea = f64::from(s.rate_counts[a]) - pred;
                 row[a] = ea;
-                e[a].push(ea);
+                n_axis[a] += 1;
+                ss_axis[a] += ea * ea;
+                e[a].push(ea as f32);
                 for (o, &(sn, cn)) in e_sums[a].iter_mut().zip(&harmonics) {
                     o.0 += ea * sn;
                     o.1 += ea * cn;
@@ -555,6 +594,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                 theta_bins[a].add(bin, ea, pred);
                 time_bins[a].add(tb, ea, 0.0);
                 temp[a].add(p.temp_c, ea);
+                rate_sums[a].add(rbin, ea, harmonics[1]);
             }
             if row.iter().all(|v| !v.is_nan()) {
                 blocking.push(row);
@@ -586,9 +626,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             .iter()
             .zip(&rd.valid)
             .filter(|(_, &v)| v)
-            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps, rk.steady_rate_dps));
-        let (mut rate_bins, mut ripples) = partial_tests(&e, &thetas, devs, &rate_bin, &coefs, &dev_coefs);
-        drop((thetas, rate_bin));
+            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps));
+        // θ2 of the used samples again, from the kinematics (not kept per sample: memory bar).
+        let thetas = (0..rk.samples.len()).filter(|&i| rd.valid[i]).map(|i| ev.theta2_at(r, i));
+        let mut ripples = ripple_tests(&e, thetas, devs, &coefs, &dev_coefs);
         let n_used = e[0].len().max(1);
         let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
         let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);
@@ -600,7 +641,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let mut spectrum = Vec::with_capacity(3);
         for a in 0..3 {
             let ea = &e[a];
-            let (n, ss) = ea.iter().filter(|v| !v.is_nan()).fold((0usize, 0.0), |(n, ss), v| (n + 1, ss + v * v));
+            let (n, ss) = (n_axis[a], ss_axis[a]);
             let floor_var = high_pass_variance(ea, w);
             let pg = Periodogram::new(ea, fs);
             let noise_var = pg
@@ -644,7 +685,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                     }
                 })
                 .collect();
-            let rate_bins = std::mem::replace(&mut rate_bins[a], Bins::new(0));
+            let rate_bins = rate_sums[a].without_orders_0_and_1(&coefs[a]);
             let ripple = std::mem::take(&mut ripples[a]);
             let (q, lags) = ljung_box(ea, block, LJUNG_BOX_LAGS);
             let test = |chi2: f64, dof: usize| Test {

@@ -251,8 +251,8 @@ impl LoopData {
         let (mut temp_sum, mut temp_n) = (0.0, 0usize);
         for r in &kin.runs {
             if let (Some(a), Some(b)) = (r.samples.first(), r.samples.last()) {
-                t_lo = t_lo.min(a.t_s);
-                t_hi = t_hi.max(b.t_s);
+                t_lo = t_lo.min(a.t_s());
+                t_hi = t_hi.max(b.t_s());
             }
             for t in r.temperatures_counts() {
                 if t.is_finite() {
@@ -273,14 +273,14 @@ impl LoopData {
             let mut gaps_after = vec![usize::MAX; s.len()];
             let mut next_gap = usize::MAX;
             for i in (0..s.len()).rev() {
-                if i + 1 < s.len() && s[i + 1].t_s - s[i].t_s > gap {
+                if i + 1 < s.len() && s[i + 1].t_s() - s[i].t_s() > gap {
                     next_gap = i;
                 }
                 gaps_after[i] = next_gap;
             }
             let mut n_valid = 0;
             for i in 0..s.len() {
-                if i > 0 && s[i].t_s - s[i - 1].t_s > gap {
+                if i > 0 && s[i].t_s() - s[i - 1].t_s() > gap {
                     last_gap = Some(i);
                 }
                 let clear_before = i >= guard && last_gap.is_none_or(|g| i >= g + guard);
@@ -302,8 +302,8 @@ impl LoopData {
                     (-((prefix[b] - prefix[a]) / (b - a) as f64 - temp_mean)) as f32
                 })
                 .collect();
-            let first = valid.iter().position(|&v| v).map_or(0.0, |i| s[i].t_s);
-            let last = valid.iter().rposition(|&v| v).map_or(first, |i| s[i].t_s);
+            let first = valid.iter().position(|&v| v).map_or(0.0, |i| s[i].t_s());
+            let last = valid.iter().rposition(|&v| v).map_or(first, |i| s[i].t_s());
             runs.push(RunData { valid, temp_c, n_valid, span_s: (first, last) });
         }
         let mut poses: Vec<Pose> = Vec::new();
@@ -517,25 +517,25 @@ impl Shifts {
 /// sample is valid, so they exist within [`MAX_DELAY_S`]).
 fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
     if delay_s == 0.0 {
-        return (s[i].theta2_rad, s[i].theta1_rate_dps);
+        return (s[i].theta2_rad(), s[i].theta1_rate_dps());
     }
-    let target = s[i].t_s - delay_s;
+    let target = s[i].t_s() - delay_s;
     let mut j = i;
     if delay_s > 0.0 {
-        while j > 0 && s[j].t_s > target {
+        while j > 0 && s[j].t_s() > target {
             j -= 1;
         }
     } else {
-        while j + 1 < s.len() && s[j + 1].t_s <= target {
+        while j + 1 < s.len() && s[j + 1].t_s() <= target {
             j += 1;
         }
     }
     let k = (j + 1).min(s.len() - 1);
-    let span = s[k].t_s - s[j].t_s;
-    let w = if span > 0.0 { ((target - s[j].t_s) / span).clamp(0.0, 1.0) } else { 0.0 };
+    let span = s[k].t_s() - s[j].t_s();
+    let w = if span > 0.0 { ((target - s[j].t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
     (
-        s[j].theta2_rad + w * (s[k].theta2_rad - s[j].theta2_rad),
-        s[j].theta1_rate_dps + w * (s[k].theta1_rate_dps - s[j].theta1_rate_dps),
+        s[j].theta2_rad() + w * (s[k].theta2_rad() - s[j].theta2_rad()),
+        s[j].theta1_rate_dps() + w * (s[k].theta1_rate_dps() - s[j].theta1_rate_dps()),
     )
 }
 
@@ -626,12 +626,12 @@ impl<'a> Evaluator<'a> {
         // The base's heading in the lab: the sensor table is geared to a shaft fixed to the
         // ground (EXCITER.md, "Mechanism"), so θ2 = ratio·θ1_lab + const and the index fixes the
         // heading for every run, while the encoder's count restarts with each capture.
-        let heading_rad = theta2 / rk.gear_ratio;
-        let basis = earth_basis(heading_rad, th_eff);
+        // (Each angle's sine and cosine once: they were 4 of the 5 libm calls a point made.)
+        let (s1, c1) = (theta2 / rk.gear_ratio).sin_cos();
+        let basis = earth_basis((s1, c1), (se, ce));
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
         // The lab-fixed rate turns with θ2 too: ∂(basis)/∂θ2.
-        let (s1, c1) = heading_rad.sin_cos();
         let d_basis = [[ce, -se, 0.0], [s1 * se, s1 * ce, 0.0], [-c1 * se, -c1 * ce, 0.0]];
         for (i, d) in dw2.iter_mut().enumerate() {
             *d += ev * d_basis[0][i] + en * d_basis[1][i] + ew * d_basis[2][i];
@@ -665,8 +665,8 @@ impl<'a> Evaluator<'a> {
             rate2_eff_dps: rate2_eff,
             dtheta_eff: ripple,
             drate_eff_dps: rate2 * dripple,
-            t_rel_s: s.t_s - self.data.t0_s,
-            t_scaled: (s.t_s - self.data.t_mid_s) / self.data.t_half_s,
+            t_rel_s: s.t_s() - self.data.t0_s,
+            t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
             temp_c: f64::from(self.data.runs[r].temp_c[i]),
             mesh_rad,
             pose: rk.pose,
@@ -676,8 +676,14 @@ impl<'a> Evaluator<'a> {
             theta1_rate_rad_s,
             theta1_rate_dps: rate1,
             run: r,
-            t_s: s.t_s,
+            t_s: s.t_s(),
         }
+    }
+
+    /// θ2 at sample `i` of run `r` as [`Evaluator::point`] gives it (`Point::theta2_rad`),
+    /// without the rest of the point (the diagnostics' second pass needs only this).
+    pub fn theta2_at(&self, r: usize, i: usize) -> f64 {
+        interpolate(&self.data.kin.runs[r].samples, i, self.shifts.delay_s).0 + self.shifts.theta2_offset_rad
     }
 
     /// Rate along axis `a`, °/s.
@@ -784,10 +790,9 @@ impl<'a> Evaluator<'a> {
 /// lab-fixed horizontal vector at azimuth ψ lies at ψ − θ1 in the base frame, cos(ψ−θ1)·e_z2 +
 /// sin(ψ−θ1)·u; expanding in cos ψ and sin ψ gives the two horizontal columns. θ1 is the
 /// base's heading, θ2/ratio (the ground-geared table ties it to the index), θ2 the table angle.
+/// Takes (sin, cos) of θ1 and of θ2.
 #[inline]
-fn earth_basis(theta1_rad: f64, theta2_rad: f64) -> [[f64; 3]; 3] {
-    let (s1, c1) = theta1_rad.sin_cos();
-    let (s2, c2) = theta2_rad.sin_cos();
+fn earth_basis((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> [[f64; 3]; 3] {
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
 }
 

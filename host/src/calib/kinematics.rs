@@ -53,19 +53,63 @@ impl Default for KinOptions {
     }
 }
 
-/// Kinematics at one gyro sample (32 bytes: millions of them are held, so neither θ2' =
+/// Kinematics at one gyro sample (24 bytes: millions of them are held, so neither θ2' =
 /// ratio·θ1', ω_s nor the temperature is stored; see [`RunKinematics::theta2_rate_dps`],
-/// [`RunKinematics::omega_package_dps`] and [`RunKinematics::temperatures_counts`]).
+/// [`RunKinematics::omega_package_dps`] and [`RunKinematics::temperatures_counts`]). The time is
+/// the capture's integer µs in 48 bits (8.9 years), exact; θ1' is kept in f32, whose rounding
+/// (4e-8 of the rate) is 3000× below the encoder quantisation already on it
+/// (`RunKinematics::rate_quantisation_dps`), so 8 of the 32 bytes it took in f64 with padding go.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KinSample {
-    /// Sample time, s since the start of the capture.
-    pub t_s: f64,
     /// Sensor-table angle θ2, rad (0 at the centre of the index plate).
-    pub theta2_rad: f64,
+    theta2: f64,
+    /// Low 32 bits of the sample time, µs since the start of the capture.
+    t_us_lo: u32,
     /// Base-table rate θ1', °/s.
-    pub theta1_rate_dps: f64,
+    theta1_rate: f32,
     /// Raw gyro output, counts.
     pub rate_counts: [i16; 3],
+    /// Bits 32-47 of the sample time.
+    t_us_hi: u16,
+}
+
+impl KinSample {
+    /// A sample at `t_us` µs since the start of the capture (0 ≤ t_us < 2^48).
+    pub fn new(t_us: i64, theta2_rad: f64, theta1_rate_dps: f64, rate_counts: [i16; 3]) -> Self {
+        debug_assert!((0..1 << 48).contains(&t_us), "sample time {t_us} µs outside 48 bits");
+        let t = t_us.clamp(0, (1 << 48) - 1) as u64;
+        Self {
+            theta2: theta2_rad,
+            t_us_lo: t as u32,
+            theta1_rate: theta1_rate_dps as f32,
+            rate_counts,
+            t_us_hi: (t >> 32) as u16,
+        }
+    }
+
+    /// Sample time, µs since the start of the capture.
+    #[inline]
+    pub fn t_us(&self) -> i64 {
+        (i64::from(self.t_us_hi) << 32) | i64::from(self.t_us_lo)
+    }
+
+    /// Sample time, s since the start of the capture.
+    #[inline]
+    pub fn t_s(&self) -> f64 {
+        self.t_us() as f64 * 1e-6
+    }
+
+    /// Sensor-table angle θ2, rad (0 at the centre of the index plate).
+    #[inline]
+    pub fn theta2_rad(&self) -> f64 {
+        self.theta2
+    }
+
+    /// Base-table rate θ1', °/s.
+    #[inline]
+    pub fn theta1_rate_dps(&self) -> f64 {
+        f64::from(self.theta1_rate)
+    }
 }
 
 /// Where θ2 = 0 lies in a run, from its index pulses.
@@ -151,20 +195,20 @@ pub struct RunKinematics {
 impl RunKinematics {
     /// Sensor-table rate θ2' at a sample, °/s.
     pub fn theta2_rate_dps(&self, s: &KinSample) -> f64 {
-        self.gear_ratio * s.theta1_rate_dps
+        self.gear_ratio * s.theta1_rate_dps()
     }
 
     /// Rate the package feels at a sample, ω_s = R_qᵀ ω2 (geometry, eq. 1-2), °/s in package axes.
     #[inline]
     pub fn omega_package_dps(&self, s: &KinSample) -> [f64; 3] {
-        (self.rot_t * omega2(s.theta1_rate_dps, s.theta2_rad, self.theta2_rate_dps(s))).into()
+        (self.rot_t * omega2(s.theta1_rate_dps(), s.theta2_rad(), self.theta2_rate_dps(s))).into()
     }
 
     /// Gyro die temperature at every kept sample, OUT_TEMP counts (−1 count/°C, offset unknown),
     /// interpolated in time (NaN without readings).
     pub fn temperatures_counts(&self) -> impl Iterator<Item = f32> + '_ {
         let mut cursor = 0;
-        self.samples.iter().map(move |s| temperature_at(&self.temperatures, (s.t_s * 1e6).round() as i64, &mut cursor))
+        self.samples.iter().map(move |s| temperature_at(&self.temperatures, s.t_us(), &mut cursor))
     }
 }
 
@@ -357,8 +401,7 @@ fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f3
 }
 
 /// Everything about a run that does not depend on the pooled gear ratio.
-struct RunPrep<'a> {
-    run: &'a Run,
+struct RunPrep {
     number: usize,
     line: IndexLine,
     fit: (f64, f64, f64, f64, f64),
@@ -366,6 +409,31 @@ struct RunPrep<'a> {
 
 /// Reconstructs θ2, θ1', θ2' and temperature at every usable sample of every run.
 pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let (preps, cpr, period, gear) = prepare(runs)?;
+    let out = preps
+        .into_iter()
+        .zip(runs)
+        .map(|(p, run)| run_kinematics(p, run, cpr, period, gear.estimated, opts))
+        .collect::<Result<_, _>>()?;
+    Ok(Kinematics { runs: out, gear })
+}
+
+/// [`reconstruct`] on runs it may consume: each run's raw samples are freed as soon as its own
+/// kinematics are made, so a long capture's raw samples and kinematics are held together for
+/// one run at most (issue 7's memory bar); the runs keep their index edges and temperatures.
+pub fn reconstruct_consuming(runs: &mut [Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let (preps, cpr, period, gear) = prepare(runs)?;
+    let mut out = Vec::with_capacity(runs.len());
+    for (p, run) in preps.into_iter().zip(runs.iter_mut()) {
+        out.push(run_kinematics(p, run, cpr, period, gear.estimated, opts)?);
+        run.samples = Vec::new();
+    }
+    Ok(Kinematics { runs: out, gear })
+}
+
+/// The index lines of every run and the pooled gear ratio: (per-run preparations, encoder
+/// counts per revolution, pooled index period in counts, gear estimate).
+fn prepare(runs: &[Run]) -> Result<(Vec<RunPrep>, f64, f64, GearEstimate), CalError> {
     let first = runs.first().ok_or(CalError::NoRuns)?;
     let cpr = f64::from(first.hello.encoder_counts_per_rev);
     let nominal = f64::from(first.hello.gear_ratio.num) / f64::from(first.hello.gear_ratio.den);
@@ -379,7 +447,7 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
         }
         let line = IndexLine::new(&p, nominal_period);
         let fit = line.fit(nominal_period);
-        preps.push(RunPrep { run, number: i + 1, line, fit });
+        preps.push(RunPrep { number: i + 1, line, fit });
     }
 
     // Pool the per-run periods, weighted by 1/σ²; runs with a single pulse carry no period.
@@ -400,19 +468,17 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
         sigma: ratio * period_sigma / period,
         deviation_ppm: (ratio - nominal) / nominal * 1e6,
     };
-
-    let out = preps.into_iter().map(|p| run_kinematics(p, cpr, period, ratio, opts)).collect::<Result<_, _>>()?;
-    Ok(Kinematics { runs: out, gear })
+    Ok((preps, cpr, period, gear))
 }
 
 fn run_kinematics(
-    p: RunPrep<'_>,
+    p: RunPrep,
+    run: &Run,
     cpr: f64,
     period: f64,
     ratio: f64,
     opts: &KinOptions,
 ) -> Result<RunKinematics, CalError> {
-    let run = p.run;
     let centre_sigma = if p.line.points.len() > 2 {
         p.fit.2 * (p.line.points.len() as f64 / (p.line.points.len() as f64 - 2.0)).sqrt()
     } else {
@@ -473,12 +539,7 @@ fn run_kinematics(
             return;
         }
         let theta2_rad = (smp.encoder as f64 - ref_counts) * two_pi_over_period;
-        samples.push(KinSample {
-            t_s: smp.t_us as f64 * 1e-6,
-            theta2_rad,
-            theta1_rate_dps: rate,
-            rate_counts: smp.rate_counts,
-        });
+        samples.push(KinSample::new(smp.t_us, theta2_rad, rate, smp.rate_counts));
     });
 
     // One sensor-table revolution at the commanded speed: the paper's per-pose sinusoid fit needs
@@ -526,10 +587,10 @@ fn run_kinematics(
 mod tests {
     use super::*;
 
-    /// The sample record stays half a cache line: every pass streams millions of them, and the
-    /// loop holds them all (issue 7's memory bar).
+    /// The sample record stays 24 bytes: every pass streams millions of them, and the loop
+    /// holds them all (issue 7's memory bar).
     #[test]
-    fn kin_sample_is_half_a_cache_line() {
-        assert_eq!(std::mem::size_of::<KinSample>(), 32);
+    fn kin_sample_is_24_bytes() {
+        assert_eq!(std::mem::size_of::<KinSample>(), 24);
     }
 }

@@ -36,10 +36,11 @@ impl Periodogram {
     /// Of `x` sampled at `fs_hz`, a NaN (a clipped sample) taken as 0, the mean removed.
     /// Up to [`MAX_SEGMENT`] samples: one segment zero-padded to a power of two. Longer: the
     /// average over consecutive segments of [`MAX_SEGMENT`] samples, the last one ending at the
-    /// last sample (it overlaps its neighbour rather than leave samples out).
-    pub fn new(x: &[f64], fs_hz: f64) -> Self {
+    /// last sample (it overlaps its neighbour rather than leave samples out). `x` is f64 or f32
+    /// (the diagnostics keep their residuals in f32).
+    pub fn new<T: Copy + Into<f64>>(x: &[T], fs_hz: f64) -> Self {
         let n = x.len();
-        let mean = x.iter().filter(|v| !v.is_nan()).sum::<f64>() / n.max(1) as f64;
+        let mean = x.iter().map(|&v| v.into()).filter(|v: &f64| !v.is_nan()).sum::<f64>() / n.max(1) as f64;
         let (seg, n_fft) =
             if n <= MAX_SEGMENT { (n, n.next_power_of_two().max(2)) } else { (MAX_SEGMENT, MAX_SEGMENT) };
         let starts: Vec<usize> = if n <= MAX_SEGMENT {
@@ -57,6 +58,7 @@ impl Periodogram {
         let mut power = vec![0.0; n_fft / 2 + 1];
         for &s0 in &starts {
             for (dst, &v) in input.iter_mut().zip(&x[s0..s0 + seg]) {
+                let v: f64 = v.into();
                 *dst = if v.is_nan() { 0.0 } else { v } - mean;
             }
             input[seg..].fill(0.0);

@@ -22,14 +22,14 @@ fn kinematics_reference_theta2_in_both_directions() {
         let tol_rad = (2.0 * 360.0 / f64::from(COUNTS_PER_REV)).to_radians();
         let (mut max_err, mut max_rate_err) = (0.0f64, 0.0f64);
         for s in &k.samples {
-            let t = s.t_s;
+            let t = s.t_s();
             let truth = g.theta2_0_rad + g.gear_ratio * g.theta1(t).0.to_radians();
-            let d =
-                (s.theta2_rad - truth + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            let d = (s.theta2_rad() - truth + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
             max_err = max_err.max(d.abs());
             // A window straddling the end of the ramp (a step in acceleration) is not a line.
             if (t - g.ramp_s).abs() > 0.011 {
-                max_rate_err = max_rate_err.max((s.theta1_rate_dps - g.theta1(t).1).abs());
+                max_rate_err = max_rate_err.max((s.theta1_rate_dps() - g.theta1(t).1).abs());
             }
         }
         assert!(max_err < tol_rad, "θ2 error {max_err} rad, {:?} {:?}", kin.gear, k.index);
