@@ -203,7 +203,8 @@ enum Cmd {
         full_scale: u16,
         /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
         /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
-        /// gear_ratio_error, mystery_harmonic.
+        /// gear_ratio_error, mystery_harmonic, earth_rotation, gear_transmission, g_sensitivity,
+        /// table_tilt, pose_fixture, bias_random_walk.
         #[arg(long = "effect")]
         effects: Vec<String>,
         /// Full configuration as JSON (a `SimConfig`); overrides the options above.

@@ -432,6 +432,22 @@ impl LockstepBench {
         self.log.lock().unwrap().clone()
     }
 
+    /// After the host has gone: one more step of rig time, so that bytes the host wrote just
+    /// before exiting (a `Stop` at the prompt, sent 0 s of rig time before the exit) are handled
+    /// rather than left in the pty, then waits (wall time, bounded) until the rig's log shows
+    /// `command` or the rig answered. Without it the check below raced the rig's reading.
+    fn settle(&mut self, command: &str) {
+        use std::io::{BufRead, Write};
+        if writeln!(self.control_in, "step {} 0", 5_000_000).and_then(|()| self.control_in.flush()).is_ok() {
+            let mut at = String::new();
+            let _ = self.control_out.read_line(&mut at);
+        }
+        let t0 = std::time::Instant::now();
+        while self.received(command).is_empty() && t0.elapsed() < Duration::from_secs(10) {
+            thread::sleep(Duration::from_millis(10));
+        }
+    }
+
     /// Simulated times (s) at which the rig received `command`.
     fn received(&self, command: &str) -> Vec<f64> {
         let prefix = format!("virtual rig: received {command} (");
@@ -604,6 +620,7 @@ fn signal_the_session(sig: &str, when: When) -> (LockstepBench, PathBuf, String,
     let (status, err, _) = host.finish();
     let (signal_ns, signal_wall) = signalled.unwrap_or_else(|| panic!("never signalled: {err}"));
     let wall = signal_wall.elapsed();
+    bench.settle("Stop");
     let sim_s = (end_ns - signal_ns) as f64 * 1e-9;
     eprintln!("SIG{sig} {when:?}: the host exited {sim_s:.3} s of rig time and {wall:.2?} of wall time after it");
     assert_eq!(status.code(), Some(1), "{err}");

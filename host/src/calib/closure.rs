@@ -9,7 +9,7 @@ use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics};
 use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
 use super::lsq::AXES;
-use super::report::{Autocorrelation, AxisResidual, RunResidualReport};
+use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
 use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score, Skipped};
 use super::truth_check::TruthErrors;
 use super::{calibrate_kinematics, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
@@ -403,6 +403,7 @@ impl Context<'_> {
 fn final_cal_report(base: &CalReport, s: &State, data: &LoopData) -> CalReport {
     let mut r = base.clone();
     let est = &s.estimate;
+    r.drift = drift_table(&s.fitted.model, data);
     r.model = std::iter::once("linear: v = K S ω + v_off".to_string())
         .chain(s.fitted.model.effects.iter().map(|e| e.name()))
         .collect::<Vec<_>>()
@@ -451,6 +452,61 @@ fn final_cal_report(base: &CalReport, s: &State, data: &LoopData) -> CalReport {
     r
 }
 
+/// Whether a linear column is part of the offset (the constant or a drift term).
+fn is_offset_column(c: LinCol) -> bool {
+    matches!(
+        c,
+        LinCol::One
+            | LinCol::DriftExp
+            | LinCol::DriftExpFixed(_)
+            | LinCol::DriftT1
+            | LinCol::DriftT2
+            | LinCol::DriftTemp
+            | LinCol::DriftKnot { .. }
+    )
+}
+
+/// The offset the model's drift gives through every run, every [`DRIFT_TABLE_STEP_S`] (empty
+/// without a drift model), for export with the calibration.
+fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
+    if !m.effects.iter().any(|e| e.is_drift()) {
+        return Vec::new();
+    }
+    let ev = super::extended::Evaluator::new(data, m);
+    let mut out = Vec::new();
+    for (r, rk) in data.kin.runs.iter().enumerate() {
+        let mut row = RunDrift {
+            run: rk.run,
+            label: rk.label.clone(),
+            t_s: Vec::new(),
+            temp_c: Vec::new(),
+            offset_counts: Default::default(),
+        };
+        let mut next_s = f64::NEG_INFINITY;
+        for (i, _) in data.runs[r].valid.iter().enumerate().filter(|(_, v)| **v) {
+            let p = ev.point(r, i);
+            if p.t_s < next_s {
+                continue;
+            }
+            next_s = p.t_s + DRIFT_TABLE_STEP_S;
+            row.t_s.push(p.t_s);
+            row.temp_c.push(p.temp_c);
+            for (a, col) in row.offset_counts.iter_mut().enumerate() {
+                col.push(
+                    m.lin
+                        .iter()
+                        .zip(&m.beta[a])
+                        .filter(|(c, _)| is_offset_column(**c))
+                        .map(|(&c, b)| b * ev.lin_value(c, &p, a))
+                        .sum(),
+                );
+            }
+        }
+        out.push(row);
+    }
+    out
+}
+
 /// With a drift model the offset column alone is not "the offset": says what time or die
 /// temperature the reported offsets refer to, and what the model gives at the first sample of the
 /// first run (where a sensor's datasheet offset is usually taken: at power-up).
@@ -460,6 +516,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         Effect::DriftWarmUp => "the warmed-up level (t → ∞ of the exponential)",
         Effect::DriftPolynomial => "the middle of the capture's time span, less half the quadratic term",
         Effect::DriftTemperature => "the capture's mean die temperature",
+        Effect::DriftKnots(_) => "the first used sample of the first run (each run has its own level)",
         _ => return None,
     };
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
@@ -472,24 +529,14 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
                 .lin
                 .iter()
                 .zip(&m.beta[a])
-                .filter(|(c, _)| {
-                    matches!(
-                        c,
-                        LinCol::One
-                            | LinCol::DriftExp
-                            | LinCol::DriftExpFixed(_)
-                            | LinCol::DriftT1
-                            | LinCol::DriftT2
-                            | LinCol::DriftTemp
-                    )
-                })
+                .filter(|(c, _)| is_offset_column(**c))
                 .map(|(&c, b)| b * ev.lin_value(c, &p, a))
                 .sum();
             format!("{v:+.2}")
         })
         .collect();
     Some(format!(
-        "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts.",
+        "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts; calibration.json's `drift` holds the modelled offset every 10 s of every run.",
         drift.name(),
         data.kin.runs[r].label,
         data.kin.runs[r].samples[i].t_s(),
@@ -658,7 +705,8 @@ fn loop_on(
     if let Some(note) = offset_reference_note(&state.fitted.model, &data) {
         notes.push(note);
     }
-    if effects.iter().any(|e| e.is_drift()) && !both_directions(&data) {
+    // The free drift gives each run its own level, so it never leans on the offset being shared.
+    if effects.iter().any(|e| e.is_drift() && !matches!(e, Effect::DriftKnots(_))) && !both_directions(&data) {
         asks.push(
             "The offset drifts, and all runs turn one way: the offset and the constant θ2'·M R_qᵀ e_z2 term are separated only through the drift model and the speeds. Runs in both directions (--rates-dps 180,-180) separate them directly.".into(),
         );

@@ -200,6 +200,7 @@ fn calibrate_kinematics(runs: &[Run], kin: &kinematics::Kinematics, opts: &CalOp
         .collect();
 
     Ok(CalReport {
+        drift: Vec::new(),
         model: model.name().to_string(),
         gyro,
         nominal_counts_per_dps: nominal,

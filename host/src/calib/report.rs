@@ -129,7 +129,29 @@ pub struct CalReport {
     pub gear: GearEstimate,
     /// Paper method cross-check (None if its per-pose systems were singular).
     pub paper: Option<PaperCheck>,
+    /// The offset the drift model gives through each run (empty without a drift model): what
+    /// `offset_counts` becomes at other times and die temperatures.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub drift: Vec<RunDrift>,
 }
+
+/// The modelled offset through one run, sampled every [`DRIFT_TABLE_STEP_S`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunDrift {
+    /// Run number.
+    pub run: usize,
+    /// Run label (pose and rate).
+    pub label: String,
+    /// Times on the run's capture clock, s.
+    pub t_s: Vec<f64>,
+    /// Smoothed die temperature at those times, °C from the capture mean.
+    pub temp_c: Vec<f64>,
+    /// Modelled offset per axis at those times, counts.
+    pub offset_counts: [Vec<f64>; 3],
+}
+
+/// Spacing of the exported drift table, s: as fine as the finest free-drift knots.
+pub const DRIFT_TABLE_STEP_S: f64 = 10.0;
 
 impl CalReport {
     /// The part needed to turn raw counts into rates.
