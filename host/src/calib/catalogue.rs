@@ -62,6 +62,12 @@ pub enum Effect {
     /// Earth's rotation with its vertical part known from the latitude the user gave: only the
     /// two horizontal components (the heading) are fitted.
     EarthRotationAtLatitude,
+    /// Earth's rotation with only its two horizontal components fitted, in a model with
+    /// g-sensitivity and no latitude: the vertical part turns in the sensor frame exactly as
+    /// gravity does (both lie along the base axis), so it is a g-sensitivity along M's rows,
+    /// ≤ Ω/g = 0.0042 °/s/g, and that term holds it; the sensitivities and directions do not
+    /// depend on which of the two holds it.
+    EarthRotationHorizontal,
     /// A periodic angle error of the sensor table at n× θ2 that encoder and index cannot see
     /// (magnetic-gear pole pass, eccentricity), with its derivative in θ2'; seen by every axis
     /// through M R_qᵀ, one coefficient pair per pose.
@@ -101,6 +107,7 @@ impl Effect {
             Effect::GSensitivity => "g-sensitivity (bias from gravity)".into(),
             Effect::TableTilt => "sensor-table axis not perpendicular to the base axis".into(),
             Effect::EarthRotationAtLatitude => "Earth rotation (vertical from the latitude)".into(),
+            Effect::EarthRotationHorizontal => "Earth rotation (horizontal; vertical held by the g-sensitivity)".into(),
             Effect::FilterGain => "gyro low-pass gain at the table frequency".into(),
             Effect::GearLag => "magnetic-gear lag growing with speed".into(),
             Effect::TableHarmonic(n) if n % GEAR_POLE_PASS_ORDER == 0 => {
@@ -127,6 +134,7 @@ impl Effect {
             Effect::GSensitivity => "g_sensitivity".into(),
             Effect::TableTilt => "table_tilt".into(),
             Effect::EarthRotationAtLatitude => "earth_rotation_at_latitude".into(),
+            Effect::EarthRotationHorizontal => "earth_rotation_horizontal".into(),
             Effect::FilterGain => "filter_gain".into(),
             Effect::GearLag => "gear_lag".into(),
             Effect::TableHarmonic(n) => format!("table_harmonic_{n}"),
@@ -138,6 +146,11 @@ impl Effect {
     /// Whether it is one of the mutually exclusive offset-drift models.
     pub fn is_drift(self) -> bool {
         matches!(self, Effect::DriftWarmUp | Effect::DriftPolynomial | Effect::DriftTemperature | Effect::DriftKnots(_))
+    }
+
+    /// Whether it is one of the forms of Earth's rotation (at most one is in a model).
+    pub fn is_earth(self) -> bool {
+        matches!(self, Effect::EarthRotation | Effect::EarthRotationAtLatitude | Effect::EarthRotationHorizontal)
     }
 
     /// What it means physically, as the report says it.
@@ -167,7 +180,7 @@ impl Effect {
             Effect::FilterGain => {
                 "the gyro's low-pass filter attenuates the table-rate sinusoid as well as delaying it (a 1st-order filter with 5 ms of delay loses 120 ppm at 0.5 Hz)"
             }
-            Effect::EarthRotation | Effect::EarthRotationAtLatitude => {
+            Effect::EarthRotation | Effect::EarthRotationAtLatitude | Effect::EarthRotationHorizontal => {
                 "the lab turns with the Earth at 15.041 °/h (IERS: 7.292115e-5 rad/s); at 180 °/s its vertical part alone is ≈ 13 ppm of θ1'"
             }
             Effect::TableHarmonic(_) => {
@@ -207,6 +220,9 @@ impl Effect {
             }
             Effect::EarthRotationAtLatitude => {
                 "the base angle θ1: the horizontal part turns with it; the vertical part is Ω·sin(latitude), given"
+            }
+            Effect::EarthRotationHorizontal => {
+                "the base angle θ1: the horizontal part turns with it; the vertical part cannot be told from a g-sensitivity along M's rows, which holds it"
             }
             Effect::EarthRotation => {
                 "runs at two speeds or in both directions (its vertical part does not scale with θ1', a sensitivity does); the horizontal part turns with the base angle θ1"

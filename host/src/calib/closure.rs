@@ -7,10 +7,14 @@
 use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics};
-use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
+use super::extended::{
+    effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
+};
 use super::lsq::AXES;
 use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
-use super::selection::{both_directions, held_out, separates_delay_and_index, step, DriftChoice, Score, Skipped};
+use super::selection::{
+    both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
+};
 use super::truth_check::TruthErrors;
 use super::{calibrate_kinematics, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
@@ -30,14 +34,15 @@ pub struct LoopOptions {
     /// horizontal rate is tested against Ω·cos(latitude).
     #[serde(default)]
     pub latitude_deg: Option<f64>,
-    /// Effects added at most (the catalogue has 3 phase, 3 drift, 1 scale and 7 harmonic entries;
-    /// a capture needing more than 8 is better described as not understood).
+    /// Effects added at most: a real exciter needs about ten (phase 2, drift 1, the gears' two
+    /// pole-pass lines, pose fixture, g-sensitivity, table tilt, scale, filter); a capture needing
+    /// more than 12 is better described as not understood.
     pub max_effects: usize,
 }
 
 impl Default for LoopOptions {
     fn default() -> Self {
-        Self { cal: CalOptions::default(), alpha: 1e-3, latitude_deg: None, max_effects: 8 }
+        Self { cal: CalOptions::default(), alpha: 1e-3, latitude_deg: None, max_effects: 12 }
     }
 }
 
@@ -124,6 +129,13 @@ pub struct StepReport {
     pub findings: Vec<String>,
     /// Gauss-Newton passes of the fit.
     pub passes: usize,
+    /// Effects taken out after this step's addition made them redundant.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<Dropped>,
+    /// Effects this step's addition replaced (a drift curve that left drift behind, replaced by
+    /// the free drift).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub replaced: Vec<Effect>,
 }
 
 /// The loop's result.
@@ -209,9 +221,10 @@ fn base_estimate(f: &Fitted, nominal: f64, data: &LoopData) -> BaseEstimate {
 /// Standard uncertainty, relative, that Earth's rotation puts on a sensitivity while the model
 /// does not hold it: its vertical part (at most Ω = 15.041 °/h) adds to θ1', a relative error of
 /// up to Ω/|θ1'| at the slowest run; taken as uniform within ± that bound, σ = bound/√3 (GUM
-/// 4.3.7, Type B). Zero once Earth rotation is modelled.
+/// 4.3.7, Type B). Zero once Earth rotation is modelled, or g-sensitivity, which holds the
+/// vertical part exactly (both turn with θ2 along the base axis).
 fn earth_type_b_rel(m: &Model, data: &LoopData) -> f64 {
-    if m.effects.iter().any(|e| matches!(e, Effect::EarthRotation | Effect::EarthRotationAtLatitude)) {
+    if m.effects.iter().any(|e| e.is_earth() || *e == Effect::GSensitivity) {
         return 0.0;
     }
     let slowest_dps = data.kin.runs.iter().map(|r| r.steady_rate_dps.abs()).fold(f64::INFINITY, f64::min);
@@ -394,6 +407,8 @@ impl Context<'_> {
             truth: self.truth.map(|t| TruthErrors::of(&s.estimate.axes, t)),
             findings: s.diag.findings.iter().map(|f| f.text.clone()).collect(),
             passes: s.fitted.passes,
+            dropped: Vec::new(),
+            replaced: Vec::new(),
         }
     }
 }
@@ -511,7 +526,13 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
 /// temperature the reported offsets refer to, and what the model gives at the first sample of the
 /// first run (where a sensor's datasheet offset is usually taken: at power-up).
 fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
-    let drift = m.effects.iter().copied().find(|e| e.is_drift())?;
+    // The free drift, when in, is what the offsets follow (a curve beside it is only its shape).
+    let drift = m
+        .effects
+        .iter()
+        .copied()
+        .find(|e| matches!(e, Effect::DriftKnots(_)))
+        .or_else(|| m.effects.iter().copied().find(|e| e.is_drift()))?;
     let refers_to = match drift {
         Effect::DriftWarmUp => "the warmed-up level (t → ∞ of the exponential)",
         Effect::DriftPolynomial => "the middle of the capture's time span, less half the quadratic term",
@@ -582,7 +603,42 @@ fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
                 total * per_hour
             )
         }
+        (None, None) if f.model.effects.contains(&Effect::EarthRotationHorizontal) => format!(
+            "Earth rotation: horizontal part fitted {:.2} ± {:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two.",
+            h * per_hour,
+            h_sigma * per_hour,
+            earth_rate_dps()
+        ),
         (None, None) => return None,
+    })
+}
+
+/// Fitted Earth rates beyond this many σ above Ω = 15.041 °/h mean the term is holding another
+/// effect: 2σ (one-sided 2.3 %) errs towards flagging, the safe side.
+const EARTH_EXCESS_SIGMAS: f64 = 2.0;
+
+/// When the freely fitted Earth rate is larger than the Earth turns (by more than
+/// [`EARTH_EXCESS_SIGMAS`]): a sentence saying so. Its vertical part is indistinguishable from a
+/// g-sensitivity along M's rows, and speed-proportional terms (a table tilt) lean on it too, so
+/// an impossible value means the model holds a real effect in the wrong term, and the
+/// calibration must not be called good.
+fn earth_implausible(f: &Fitted) -> Option<String> {
+    let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
+    let (v, n, w) =
+        (get(SharedPar::EarthVertical)?, get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
+    let total = (v.0 * v.0 + n.0 * n.0 + w.0 * w.0).sqrt();
+    if total <= 0.0 {
+        return None;
+    }
+    // σ of the magnitude from the three components (first order).
+    let sigma = ((v.0 * v.1).powi(2) + (n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / total;
+    let excess = (total - earth_rate_dps()) / sigma;
+    (excess > EARTH_EXCESS_SIGMAS).then(|| {
+        format!(
+            "Earth rotation fitted at {:.1} ± {:.1} °/h, {excess:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
+            total * 3600.0,
+            sigma * 3600.0
+        )
     })
 }
 
@@ -651,42 +707,66 @@ fn loop_on(
                 skipped.push(sk);
             }
         }
-        let Some((bi, fitted)) = outcome.accepted else {
+        let Some((bi, mut fitted)) = outcome.accepted else {
             break;
         };
         let score = outcome.scores[bi].clone();
+        let mut dropped = Vec::new();
+        let replaced: Vec<Effect> =
+            state.fitted.model.effects.iter().copied().filter(|e| !fitted.model.effects.contains(e)).collect();
+        while let Some((effect, wald_chi2, threshold)) = least_needed(&fitted, opts.alpha, score.effect) {
+            match fit(&data, fitted.model.without(effect), state.diag.weights()) {
+                Ok(f) => {
+                    dropped.push(Dropped { effect, after: score.effect, wald_chi2, threshold });
+                    fitted = f;
+                }
+                Err(e) => {
+                    skipped.push(Skipped { effect, why: format!("could not be dropped when redundant: {e}") });
+                    break;
+                }
+            }
+        }
         let next = ctx.state(fitted);
-        steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), outcome.scores, outcome.drift_choice));
+        let mut report =
+            ctx.report(steps.len(), &next, Some(&state), Some(score), outcome.scores, outcome.drift_choice);
+        report.dropped = dropped;
+        report.replaced = replaced;
+        steps.push(report);
         state = next;
     }
     // Earth rotation is in every lab: once the loop has explained what it can, a model without
     // it gets it (fitted freely: only the lab's orientation is unknown), when the runs separate
     // its vertical part from the sensitivities (two speeds or directions). Its σ then replaces
     // the Type-B bound of `earth_type_b_rel`, and its bias (13 ppm at 180 °/s) is gone.
-    let has_earth =
-        |m: &Model| m.effects.iter().any(|e| matches!(e, Effect::EarthRotation | Effect::EarthRotationAtLatitude));
-    if !has_earth(&state.fitted.model) && separates_delay_and_index(&data) {
+    // With g-sensitivity in the model its vertical part cannot be told from that term, which
+    // holds it (`Effect::EarthRotationHorizontal`): only the horizontal part is added.
+    if !state.fitted.model.effects.iter().any(|e| e.is_earth()) && separates_delay_and_index(&data) {
         let weights = state.diag.weights();
-        let start = state.fitted.model.with(Effect::EarthRotation, Default::default(), vec![0.0; 3]);
+        let earth = if state.fitted.model.effects.contains(&Effect::GSensitivity) {
+            Effect::EarthRotationHorizontal
+        } else {
+            Effect::EarthRotation
+        };
+        let dof = effect_columns(earth, &data.layout()).1.len();
+        let start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
         let before = state.fitted.model.clone();
         match (fit(&data, start, weights), fit(&data, before, weights)) {
             (Ok(fitted), Ok(without)) => {
                 let delta_chi2 = without.solution.chi2 - fitted.solution.chi2;
-                let n: u64 = fitted.solution.n.iter().sum();
                 let score = Score {
-                    effect: Effect::EarthRotation,
+                    effect: earth,
                     drift_tau_s: None,
                     delta_chi2,
-                    dof: 3,
+                    dof,
                     threshold: 0.0,
-                    delta_bic: delta_chi2 - 3.0 * (n as f64).ln(),
+                    significance_sigma: super::stats::chi2_to_sigma(dof, delta_chi2),
                     known_physics: true,
                 };
                 let next = ctx.state(fitted);
                 steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), Vec::new(), Vec::new()));
                 state = next;
             }
-            (Err(e), _) | (_, Err(e)) => skipped.push(Skipped { effect: Effect::EarthRotation, why: e.to_string() }),
+            (Err(e), _) | (_, Err(e)) => skipped.push(Skipped { effect: earth, why: e.to_string() }),
         }
     }
     let effects = &state.fitted.model.effects;
@@ -706,9 +786,17 @@ fn loop_on(
         notes.push(note);
     }
     // The free drift gives each run its own level, so it never leans on the offset being shared.
-    if effects.iter().any(|e| e.is_drift() && !matches!(e, Effect::DriftKnots(_))) && !both_directions(&data) {
+    if effects.iter().any(|e| e.is_drift())
+        && !effects.iter().any(|e| matches!(e, Effect::DriftKnots(_)))
+        && !both_directions(&data)
+    {
         asks.push(
             "The offset drifts, and all runs turn one way: the offset and the constant θ2'·M R_qᵀ e_z2 term are separated only through the drift model and the speeds. Runs in both directions (--rates-dps 180,-180) separate them directly.".into(),
+        );
+    }
+    if effects.contains(&Effect::GSensitivity) && !both_directions(&data) {
+        asks.push(
+            "g-sensitivity is in the model and every run turns one way: its gravity term turns with θ2 like the signal, and only the speeds (1/θ1') tell the two apart, which costs every sensitivity and direction σ. In runs in both directions (--rates-dps 180,-180) the term keeps its sign while the signal's flips, which separates them directly (on the simulator, 4-8× smaller σ).".into(),
         );
     }
     if let Some(note) = earth_note(&state.fitted, opts.latitude_deg) {
@@ -721,7 +809,12 @@ fn loop_on(
             type_b * 1e6
         ));
     }
-    let verdict = if state.diag.has_structure() { Verdict::UnexplainedStructure } else { Verdict::AtNoiseFloor };
+    let implausible = earth_implausible(&state.fitted);
+    let verdict = if state.diag.has_structure() || implausible.is_some() {
+        Verdict::UnexplainedStructure
+    } else {
+        Verdict::AtNoiseFloor
+    };
     let verdict_text = match verdict {
         Verdict::AtNoiseFloor => {
             let ratio: Vec<String> =
@@ -734,7 +827,8 @@ fn loop_on(
             )
         }
         Verdict::UnexplainedStructure => {
-            let what: Vec<String> = state.diag.findings.iter().map(|f| f.text.clone()).collect();
+            let what: Vec<String> =
+                implausible.iter().cloned().chain(state.diag.findings.iter().map(|f| f.text.clone())).collect();
             format!(
                 "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
                 what.join(" ")

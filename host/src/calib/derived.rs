@@ -35,6 +35,21 @@ pub fn delta_method(f: impl Fn(&[f64]) -> Vec<f64>, x: &[f64], cov: &DMatrix<f64
     (y, out)
 }
 
+/// How closely the rig's pose fixtures hold the package, degrees (± bound): a machined 90° angle
+/// block holds it to ~0.1°, the size issue 10 gives for the fixtures of such a rig (and the
+/// simulator's `pose_fixture` default). The runs see the package only through the fixture, so a
+/// rotation of it common to both poses turns all three axes alike and no run reveals it: it
+/// limits the tilts from the package axes (extrinsic), not the angles between the real axes
+/// (intrinsic).
+pub const MOUNT_TOLERANCE_DEG: f64 = 0.1;
+
+/// 1-σ of one tilt component from the mount alone: [`MOUNT_TOLERANCE_DEG`] as a uniform bound
+/// (GUM 4.3.7, Type B: bound/√3). A small rotation φ of the package moves each tilt component by
+/// one component of φ.
+pub fn mount_sigma_deg() -> f64 {
+    MOUNT_TOLERANCE_DEG / 3f64.sqrt()
+}
+
 /// One axis's calibration, from row i of M and offset i.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AxisEstimate {
@@ -63,11 +78,22 @@ pub struct AxisEstimate {
     pub tilt_component_axes: [char; 2],
     /// Tilt of s_i toward each of those axes, atan2(s_j, s_i), degrees.
     pub tilt_components_deg: [f64; 2],
-    /// 2×2 covariance of the tilt components, degrees².
+    /// 2×2 covariance of the tilt components, degrees², from the runs (intrinsic to the fit).
     pub tilt_components_cov_deg2: [[f64; 2]; 2],
+    /// 1-σ the mount adds to the tilt and to each tilt component ([`mount_sigma_deg`]): the
+    /// extrinsic angles' uncertainty is this and the runs' σ together.
+    #[serde(default)]
+    pub tilt_mount_sigma_deg: f64,
 }
 
-/// The angle between two real axes.
+impl AxisEstimate {
+    /// 1-σ of the tilt from the package axis, runs and mount together.
+    pub fn tilt_extrinsic_sigma_deg(&self) -> f64 {
+        self.tilt_sigma_deg.hypot(self.tilt_mount_sigma_deg)
+    }
+}
+
+/// The angle between two real axes (intrinsic: the mount does not limit it).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct InterAxisAngle {
     /// The two axes, e.g. ['x', 'y'].
@@ -130,6 +156,7 @@ pub fn derive(
             tilt_component_axes: [AXES[(i + 1) % 3], AXES[(i + 2) % 3]],
             tilt_components_deg: [y[o + 6], y[o + 7]],
             tilt_components_cov_deg2: [[c[(o + 6, o + 6)], c[(o + 6, o + 7)]], [c[(o + 7, o + 6)], c[(o + 7, o + 7)]]],
+            tilt_mount_sigma_deg: mount_sigma_deg(),
         }
     });
     let angles = std::array::from_fn(|n| {

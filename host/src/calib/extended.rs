@@ -194,7 +194,9 @@ pub fn effect_columns(e: Effect, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar
         Effect::EarthRotation => {
             (vec![], vec![SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
         }
-        Effect::EarthRotationAtLatitude => (vec![], vec![SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero]),
+        Effect::EarthRotationAtLatitude | Effect::EarthRotationHorizontal => {
+            (vec![], vec![SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
+        }
         Effect::TableHarmonic(order) => (
             vec![],
             poses
@@ -395,6 +397,24 @@ impl Model {
         }
         m.shared.extend(shared);
         m.theta.extend(init_shared);
+        m
+    }
+
+    /// The model with `effect` taken out (its columns and parameters), the rest as fitted.
+    pub fn without(&self, effect: Effect) -> Self {
+        let (lin, shared) = effect_columns(effect, &self.layout);
+        let mut m = self.clone();
+        m.effects.retain(|&e| e != effect);
+        let keep_lin: Vec<bool> = self.lin.iter().map(|c| !lin.contains(c)).collect();
+        let keep =
+            |v: &Vec<f64>, k: &[bool]| v.iter().zip(k).filter(|(_, &k)| k).map(|(&x, _)| x).collect::<Vec<f64>>();
+        for b in &mut m.beta {
+            *b = keep(b, &keep_lin);
+        }
+        m.lin.retain(|c| !lin.contains(c));
+        let keep_shared: Vec<bool> = self.shared.iter().map(|p| !shared.contains(p)).collect();
+        m.theta = keep(&self.theta, &keep_shared);
+        m.shared.retain(|p| !shared.contains(p));
         m
     }
 

@@ -153,14 +153,14 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
     doc.paragraph(format!("Model: {}.", cal.model));
     doc.table(
         "Per axis, with 1σ.",
-        &["axis", "k [counts/(°/s)]", "tilt [°]", "offset [counts]", "direction s"],
+        &["axis", "k [counts/(°/s)]", "tilt [°] ± runs ± mount", "offset [counts]", "direction s"],
         cal.axes
             .iter()
             .map(|a| {
                 vec![
                     a.axis.to_string(),
                     format!("{:.5} ± {:.5}", a.k_counts_per_dps, a.k_sigma),
-                    format!("{:.4} ± {:.4}", a.tilt_deg, a.tilt_sigma_deg),
+                    format!("{:.4} ± {:.4} ± {:.3}", a.tilt_deg, a.tilt_sigma_deg, a.tilt_mount_sigma_deg),
                     format!("{:+.3} ± {:.3}", a.offset_counts, a.offset_sigma_counts),
                     format!("[{:+.6}, {:+.6}, {:+.6}]", a.s[0], a.s[1], a.s[2]),
                 ]

@@ -72,13 +72,13 @@ pub fn summary(r: &LoopReport) -> String {
         } else {
             let _ = writeln!(
                 o,
-                "\nStep {}: {} — Δχ² = {:.1} for {} parameters (threshold {:.1}), ΔBIC {:.1}. Means: {}.",
+                "\nStep {}: {} — Δχ² = {:.1} for {} parameters (threshold {:.1}, {:.1}σ). Means: {}.",
                 s.number,
                 step_name(s),
                 sc.delta_chi2,
                 sc.dof,
                 sc.threshold,
-                sc.delta_bic,
+                sc.significance_sigma,
                 sc.effect.meaning()
             );
         }
@@ -99,6 +99,19 @@ pub fn summary(r: &LoopReport) -> String {
             let c: Vec<String> =
                 s.drift_choice.iter().map(|d| format!("{} BIC {:.1}", d.effect.name(), d.bic)).collect();
             let _ = writeln!(o, "  drift models fitted and compared (lowest BIC kept): {}", c.join("; "));
+        }
+        for e in &s.replaced {
+            let _ = writeln!(o, "  replaces: {} (the residual still drifted with it in the model)", e.name());
+        }
+        for d in &s.dropped {
+            let _ = writeln!(
+                o,
+                "  dropped: {} (its parameters' Wald χ² {:.1} < {:.1}): with {} in the model the runs no longer need it",
+                d.effect.name(),
+                d.wald_chi2,
+                d.threshold,
+                d.after.name()
+            );
         }
         for p in &s.effect_params {
             let _ = writeln!(o, "  {} = {:.5} ± {:.5} {}", p.name, p.value, p.sigma, p.unit);
@@ -141,16 +154,17 @@ pub fn summary(r: &LoopReport) -> String {
     }
     let _ = writeln!(o, "\nBefore and after:\n{}", table(r));
     let _ = writeln!(o, "Final calibration ({}):", cal.model);
-    let _ = writeln!(o, "  axis  k [counts/(°/s)]        tilt [°]            offset [counts]     direction s");
+    let _ = writeln!(o, "  axis  k [counts/(°/s)]        tilt [°] ± runs ± mount     offset [counts]     direction s");
     for a in &cal.axes {
         let _ = writeln!(
             o,
-            "  {}     {:.5} ± {:.5}   {:.4} ± {:.4}   {:+9.3} ± {:.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
+            "  {}     {:.5} ± {:.5}   {:.4} ± {:.4} ± {:.3}   {:+9.3} ± {:.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
             a.axis,
             a.k_counts_per_dps,
             a.k_sigma,
             a.tilt_deg,
             a.tilt_sigma_deg,
+            a.tilt_mount_sigma_deg,
             a.offset_counts,
             a.offset_sigma_counts,
             a.s[0],
@@ -164,6 +178,12 @@ pub fn summary(r: &LoopReport) -> String {
     for p in &cal.inter_axis {
         let _ = writeln!(o, "  angle {}–{}: {:.4} ± {:.4}°", p.axes[0], p.axes[1], p.angle_deg, p.sigma_deg);
     }
+    let _ = writeln!(
+        o,
+        "  The angles between the axes (intrinsic) rest on the runs alone. The tilts from the package axes (extrinsic) also rest on the fixture, which holds the package to ±{}° (σ {:.3}° per component): a turn of it common to both poses moves all three axes alike and no run can reveal it, so the mount, not the runs, limits them.",
+        super::derived::MOUNT_TOLERANCE_DEG,
+        super::derived::mount_sigma_deg()
+    );
     if let Some(last) = r.steps.last() {
         if !last.effect_params.is_empty() {
             let _ = writeln!(o, "  effects:");

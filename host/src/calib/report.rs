@@ -189,7 +189,7 @@ impl CalReport {
                 a.offset_counts,
                 a.offset_sigma_counts,
                 a.tilt_deg,
-                a.tilt_sigma_deg,
+                a.tilt_extrinsic_sigma_deg(),
                 a.s[0],
                 a.s_sigma[0],
                 a.s[1],

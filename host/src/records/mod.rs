@@ -122,7 +122,7 @@ pub fn params_from_report(r: &CalReport) -> Vec<Param> {
             "%",
         ));
         out.push(p(format!("offset_{ax}"), a.offset_counts, Some(a.offset_sigma_counts), "counts"));
-        out.push(p(format!("tilt_{ax}"), a.tilt_deg, Some(a.tilt_sigma_deg), "deg"));
+        out.push(p(format!("tilt_{ax}"), a.tilt_deg, Some(a.tilt_extrinsic_sigma_deg()), "deg"));
         for k in 0..2 {
             out.push(p(
                 format!("tilt_{ax}_to_{}", a.tilt_component_axes[k]),
