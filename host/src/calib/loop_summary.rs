@@ -101,7 +101,12 @@ pub fn summary(r: &LoopReport) -> String {
             let _ = writeln!(o, "  drift models fitted and compared (lowest BIC kept): {}", c.join("; "));
         }
         for e in &s.replaced {
-            let _ = writeln!(o, "  replaces: {} (the residual still drifted with it in the model)", e.name());
+            let why = if e.is_drift() {
+                "the residual still drifted with it in the model"
+            } else {
+                "its only trace, a constant rate in each run, is now each run's own level"
+            };
+            let _ = writeln!(o, "  replaces: {} ({why})", e.name());
         }
         for d in &s.dropped {
             let _ = writeln!(

@@ -396,3 +396,55 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
         assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), &format!("earth, seed {seed}"));
     }
 }
+
+/// g-sensitivity and Earth rotation with no latitude given, in both directions: gravity and
+/// Earth's vertical part turn in the sensor frame alike, so the model holds g-sensitivity and
+/// only Earth's horizontal part (the vertical one in the g-sensitivity), says so, and is within
+/// 3σ at the floor.
+#[test]
+fn g_sensitivity_holds_earths_vertical_part_without_a_latitude() {
+    let effects = ["g_sensitivity", "earth_rotation=45"];
+    let (runs, truth) = capture_with(7, &[180.0, -180.0], BAR_DURATION_S, &effects, FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let effects = r.effects();
+    assert!(effects.contains(&Effect::GSensitivity), "{}", r.summary());
+    assert_eq!(effects.last(), Some(&Effect::EarthRotationHorizontal), "{}", r.summary());
+    assert!(r.notes.iter().any(|n| n.contains("the g-sensitivity holds it")), "{:?}", r.notes);
+    assert!(!r.notes.iter().any(|n| n.contains("Earth rotation is not in the model")), "{:?}", r.notes);
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "g-sensitivity with Earth");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
+/// Taking an effect out leaves exactly the model it was added to: columns, parameters, values.
+#[test]
+fn an_effect_taken_out_leaves_the_model_it_was_added_to() {
+    let base = Model::base().with(Effect::Delay, Default::default(), vec![0.004]);
+    let both = base.with(Effect::GSensitivity, std::array::from_fn(|a| vec![0.1 * a as f64; 3]), Vec::new());
+    let both = both.with(Effect::TableTilt, Default::default(), vec![0.005]);
+    let back = both.without(Effect::GSensitivity).without(Effect::TableTilt);
+    assert_eq!(back.effects, base.effects);
+    assert_eq!(back.lin, base.lin);
+    assert_eq!(back.shared, base.shared);
+    assert_eq!(back.beta, base.beta);
+    assert_eq!(back.theta, base.theta);
+    let tilt_only = both.without(Effect::GSensitivity);
+    assert_eq!(tilt_only.theta_of(SharedPar::TableTilt), Some(0.005));
+    assert_eq!(tilt_only.theta_of(SharedPar::Delay), Some(0.004));
+}
+
+/// A warm-up with a rate random walk on top and a table tilted 0.3°, in both directions: the
+/// final model drifts freely (no curve follows a random walk, and a curve that entered first is
+/// replaced), and the tilt, whose only trace is a constant rate per run, is not in it once each
+/// run has its own level (dropped if it entered before). Within 3σ at the floor.
+#[test]
+fn a_random_walk_ends_in_the_free_drift_and_a_tilt_it_hides_is_not_kept() {
+    let effects = ["offset_drift", "bias_random_walk", "table_tilt", "earth_rotation=45"];
+    let (runs, truth) = capture_with(8, &[180.0, -180.0], BAR_DURATION_S, &effects, FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let effects = r.effects();
+    let drifts: Vec<&Effect> = effects.iter().filter(|e| e.is_drift()).collect();
+    assert!(matches!(drifts[..], [Effect::DriftKnots(_)]), "{}", r.summary());
+    assert!(!effects.contains(&Effect::TableTilt), "{}", r.summary());
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk and tilt");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}

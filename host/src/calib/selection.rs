@@ -201,7 +201,7 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
     // added once the loop ends (see `closure`).
     if separates_delay_and_index(data) {
         let phase_modelled = has(Effect::Delay) || has(Effect::IndexOffset) || has(Effect::Phase);
-        if !has(Effect::TableTilt) {
+        if !has(Effect::TableTilt) && !has_free_drift {
             out.push(plain(Effect::TableTilt));
         }
         if phase_modelled && !has(Effect::PoseFixture) && data.poses.len() == 2 {
@@ -348,10 +348,12 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         let sol = sol.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
         let mut start = start_model(state, &cands[*ci], sol);
         if matches!(cands[*ci].effect, Effect::DriftKnots(_)) {
-            // The free drift replaces a drift curve already in: with both, the curve's shape is
-            // held by the knots and its parameters run off.
-            for curve in state.model.effects.iter().filter(|e| e.is_drift()) {
-                start = start.without(*curve);
+            // The free drift replaces what it holds: a drift curve already in (with both, the
+            // knots hold the curve's shape and its parameters run off) and a table tilt, whose
+            // only trace is a constant rate in each run, now each run's own level (with both, ε
+            // runs off along the null direction: −60° ± 5° on a 0.3° tilt).
+            for e in state.model.effects.iter().filter(|e| replaced_by_free_drift(**e)) {
+                start = start.without(*e);
             }
         }
         let f = fit(data, start, weights).map_err(|e| e.to_string())?;
@@ -413,6 +415,12 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         }
     }
     Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), skipped, accepted, drift_choice })
+}
+
+/// Whether adding the free drift takes `e` out of the model: every drift curve, and the table
+/// tilt (see [`step`]).
+pub fn replaced_by_free_drift(e: Effect) -> bool {
+    e.is_drift() || e == Effect::TableTilt
 }
 
 /// An effect taken out of the model because a later one made it redundant.
