@@ -36,6 +36,8 @@
 //! `BENCH_SEEDS=N` runs seeds 1..=N (default 10); `BENCH_PLANS='180,-180;180,90'` (the default)
 //! lists the run plans, each the base-table rates of `--rates-dps`, separated by `;`.
 
+mod measured;
+use measured::Usage;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -79,9 +81,7 @@ const BAR_ROTATION_MOUNT_SIGMAS: f64 = 3.0;
 const WORKERS: usize = 2;
 
 fn bench_dir() -> PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench-data/all-effects");
-    std::fs::create_dir_all(&dir).expect("create target/bench-data/all-effects");
-    dir
+    measured::bench_dir("all-effects")
 }
 
 /// A case's directory: the capture `x.cap`, its truth `x.truth.json`, the logs and `out/`.
@@ -116,14 +116,6 @@ fn simulated(plan: &str, seed: u64) -> Result<PathBuf, String> {
     Ok(cap)
 }
 
-/// One calibration's exit status and cost.
-struct Usage {
-    /// Exit status; -1 when killed by a signal.
-    code: i32,
-    wall_s: f64,
-    cpu_s: f64,
-}
-
 /// Runs `host calibrate --replay cap` into a fresh `out/` beside it (a stale `calibration.json`
 /// must not stand in for a failed run) and waits for it with `wait4`, which hands back that
 /// child's own CPU time.
@@ -135,35 +127,16 @@ fn calibrate(cap: &Path) -> Result<Usage, String> {
     let db = format!("sqlite:{}", out.join("records.sqlite").display());
     let stdout = std::fs::File::create(dir.join("calibrate.txt")).map_err(|e| format!("calibrate.txt: {e}"))?;
     let stderr = std::fs::File::create(dir.join("calibrate.log")).map_err(|e| format!("calibrate.log: {e}"))?;
-    let t = Instant::now();
-    // Reaped by the `wait4` below, which std's `Child::wait` cannot replace: it drops the
-    // child's resource usage.
-    #[allow(clippy::zombie_processes)]
-    let child = Command::new(HOST)
-        .arg("calibrate")
+    let mut cmd = Command::new(HOST);
+    cmd.arg("calibrate")
         .arg("--replay")
         .arg(cap)
         .arg("--out-dir")
         .arg(&out)
         .args(["--db", &db])
         .stdout(stdout)
-        .stderr(stderr)
-        .spawn()
-        .map_err(|e| format!("host calibrate: {e}"))?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `pid` is our own child, not yet waited for (`child` is never waited on or killed
-    // through std after this); `status` and `usage` are valid for writes.
-    let got = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    let wall_s = t.elapsed().as_secs_f64();
-    if got != pid {
-        return Err(format!("wait4: {}", std::io::Error::last_os_error()));
-    }
-    let code = if libc::WIFEXITED(status) { libc::WEXITSTATUS(status) } else { -1 };
-    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    Ok(Usage { code, wall_s, cpu_s: secs(usage.ru_utime) + secs(usage.ru_stime) })
+        .stderr(stderr);
+    measured::run_measured(cmd).map_err(|e| format!("host calibrate: {e}"))
 }
 
 /// A calibration's errors against the truth, per axis where it has one.
@@ -381,19 +354,6 @@ fn run_case(plans: &[String], plan: usize, seed: u64) -> Outcome {
     o
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 fn case_line(plans: &[String], o: &Outcome) -> String {
     let head = format!("{:>12} s{:<3}", plans[o.plan], o.seed);
     let exit = o.code().map_or("-".into(), |c| c.to_string());
@@ -444,8 +404,8 @@ fn summary(plan: &str, outcomes: &[&Outcome]) {
     println!(
         "  per calibration (median of {}): wall {:.1} s, CPU {:.1} s",
         usages.len(),
-        median(usages.iter().map(|u| u.wall_s).collect()),
-        median(usages.iter().map(|u| u.cpu_s).collect())
+        measured::median(usages.iter().map(|u| u.wall_s).collect()),
+        measured::median(usages.iter().map(|u| u.cpu_s).collect())
     );
     println!("  {}", if n > 0 && meet == n { "BAR HOLDS" } else { "BAR FAILS" });
 }

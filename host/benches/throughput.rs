@@ -14,6 +14,8 @@
 //! `BENCH_RUNS=N` sets the repetitions of the short cases (default 5; the 4-hour and realistic
 //! ones run ⌈N/2⌉ times); `BENCH_ONLY=1h,4h,…` runs only the named cases.
 
+mod measured;
+use measured::Usage;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
@@ -30,9 +32,7 @@ const BAR_RSS_1H_MIB: f64 = 128.0;
 const BAR_RSS_4H_MIB: f64 = 256.0;
 
 fn bench_dir() -> PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench-data");
-    std::fs::create_dir_all(&dir).expect("create target/bench-data");
-    dir
+    measured::bench_dir("")
 }
 
 /// The realistic capture from the independent model, beside the project root.
@@ -68,13 +68,6 @@ fn samples_in(files: &[PathBuf]) -> usize {
         .sum()
 }
 
-/// One child's figures.
-struct Usage {
-    wall_s: f64,
-    cpu_s: f64,
-    peak_mib: f64,
-}
-
 /// Runs `host calibrate --replay files` once into a fresh directory and waits for it with
 /// `wait4`, which hands back that child's own CPU time and peak resident set.
 fn run_once(files: &[PathBuf]) -> Usage {
@@ -83,54 +76,24 @@ fn run_once(files: &[PathBuf]) -> Usage {
     std::fs::create_dir_all(&out).expect("create output dir");
     let db = format!("sqlite:{}", out.join("records.sqlite").display());
     let log = std::fs::File::create(bench_dir().join("calibrate.log")).expect("log file");
-    let t = Instant::now();
-    // Reaped by the `wait4` below, which std's `Child::wait` cannot replace: it drops the
-    // child's resource usage.
-    #[allow(clippy::zombie_processes)]
-    let child = Command::new(HOST)
-        .arg("calibrate")
+    let mut cmd = Command::new(HOST);
+    cmd.arg("calibrate")
         .arg("--replay")
         .args(files)
         .arg("--out-dir")
         .arg(&out)
         .args(["--db", &db])
         .stdout(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .expect("host calibrate starts");
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `pid` is our own child, not yet waited for (`child` is never waited on or killed
-    // through std after this); `status` and `usage` are valid for writes.
-    let got = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    let wall_s = t.elapsed().as_secs_f64();
-    assert_eq!(got, pid, "wait4: {}", std::io::Error::last_os_error());
-    let code = if libc::WIFEXITED(status) { libc::WEXITSTATUS(status) } else { -1 };
+        .stderr(log);
+    let usage = measured::run_measured(cmd).unwrap_or_else(|e| panic!("host calibrate: {e}"));
+    let code = usage.code;
     // 0: at the noise floor; 3: calibrated with structure left (the realistic capture may be).
     assert!(
         code == 0 || code == 3,
         "host calibrate exited {code}: see {}",
         bench_dir().join("calibrate.log").display()
     );
-    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    Usage {
-        wall_s,
-        cpu_s: secs(usage.ru_utime) + secs(usage.ru_stime),
-        // Linux reports ru_maxrss in KiB.
-        peak_mib: usage.ru_maxrss as f64 / 1024.0,
-    }
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    usage
 }
 
 /// Medians of `runs` children on `files`.
@@ -157,9 +120,9 @@ fn measure(name: &str, files: &[PathBuf], runs: usize) -> Figures {
     let usages: Vec<Usage> = (0..runs).map(|_| run_once(files)).collect();
     let f = Figures {
         samples,
-        wall_s: median(usages.iter().map(|u| u.wall_s).collect()),
-        cpu_s: median(usages.iter().map(|u| u.cpu_s).collect()),
-        peak_mib: median(usages.iter().map(|u| u.peak_mib).collect()),
+        wall_s: measured::median(usages.iter().map(|u| u.wall_s).collect()),
+        cpu_s: measured::median(usages.iter().map(|u| u.cpu_s).collect()),
+        peak_mib: measured::median(usages.iter().map(|u| u.peak_mib).collect()),
         cpu_all: usages.iter().map(|u| u.cpu_s).collect(),
     };
     println!(

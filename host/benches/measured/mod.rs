@@ -1,0 +1,70 @@
+//! What the benchmarks share: where their data lives, and running one child process with the
+//! kernel's accounting of that child alone (`wait4`), so neither the bench itself nor anything
+//! else on the machine counts in its CPU time and peak memory.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// One child's figures.
+pub struct Usage {
+    /// Exit status (−1 when it did not exit normally).
+    pub code: i32,
+    /// Wall time from spawn to reaping, s.
+    pub wall_s: f64,
+    /// User + system CPU time of the child, s.
+    pub cpu_s: f64,
+    /// Peak resident set of the child, MiB.
+    #[allow(dead_code)] // read by `throughput` only
+    pub peak_mib: f64,
+}
+
+/// `target/bench-data/<sub>`, created.
+pub fn bench_dir(sub: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bench-data").join(sub);
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("create {}: {e}", dir.display()));
+    dir
+}
+
+/// Spawns `cmd` and reaps it with `wait4`, which hands back that child's own resource usage;
+/// std's `Child::wait` cannot replace it: it drops the usage.
+pub fn run_measured(mut cmd: Command) -> Result<Usage, String> {
+    let t = Instant::now();
+    // Reaped by the `wait4` below.
+    #[allow(clippy::zombie_processes)]
+    let child = cmd.spawn().map_err(|e| format!("{:?}: {e}", cmd.get_program()))?;
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `pid` is our own child, not yet waited for (`child` is never waited on or killed
+    // through std after this); `status` and `usage` are valid for writes.
+    let got = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    let wall_s = t.elapsed().as_secs_f64();
+    if got != pid {
+        return Err(format!("wait4: {}", std::io::Error::last_os_error()));
+    }
+    let code = if libc::WIFEXITED(status) { libc::WEXITSTATUS(status) } else { -1 };
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    Ok(Usage {
+        code,
+        wall_s,
+        cpu_s: secs(usage.ru_utime) + secs(usage.ru_stime),
+        // Linux reports ru_maxrss in KiB.
+        peak_mib: usage.ru_maxrss as f64 / 1024.0,
+    })
+}
+
+/// The median (NaN of nothing).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
