@@ -398,7 +398,10 @@ mod tests {
         // Stop came 1 s of wall clock after Start was sent, so the run lasted most of that.
         assert!(rt.duration_s >= 0.5, "{}", rt.duration_s);
         assert_eq!(run.samples.len() as u64, rt.samples);
-        assert!((rt.samples as f64 - rt.duration_s * truth.odr_hz_actual).abs() <= 1.0);
+        // The count against the duration at the ODR is checked in simulated time above
+        // (`rig_answers_every_command_and_streams_runs_in_memory`); here the wall clock of a loaded
+        // machine decides between which samples a command lands (it failed a CI run at ±1), so
+        // this test asserts only what no scheduling can change.
         // Identify, Start and Stop were all acknowledged Ok.
         let a = acks(&frames(&captured));
         assert!(a.iter().all(|&(_, r)| r == CmdResult::Ok));
