@@ -79,9 +79,9 @@ pub enum Effect {
     /// validation capture (0.13° of direction error), so they are not fitted.
     PoseFixture,
     /// Offsets that wander with no assumed shape (a rate random walk on top of a warm-up that
-    /// lags the die temperature): each run its own level, linear between knots about this many
-    /// seconds apart. Used only through the linear model's AC part, so the directions and
-    /// sensitivities do not lean on the offset being the same in every run.
+    /// lags the die temperature): linear between knots about this many seconds apart, one
+    /// continuous curve through the runs of a pose that follow each other on one clock
+    /// (`extended::Stretch`), a level of its own after a remount or a gap.
     DriftKnots(u16),
 }
 
@@ -116,7 +116,7 @@ impl Effect {
             Effect::TableHarmonic(1) => "sensor-table eccentricity (transmission error at 1×)".into(),
             Effect::TableHarmonic(n) => format!("table-speed ripple at {n}× the sensor-table rate"),
             Effect::PoseFixture => "pose-2 fixture turned about the table axis against pose 1".into(),
-            Effect::DriftKnots(t) => format!("offset drift: free per run, linear between knots {t} s apart"),
+            Effect::DriftKnots(t) => format!("offset drift: free, linear between knots {t} s apart"),
         }
     }
 
@@ -165,7 +165,7 @@ impl Effect {
             Effect::DriftPolynomial => "the zero-rate level wanders slowly",
             Effect::DriftTemperature => "the zero-rate level follows the die temperature",
             Effect::DriftKnots(_) => {
-                "the zero-rate level wanders in a way no single curve follows (a warm-up lagging the die temperature, a rate random walk of 0.001-0.005 °/s/√s): each run keeps its own level"
+                "the zero-rate level wanders in a way no single curve follows (a warm-up lagging the die temperature, a rate random walk of 0.001-0.005 °/s/√s): one continuous level through the runs of a pose, where the gyro stays powered and mounted, and a new one after each remount"
             }
             Effect::RateScale => "the sense chain is not linear, or its gain differs with the sign of the rate",
             Effect::GSensitivity => {
@@ -200,7 +200,7 @@ impl Effect {
             }
             Effect::Phase => "nothing more: a second speed or direction is needed to split it",
             Effect::DriftKnots(_) => {
-                "its slow change within runs; the directions and sensitivities then rest on the table-rate sinusoids alone, not on the offset being the same in every run"
+                "its slow change within runs and its continuity from run to run in one pose; where runs at different rates share it, the constant rate terms (θ2'·M R_qᵀ e_z2, a table tilt's) step between runs and it does not, otherwise the directions and sensitivities rest on the table-rate sinusoids alone"
             }
             Effect::DriftWarmUp | Effect::DriftPolynomial | Effect::DriftTemperature => {
                 "its slow change within and between runs; runs in both directions separate the offset from the constant θ2' term without relying on it"

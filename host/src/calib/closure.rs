@@ -537,7 +537,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         Effect::DriftWarmUp => "the warmed-up level (t → ∞ of the exponential)",
         Effect::DriftPolynomial => "the middle of the capture's time span, less half the quadratic term",
         Effect::DriftTemperature => "the capture's mean die temperature",
-        Effect::DriftKnots(_) => "the first used sample of the first run (each run has its own level)",
+        Effect::DriftKnots(_) => "the first used sample of the first run (each pose has its own level)",
         _ => return None,
     };
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;

@@ -11,7 +11,7 @@
 //! The same accumulation over the union of the model's columns and every candidate's gives the
 //! linearised fit of any candidate model from one pass (see [`super::selection`]).
 
-use super::catalogue::{Effect, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
+use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{KinSample, Kinematics};
 use super::lsq::is_clipped;
@@ -70,13 +70,13 @@ pub enum LinCol {
     /// Component k of the specific force from gravity in the package frame, g: gravity holds
     /// the lab's −z1, so a table at rest feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2.
     Gravity(usize),
-    /// The hat function of knot `knot` of run `run` (index into the data's runs) on the grid of
-    /// `Effect::DriftKnots(spacing_s)`: 1 at the knot, falling linearly to 0 at its neighbours,
-    /// 0 in every other run (`Layout::knots`).
+    /// The hat function of knot `knot` of stretch `stretch` (index into `Layout::stretches`) on
+    /// the grid of `Effect::DriftKnots(spacing_s)`: 1 at the knot, falling linearly to 0 at its
+    /// neighbours, 0 in every other stretch (`Layout::knots`).
     DriftKnot {
-        /// Run index.
-        run: u16,
-        /// Knot index within the run, from 0 at its first used sample.
+        /// Stretch index.
+        stretch: u16,
+        /// Knot index within the stretch, from 0 at its first used sample.
         knot: u16,
         /// Nominal knot spacing, s.
         spacing_s: u16,
@@ -89,32 +89,128 @@ fn knot_intervals(span_s: (f64, f64), spacing_s: u16) -> usize {
     (((span_s.1 - span_s.0) / f64::from(spacing_s.max(1))).round() as usize).max(1)
 }
 
+/// Longest gap between two runs of one pose that the free drift bridges, s: the gyro stays
+/// powered and mounted between them, so its offset is continuous, and a random walk of
+/// 0.005 °/s/√s (the top of issue 10's range) strays from the straight line across the gap by
+/// K·√(T/6) ≈ 0.011 °/s, what the 40-s knots allow within a run. Runs further apart, or in
+/// another pose (a remount handles the package), start a stretch of their own.
+pub const MAX_BRIDGED_GAP_S: f64 = 30.0;
+
+/// Runs one after another in one pose and on one clock, whose offset the free drift follows as
+/// one continuous curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stretch {
+    /// The runs (indices into the data's runs), in time order.
+    pub runs: std::ops::Range<usize>,
+    /// Time of the first and last used sample of the stretch, s.
+    pub span_s: (f64, f64),
+    /// Longest gap between its runs, s (0 for one run).
+    pub max_gap_s: f64,
+}
+
 /// What of the data an effect's columns depend on: the poses present (a parameter set per
-/// pose) and each run's used time span (the free drift's knots).
+/// pose) and the stretches of runs the free drift follows continuously.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Layout {
     /// Poses, in order of first appearance.
     pub poses: Vec<Pose>,
-    /// Per run, the first and last used sample's time, s (each capture's clock starts at 0).
+    /// Consecutive runs of one pose on one clock, each gap at most [`MAX_BRIDGED_GAP_S`].
+    pub stretches: Vec<Stretch>,
+    /// Per run, its stretch.
+    pub run_stretch: Vec<usize>,
+    /// Per run, the first and last used sample's time, s.
     pub run_spans_s: Vec<(f64, f64)>,
 }
 
 impl Layout {
-    /// Intervals between knots of run `r` at nominal spacing `spacing_s`: the span divided
-    /// evenly, at least one.
-    pub fn intervals(&self, r: usize, spacing_s: u16) -> usize {
-        knot_intervals(self.run_spans_s[r], spacing_s)
+    /// The layout of runs in pose `poses_of_runs[r]` whose used samples span `spans_s[r]` (each
+    /// capture's clock starts at 0, so a run starting before the previous one ended is on
+    /// another clock).
+    pub fn new(poses: Vec<Pose>, poses_of_runs: &[Pose], spans_s: &[(f64, f64)]) -> Self {
+        let mut stretches: Vec<Stretch> = Vec::new();
+        let mut run_stretch = Vec::with_capacity(spans_s.len());
+        for (r, &(a, b)) in spans_s.iter().enumerate() {
+            match stretches.last_mut() {
+                Some(s)
+                    if poses_of_runs[r - 1] == poses_of_runs[r]
+                        && a > s.span_s.1
+                        && a - s.span_s.1 <= MAX_BRIDGED_GAP_S =>
+                {
+                    s.runs.end = r + 1;
+                    s.max_gap_s = s.max_gap_s.max(a - s.span_s.1);
+                    s.span_s.1 = b;
+                }
+                _ => stretches.push(Stretch { runs: r..r + 1, span_s: (a, b), max_gap_s: 0.0 }),
+            }
+            run_stretch.push(stretches.len() - 1);
+        }
+        Self { poses, stretches, run_stretch, run_spans_s: spans_s.to_vec() }
     }
 
-    /// The knot columns of `Effect::DriftKnots(spacing_s)`: every knot of every run but the
-    /// first run's first, whose level is the offset column's (the hats of a run sum to 1, so
-    /// one knot overall must go for the offset to stay identifiable). The reported offset is
-    /// therefore the level at the first used sample of the first run.
+    /// Whether knot column `c` has support in run `r` only: the level of that run alone, which
+    /// no other run can tell.
+    pub fn knot_only_in_run(&self, c: LinCol, r: usize) -> bool {
+        let LinCol::DriftKnot { stretch, knot, spacing_s } = c else {
+            return false;
+        };
+        let s = usize::from(stretch);
+        if self.run_stretch.get(r) != Some(&s) {
+            return false;
+        }
+        let (lo, hi) = self.knot_support_s(s, knot, spacing_s);
+        self.stretches[s].runs.clone().filter(|&q| q != r).all(|q| {
+            let (a, b) = self.run_spans_s[q];
+            b <= lo || a >= hi
+        })
+    }
+
+    /// Intervals between knots of stretch `s` at nominal spacing `spacing_s`: the span divided
+    /// evenly, at least one, and longer than the longest gap between its runs. Two knots then
+    /// never sit on a gap's two edges (which would leave the levels either side free, a level
+    /// per run again): a gap lies inside an interval, held by samples on both sides, or around
+    /// a knot that both sides share.
+    pub fn intervals(&self, s: usize, spacing_s: u16) -> usize {
+        let st = &self.stretches[s];
+        let n = knot_intervals(st.span_s, spacing_s);
+        if st.max_gap_s > 0.0 {
+            let longer_than_gap = ((st.span_s.1 - st.span_s.0) / st.max_gap_s).ceil() as usize;
+            n.min(longer_than_gap.saturating_sub(1)).max(1)
+        } else {
+            n
+        }
+    }
+
+    /// The knot grid of stretch `s` at nominal spacing `spacing_s`: its first knot's time, s,
+    /// and knots per second.
+    pub fn knot_grid(&self, s: usize, spacing_s: u16) -> (f64, f64) {
+        let (a, b) = self.stretches[s].span_s;
+        (a, self.intervals(s, spacing_s) as f64 / (b - a).max(1e-9))
+    }
+
+    /// Where knot `knot` of stretch `s` is non-zero, s.
+    pub fn knot_support_s(&self, s: usize, knot: u16, spacing_s: u16) -> (f64, f64) {
+        let (a, b) = self.stretches[s].span_s;
+        let h = (b - a) / self.intervals(s, spacing_s) as f64;
+        let t = a + h * f64::from(knot);
+        (t - h, t + h)
+    }
+
+    /// Whether some stretch holds runs at different base-table rates: the free drift's level is
+    /// then shared by runs whose constant rate terms (θ2'·M R_qᵀ e_z2, a table tilt's) differ,
+    /// so it does not hold those terms.
+    pub fn shares_levels_across_rates(&self, rates_dps: &[f64]) -> bool {
+        self.stretches.iter().any(|s| s.runs.clone().any(|r| (rates_dps[r] - rates_dps[s.runs.start]).abs() > 1e-9))
+    }
+
+    /// The knot columns of `Effect::DriftKnots(spacing_s)`: every knot of every stretch but the
+    /// first stretch's first, whose level is the offset column's (the hats of a stretch sum to
+    /// 1, so one knot overall must go for the offset to stay identifiable). The reported offset
+    /// is therefore the level at the first used sample of the first run.
     pub fn knots(&self, spacing_s: u16) -> Vec<LinCol> {
-        (0..self.run_spans_s.len())
-            .flat_map(|r| {
-                (0..=self.intervals(r, spacing_s)).filter(move |&k| r > 0 || k > 0).map(move |k| LinCol::DriftKnot {
-                    run: r as u16,
+        (0..self.stretches.len())
+            .flat_map(|s| {
+                (0..=self.intervals(s, spacing_s)).filter(move |&k| s > 0 || k > 0).map(move |k| LinCol::DriftKnot {
+                    stretch: s as u16,
                     knot: k as u16,
                     spacing_s,
                 })
@@ -236,12 +332,14 @@ pub struct LoopData {
     pub t_half_s: f64,
     /// The poses the runs are in, in order of first appearance.
     pub poses: Vec<Pose>,
+    /// What the effects' columns depend on.
+    pub layout: Layout,
 }
 
 impl LoopData {
     /// What the effects' columns depend on.
     pub fn layout(&self) -> Layout {
-        Layout { poses: self.poses.clone(), run_spans_s: self.runs.iter().map(|r| r.span_s).collect() }
+        self.layout.clone()
     }
 }
 
@@ -314,7 +412,18 @@ impl LoopData {
                 poses.push(r.pose);
             }
         }
-        Self { kin, runs, t0_s: t_lo, t_mid_s: 0.5 * (t_lo + t_hi), t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9), poses }
+        let run_poses: Vec<Pose> = kin.runs.iter().map(|r| r.pose).collect();
+        let spans: Vec<(f64, f64)> = runs.iter().map(|r| r.span_s).collect();
+        let layout = Layout::new(poses.clone(), &run_poses, &spans);
+        Self {
+            kin,
+            runs,
+            t0_s: t_lo,
+            t_mid_s: 0.5 * (t_lo + t_hi),
+            t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9),
+            poses,
+            layout,
+        }
     }
 }
 
@@ -361,7 +470,7 @@ impl Model {
             theta: Vec::new(),
             s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
             earth_vertical_known_dps: 0.0,
-            layout: Layout { poses: poses.to_vec(), run_spans_s: Vec::new() },
+            layout: Layout { poses: poses.to_vec(), ..Layout::default() },
         }
     }
 
@@ -473,6 +582,12 @@ pub struct Point {
     pub run: usize,
     /// The sample's time on its capture's clock, s.
     pub t_s: f64,
+    /// The run's stretch (`Layout::stretches`).
+    pub stretch: usize,
+    /// Where the sample lies on the free drift's knot grid of each of
+    /// [`DRIFT_KNOT_SPACINGS_S`] in its stretch, in intervals from the first knot (computed once
+    /// per sample: the knots are dozens of columns).
+    pub knot_x: [f64; DRIFT_KNOT_SPACINGS_S.len()],
 }
 
 /// Values derived from a model once per pass.
@@ -574,6 +689,9 @@ pub struct Evaluator<'a> {
     c_abs: [f64; 3],
     c_sq: [f64; 3],
     c_exp: [f64; 3],
+    /// Per stretch and knot spacing of [`DRIFT_KNOT_SPACINGS_S`]: the first knot's time, s, and
+    /// knots per second.
+    knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -596,6 +714,9 @@ impl<'a> Evaluator<'a> {
             c_abs: coef(LinCol::RateAbs),
             c_sq: coef(LinCol::RateSq),
             c_exp: coef(LinCol::DriftExp),
+            knot_grid: (0..data.layout.stretches.len())
+                .map(|st| std::array::from_fn(|k| data.layout.knot_grid(st, DRIFT_KNOT_SPACINGS_S[k])))
+                .collect(),
         }
     }
 
@@ -697,6 +818,11 @@ impl<'a> Evaluator<'a> {
             theta1_rate_dps: rate1,
             run: r,
             t_s: s.t_s(),
+            stretch: self.data.layout.run_stretch[r],
+            knot_x: std::array::from_fn(|k| {
+                let (t0, per_s) = self.knot_grid[self.data.layout.run_stretch[r]][k];
+                (s.t_s() - t0) * per_s
+            }),
         }
     }
 
@@ -730,14 +856,18 @@ impl<'a> Evaluator<'a> {
             }
             // z1 in the package frame is the vertical column of Earth's basis.
             LinCol::Gravity(k) => p.d_earth[0][k],
-            LinCol::DriftKnot { run, knot, spacing_s } => {
-                if usize::from(run) != p.run {
+            LinCol::DriftKnot { stretch, knot, spacing_s } => {
+                if p.stretch != usize::from(stretch) {
                     return 0.0;
                 }
-                let (a, b) = self.data.runs[p.run].span_s;
-                let n = knot_intervals((a, b), spacing_s);
-                let h = ((b - a) / n as f64).max(1e-9);
-                (1.0 - ((p.t_s - a) / h - f64::from(knot)).abs()).max(0.0)
+                let x = match DRIFT_KNOT_SPACINGS_S.iter().position(|&d| d == spacing_s) {
+                    Some(k) => p.knot_x[k],
+                    None => {
+                        let (t0, per_s) = self.data.layout.knot_grid(p.stretch, spacing_s);
+                        (p.t_s - t0) * per_s
+                    }
+                };
+                (1.0 - (x - f64::from(knot)).abs()).max(0.0)
             }
         }
     }
@@ -1199,4 +1329,54 @@ fn singular(model: &Model) -> CalError {
 /// The harmonics in the catalogue, as effects.
 pub fn harmonic_effects() -> impl Iterator<Item = Effect> {
     HARMONIC_ORDERS.map(Effect::TableHarmonic)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SPANS: [(f64, f64); 5] = [(1.5, 111.5), (123.5, 233.5), (245.5, 355.5), (367.5, 477.5), (2.0, 100.0)];
+    const POSES: [Pose; 5] = [Pose::One, Pose::One, Pose::Two, Pose::Two, Pose::Two];
+
+    #[test]
+    fn a_stretch_is_the_runs_of_one_pose_on_one_clock_close_in_time() {
+        let l = Layout::new(vec![Pose::One, Pose::Two], &POSES, &SPANS);
+        // Runs 1-2 (pose 1, 12 s apart) and 3-4 (pose 2) join; run 5 restarts the clock.
+        assert_eq!(l.run_stretch, [0, 0, 1, 1, 2]);
+        assert_eq!(l.stretches[0], Stretch { runs: 0..2, span_s: (1.5, 233.5), max_gap_s: 12.0 });
+        assert_eq!(l.stretches[2], Stretch { runs: 4..5, span_s: (2.0, 100.0), max_gap_s: 0.0 });
+        // A gap beyond MAX_BRIDGED_GAP_S splits.
+        let far = [(0.0, 100.0), (100.0 + MAX_BRIDGED_GAP_S + 1.0, 200.0)];
+        assert_eq!(Layout::new(vec![Pose::One], &[Pose::One; 2], &far).run_stretch, [0, 1]);
+        // Every knot of every stretch but the very first: 232 s at 40 s is 6 intervals, 7 knots.
+        assert_eq!(l.intervals(0, 40), 6);
+        assert_eq!(l.knots(40).len(), 6 + 7 + (1 + 2));
+    }
+
+    #[test]
+    fn knots_are_further_apart_than_a_gap_they_bridge() {
+        let l = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (125.0, 225.0)]);
+        // 225 s at 10 s would be 22 intervals; the 25-s gap caps them at 8 (28.125 s each).
+        assert_eq!(l.intervals(0, 10), 8);
+        assert_eq!(l.knot_grid(0, 10), (0.0, 8.0 / 225.0));
+        let knot = |k: u16| LinCol::DriftKnot { stretch: 0, knot: k, spacing_s: 10 };
+        // Knot 3 (84.4 s) is the first run's alone, knot 5 (140.6 s) the second's; knot 4
+        // (112.5 s, in the gap) reaches both, and ties their levels.
+        assert!(l.knot_only_in_run(knot(3), 0));
+        assert!(l.knot_only_in_run(knot(5), 1));
+        assert!(!l.knot_only_in_run(knot(4), 0) && !l.knot_only_in_run(knot(4), 1));
+        assert!(!l.knot_only_in_run(knot(1), 1));
+        // A gap of exactly two intervals' worth still gets intervals longer than itself.
+        let l = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (125.0, 250.0)]);
+        assert_eq!(l.intervals(0, 10), 9);
+    }
+
+    #[test]
+    fn levels_are_shared_across_rates_only_when_a_stretch_holds_two() {
+        let l = Layout::new(vec![Pose::One, Pose::Two], &POSES, &SPANS);
+        assert!(l.shares_levels_across_rates(&[180.0, -180.0, 180.0, -180.0, 90.0]));
+        assert!(!l.shares_levels_across_rates(&[180.0, 180.0, 90.0, 90.0, 90.0]));
+        let apart = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (0.0, 100.0)]);
+        assert!(!apart.shares_levels_across_rates(&[180.0, -180.0]));
+    }
 }

@@ -201,7 +201,7 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
     // added once the loop ends (see `closure`).
     if separates_delay_and_index(data) {
         let phase_modelled = has(Effect::Delay) || has(Effect::IndexOffset) || has(Effect::Phase);
-        if !has(Effect::TableTilt) && !has_free_drift {
+        if !has(Effect::TableTilt) && (!has_free_drift || free_drift_keeps_constant_rates(data)) {
             out.push(plain(Effect::TableTilt));
         }
         if phase_modelled && !has(Effect::PoseFixture) && data.poses.len() == 2 {
@@ -349,10 +349,10 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         let mut start = start_model(state, &cands[*ci], sol);
         if matches!(cands[*ci].effect, Effect::DriftKnots(_)) {
             // The free drift replaces what it holds: a drift curve already in (with both, the
-            // knots hold the curve's shape and its parameters run off) and a table tilt, whose
-            // only trace is a constant rate in each run, now each run's own level (with both, ε
-            // runs off along the null direction: −60° ± 5° on a 0.3° tilt).
-            for e in state.model.effects.iter().filter(|e| replaced_by_free_drift(**e)) {
+            // knots hold the curve's shape and its parameters run off) and, when each run has
+            // a level of its own, a table tilt, whose only trace is a constant rate in each run
+            // (with both, ε runs off along the null direction: −60° ± 5° on a 0.3° tilt).
+            for e in state.model.effects.iter().filter(|e| replaced_by_free_drift(**e, data)) {
                 start = start.without(*e);
             }
         }
@@ -418,9 +418,18 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
 }
 
 /// Whether adding the free drift takes `e` out of the model: every drift curve, and the table
-/// tilt (see [`step`]).
-pub fn replaced_by_free_drift(e: Effect) -> bool {
-    e.is_drift() || e == Effect::TableTilt
+/// tilt when the free drift's levels hold its constant rate (see [`step`]).
+pub fn replaced_by_free_drift(e: Effect, data: &LoopData) -> bool {
+    e.is_drift() || (e == Effect::TableTilt && !free_drift_keeps_constant_rates(data))
+}
+
+/// Whether the free drift leaves the constant rate terms (θ2'·M R_qᵀ e_z2, a table tilt's
+/// θ1'·sin ε) to the model: it follows the offset continuously through runs at different rates,
+/// where those terms step and the offset does not. When every stretch is one run (or one rate),
+/// each level holds them.
+pub fn free_drift_keeps_constant_rates(data: &LoopData) -> bool {
+    let rates: Vec<f64> = data.kin.runs.iter().map(|r| r.commanded_rate_dps).collect();
+    data.layout().shares_levels_across_rates(&rates)
 }
 
 /// An effect taken out of the model because a later one made it redundant.
@@ -532,9 +541,10 @@ pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses
         let Some(others) = Gram::sum(fitted.per_run.iter().enumerate().filter(|(i, _)| *i != r).map(|(_, g)| g)) else {
             continue;
         };
-        // The free drift's knots of the held-out run are its own level, which no other run can
-        // predict: they are left out of the fit to the others and fitted to the run itself.
-        let own = |c: usize| matches!(fitted.model.lin[c], LinCol::DriftKnot { run, .. } if usize::from(run) == r);
+        // The free drift's knots that only the held-out run sees are its own level, which no
+        // other run can predict: they are left out of the fit to the others and fitted to the
+        // run itself. A knot it shares with a run beside it in its stretch is predicted.
+        let own = |c: usize| fitted.model.layout.knot_only_in_run(fitted.model.lin[c], r);
         let others_sel =
             Selection { lin: sel.lin.iter().copied().filter(|&c| !own(c)).collect(), shared: sel.shared.clone() };
         let Some(sol) = solve_joint(&others, &others_sel, weights) else {
