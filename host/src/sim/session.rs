@@ -425,8 +425,12 @@ impl Session {
         let theta2 = self.theta2_rad(st.theta1_deg);
         let mut w2 = omega2(st.theta1_rate_dps, theta2, self.theta2_rate_dps(st));
         if let Some(t) = &self.effects.table_tilt {
-            // z1 leans by ε towards z2: θ1' gets a part along z2.
-            w2[2] += st.theta1_rate_dps * t.tilt_deg.to_radians().sin();
+            // z1 leans by ε towards z2: θ1' gets a part along z2, and its in-plane part, the
+            // sinusoid every axis measures, shrinks by cos ε.
+            let (sin_tilt, cos_tilt) = t.tilt_deg.to_radians().sin_cos();
+            w2[0] *= cos_tilt;
+            w2[1] *= cos_tilt;
+            w2[2] += st.theta1_rate_dps * sin_tilt;
         }
         if let Some(e) = &self.effects.earth_rotation {
             // The base's heading in the lab: the table is geared to a ground-fixed shaft, so
