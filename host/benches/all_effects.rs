@@ -36,8 +36,9 @@
 //! `BENCH_SEEDS=N` runs seeds 1..=N (default 10); `BENCH_PLANS` lists the run plans, separated by
 //! `;`, each the base-table rates of `--rates-dps` and, after `@`, the seconds per run (default
 //! [`DURATION_S`]). The default, `180,-180@300`, is the session the tool asks for once it finds
-//! g-sensitivity, long enough for the statistical σ of a sensitivity (≈ 6 ppm) to put the 20-ppm
-//! bar at 3σ: at 120 s per run that σ is ≈ 10 ppm whatever the model, and the bar is 2σ.
+//! g-sensitivity, long enough for the statistical σ of a sensitivity (6.7 ppm) to put the 20-ppm
+//! bar at 3σ: at 120 s per run that σ is ≈ 10 ppm with every effect in the model, and the bar
+//! is 2σ.
 
 mod measured;
 use measured::Usage;
