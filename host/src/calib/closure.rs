@@ -747,7 +747,7 @@ fn loop_on(
         } else {
             Effect::EarthRotation
         };
-        let dof = effect_columns(earth, &data.layout()).1.len();
+        let dof = effect_columns(earth, &data.layout).1.len();
         let start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
         let before = state.fitted.model.clone();
         match (fit(&data, start, weights), fit(&data, before, weights)) {

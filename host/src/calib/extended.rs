@@ -189,10 +189,9 @@ impl Layout {
 
     /// Where knot `knot` of stretch `s` is non-zero, s.
     pub fn knot_support_s(&self, s: usize, knot: u16, spacing_s: u16) -> (f64, f64) {
-        let (a, b) = self.stretches[s].span_s;
-        let h = (b - a) / self.intervals(s, spacing_s) as f64;
-        let t = a + h * f64::from(knot);
-        (t - h, t + h)
+        let (t0, per_s) = self.knot_grid(s, spacing_s);
+        let t = t0 + f64::from(knot) / per_s;
+        (t - 1.0 / per_s, t + 1.0 / per_s)
     }
 
     /// Whether some stretch holds runs at different base-table rates: the free drift's level is
@@ -337,13 +336,6 @@ pub struct LoopData {
 }
 
 impl LoopData {
-    /// What the effects' columns depend on.
-    pub fn layout(&self) -> Layout {
-        self.layout.clone()
-    }
-}
-
-impl LoopData {
     /// Marks usable samples and smooths the temperature.
     pub fn new(kin: Kinematics) -> Self {
         let mut runs = Vec::with_capacity(kin.runs.len());
@@ -457,7 +449,7 @@ impl Model {
 
     /// The linear model for `data`.
     pub fn for_data(data: &LoopData) -> Self {
-        Self { layout: data.layout(), ..Self::base_for(&data.poses) }
+        Self { layout: data.layout.clone(), ..Self::base_for(&data.poses) }
     }
 
     /// The linear model for data holding `poses` (and no free drift).

@@ -143,7 +143,7 @@ impl Evidence {
 pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> Vec<Candidate> {
     let has = |e: Effect| current.contains(&e);
     let plain = |effect: Effect| {
-        let (lin, shared) = effect_columns(effect, &data.layout());
+        let (lin, shared) = effect_columns(effect, &data.layout);
         Candidate {
             effect,
             cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
@@ -384,7 +384,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 match fit_of(i) {
                     Ok(f) => {
                         seen.push(sc.effect);
-                        let (lin, shared) = effect_columns(sc.effect, &data.layout());
+                        let (lin, shared) = effect_columns(sc.effect, &data.layout);
                         let k = 3 * lin.len() + shared.len();
                         let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
                         choices.push((i, f, bic));
@@ -429,7 +429,7 @@ pub fn replaced_by_free_drift(e: Effect, data: &LoopData) -> bool {
 /// each level holds them.
 pub fn free_drift_keeps_constant_rates(data: &LoopData) -> bool {
     let rates: Vec<f64> = data.kin.runs.iter().map(|r| r.commanded_rate_dps).collect();
-    data.layout().shares_levels_across_rates(&rates)
+    data.layout.shares_levels_across_rates(&rates)
 }
 
 /// An effect taken out of the model because a later one made it redundant.
