@@ -327,16 +327,6 @@ impl Bins {
 }
 
 impl OrderSums {
-    /// Adds one sample's sin nθ, cos nθ and `y` (into es, ec).
-    #[inline]
-    fn add(&mut self, sn: f64, cn: f64, y: f64) {
-        self.ss += sn * sn;
-        self.cc += cn * cn;
-        self.sc += sn * cn;
-        self.es += y * sn;
-        self.ec += y * cn;
-    }
-
     /// Least-squares (a, b) of a·sin + b·cos (for n = 0, (mean, 0) with cos = 1).
     fn solve(&self) -> (f64, f64) {
         if self.ss == 0.0 {
@@ -413,42 +403,151 @@ impl RateBinSums {
     }
 }
 
-/// The test that would otherwise repeat the harmonic ones: the slope against the speed
-/// deviation with every harmonic 0…32× removed from both (ripple at harmonics of the table is
-/// indistinguishable from them; what is left is the ripple at other frequencies, which only a
-/// wrong rate reconstruction would echo). A second pass over the run's samples for all three
-/// axes (`thetas` the used samples' θ2, `devs` their speed deviations); `coefs` and `dev_coefs`
-/// are the per-axis harmonic fits of the residual and of the speed deviation from the first pass.
-fn ripple_tests(
-    e: &[Vec<f32>; 3],
-    thetas: impl Iterator<Item = f64>,
-    devs: impl Iterator<Item = f64>,
-    coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
-    dev_coefs: &[[(f64, f64); MAX_ORDER + 1]; 3],
-) -> [SlopeSums; 3] {
-    let mut ripple = [SlopeSums::default(); 3];
-    let coefs = coefs.map(|c| flatten(&c));
-    let dev_coefs = dev_coefs.map(|c| flatten(&c));
-    let all = 2 * (MAX_ORDER + 1);
-    // Axes whose speed-deviation fit is the same (no clipped sample set them apart) share its
-    // evaluation: usually one dot product per sample instead of three.
-    let same_dev: [Option<usize>; 3] = std::array::from_fn(|a| (0..a).find(|&b| dev_coefs[b] == dev_coefs[a]));
-    for (i, (th, d)) in thetas.zip(devs).enumerate() {
-        let h = flatten(&harmonics_of(th));
-        let mut dev_fit = [0.0f64; 3];
-        for a in 0..3 {
-            dev_fit[a] = match same_dev[a] {
-                Some(b) => dev_fit[b],
-                None => dot_prefix(&dev_coefs[a], &h, all),
-            };
-            let v = f64::from(e[a][i]);
-            if v.is_nan() {
-                continue;
-            }
-            ripple[a].add(d - dev_fit[a], v - dot_prefix(&coefs[a], &h, all));
+/// θ2 bins of the harmonic fits and the speed-ripple test: 2^13 per turn. Every sum those need
+/// is a sum over samples of something times sin nθ2 or cos nθ2 (n ≤ 32), so summing the samples
+/// into θ2 bins first costs one addition per sample instead of 33 sine-cosine pairs, and the
+/// ripple test needs no second pass. Each harmonic becomes the step function of its values at the
+/// bin centres, and the fits are exact least squares on that basis: at 32× a bin spans
+/// 32·2π/8192 = 0.025 rad of phase, which costs a harmonic 2.5e-5 of its power (sinc²), far below
+/// what any test at the Bonferroni level can notice.
+const ANGLE_BINS: usize = 8192;
+
+/// sin θ, cos θ at the centre of each of the [`ANGLE_BINS`].
+fn angle_bin_centres() -> Vec<(f64, f64)> {
+    (0..ANGLE_BINS).map(|b| ((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64).sin_cos()).collect()
+}
+
+/// The bin of [`ANGLE_BINS`] that holds θ (any real angle, rad).
+#[inline]
+fn angle_bin(theta_rad: f64) -> usize {
+    let th = theta_rad.rem_euclid(std::f64::consts::TAU);
+    ((th / std::f64::consts::TAU * ANGLE_BINS as f64) as usize).min(ANGLE_BINS - 1)
+}
+
+/// One run's sums per θ2 bin for the harmonic fits of the residual and of the speed deviation d
+/// (in %), and for the slope of the residual against d with every harmonic 0…32× removed from
+/// both (the ripple test).
+#[derive(Debug, Clone)]
+struct AngleSums {
+    /// Used samples per bin.
+    count: Vec<f64>,
+    /// Σ d per bin over the used samples.
+    dev: Vec<f64>,
+    /// Σ d² over the used samples.
+    dev_sq: f64,
+    /// Per axis: Σ e per bin over its unclipped samples.
+    e: [Vec<f64>; 3],
+    /// Per axis: Σ d·e over its unclipped samples.
+    dev_e: [f64; 3],
+    /// Per axis: its clipped samples' count and Σ d per bin, and Σ d² (taken off the shared sums).
+    clip_count: [Vec<f64>; 3],
+    clip_dev: [Vec<f64>; 3],
+    clip_dev_sq: [f64; 3],
+}
+
+/// What [`AngleSums`] give per axis: the residual's order sums, the harmonic fit of the speed
+/// deviation, and the ripple test's slope sums.
+struct AngleFits {
+    orders: [[OrderSums; MAX_ORDER + 1]; 3],
+    ripple: [SlopeSums; 3],
+}
+
+impl AngleSums {
+    fn new() -> Self {
+        let zeros = || vec![0.0; ANGLE_BINS];
+        Self {
+            count: zeros(),
+            dev: zeros(),
+            dev_sq: 0.0,
+            e: std::array::from_fn(|_| zeros()),
+            dev_e: [0.0; 3],
+            clip_count: std::array::from_fn(|_| zeros()),
+            clip_dev: std::array::from_fn(|_| zeros()),
+            clip_dev_sq: [0.0; 3],
         }
     }
-    ripple
+
+    /// A used sample in bin `b` with speed deviation `dev_pct`.
+    #[inline]
+    fn add_sample(&mut self, b: usize, dev_pct: f64) {
+        self.count[b] += 1.0;
+        self.dev[b] += dev_pct;
+        self.dev_sq += dev_pct * dev_pct;
+    }
+
+    /// Axis `a`'s residual `e` at that sample.
+    #[inline]
+    fn add_residual(&mut self, a: usize, b: usize, dev_pct: f64, e: f64) {
+        self.e[a][b] += e;
+        self.dev_e[a] += dev_pct * e;
+    }
+
+    /// Axis `a` clipped at that sample.
+    #[inline]
+    fn add_clipped(&mut self, a: usize, b: usize, dev_pct: f64) {
+        self.clip_count[a][b] += 1.0;
+        self.clip_dev[a][b] += dev_pct;
+        self.clip_dev_sq[a] += dev_pct * dev_pct;
+    }
+
+    /// The fits, on the bin-centre basis.
+    fn fits(&self) -> AngleFits {
+        let used: Vec<usize> = (0..ANGLE_BINS).filter(|&b| self.count[b] > 0.0).collect();
+        let bin_harmonics: Vec<Flat> = used
+            .iter()
+            .map(|&b| flatten(&harmonics_of((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64)))
+            .collect();
+        let axis_bin = |a: usize, b: usize| {
+            (self.count[b] - self.clip_count[a][b], self.dev[b] - self.clip_dev[a][b], self.e[a][b])
+        };
+        let mut orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
+        let mut dev_orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
+        for (&b, h) in used.iter().zip(&bin_harmonics) {
+            for a in 0..3 {
+                let (n, d, e) = axis_bin(a, b);
+                if n == 0.0 {
+                    continue;
+                }
+                for (o, (eo, dout)) in orders[a].iter_mut().zip(dev_orders[a].iter_mut()).enumerate() {
+                    let (sn, cn) = (h[2 * o], h[2 * o + 1]);
+                    eo.ss += n * sn * sn;
+                    eo.cc += n * cn * cn;
+                    eo.sc += n * sn * cn;
+                    eo.es += e * sn;
+                    eo.ec += e * cn;
+                    dout.es += d * sn;
+                    dout.ec += d * cn;
+                }
+            }
+        }
+        for a in 0..3 {
+            for (eo, dout) in orders[a].iter().zip(dev_orders[a].iter_mut()) {
+                (dout.ss, dout.cc, dout.sc) = (eo.ss, eo.cc, eo.sc);
+            }
+        }
+        let coefs: [Flat; 3] = std::array::from_fn(|a| flatten(&harmonic_coefficients(&orders[a])));
+        let dev_flat: [Flat; 3] = std::array::from_fn(|a| flatten(&harmonic_coefficients(&dev_orders[a])));
+        let all = 2 * (MAX_ORDER + 1);
+        // Σ (d − D(θ))·(e − E(θ)) and its companions from the bin sums: D and E, the harmonic
+        // fits, are constant within a bin.
+        let ripple = std::array::from_fn(|a| {
+            let mut s = SlopeSums { xx: self.dev_sq - self.clip_dev_sq[a], xe: self.dev_e[a], ..SlopeSums::default() };
+            for (&b, h) in used.iter().zip(&bin_harmonics) {
+                let (n, d, e) = axis_bin(a, b);
+                if n == 0.0 {
+                    continue;
+                }
+                let (fit_d, fit_e) = (dot_prefix(&dev_flat[a], h, all), dot_prefix(&coefs[a], h, all));
+                s.n += n;
+                s.x += d - n * fit_d;
+                s.xx += n * fit_d * fit_d - 2.0 * d * fit_d;
+                s.e += e - n * fit_e;
+                s.xe += n * fit_d * fit_e - d * fit_e - e * fit_d;
+            }
+            s
+        });
+        AngleFits { orders, ripple }
+    }
 }
 
 /// The speed deviation θ1'/steady − 1 in %.
@@ -524,6 +623,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
     let mut cross = [[0.0f64; 3]; 3];
     let mut pooled = [(0.0f64, 0.0f64, 0.0f64, 0usize); 3]; // Σe², floor var·n, noise var·n, n
     let mut runs = Vec::with_capacity(n_runs);
+    let centres = angle_bin_centres();
     for (r, rk) in data.kin.runs.iter().enumerate() {
         let rd = &data.runs[r];
         let fs = rk.sample_rate_hz;
@@ -533,13 +633,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         // noise it measures): the floor, spectrum and whiteness need the series, and it is the
         // largest thing the diagnostics hold (issue 7's memory bar).
         let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
-        // Σ e·sin nθ, Σ e·cos nθ per axis; the sums that do not involve e (sin², cos², sin·cos,
-        // and the speed deviation's Σ d·sin, Σ d·cos) are shared by the axes, less what an
-        // axis's clipped samples contributed (`clipped_sums`), so each order costs two
-        // products per axis rather than five, and the deviation's fit needs no second pass.
-        let mut e_sums = [[(0.0f64, 0.0f64); MAX_ORDER + 1]; 3];
-        let mut shared = [OrderSums::default(); MAX_ORDER + 1];
-        let mut clipped_sums = [[OrderSums::default(); MAX_ORDER + 1]; 3];
+        let mut angle = AngleSums::new();
         let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
         let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s()) - rk.samples.first().map_or(0.0, |s| s.t_s()))
             / TIME_BIN_S)
@@ -566,19 +660,15 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
-            let harmonics = harmonics_of(p.theta2_rad);
-            for (o, &(sn, cn)) in shared.iter_mut().zip(&harmonics) {
-                o.add(sn, cn, dev_pct);
-            }
+            let hb = angle_bin(p.theta2_rad);
+            angle.add_sample(hb, dev_pct);
             for a in 0..3 {
                 let r = ev.axis_rate(&p, a).abs();
                 let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
                 if is_clipped(s.rate_counts[a]) {
                     clipped[a] += 1;
                     e[a].push(f32::NAN);
-                    for (o, &(sn, cn)) in clipped_sums[a].iter_mut().zip(&harmonics) {
-                        o.add(sn, cn, dev_pct);
-                    }
+                    angle.add_clipped(a, hb, dev_pct);
                     continue;
                 }
                 let pred = ev.predict(&p, a);
@@ -587,14 +677,11 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                 n_axis[a] += 1;
                 ss_axis[a] += ea * ea;
                 e[a].push(ea as f32);
-                for (o, &(sn, cn)) in e_sums[a].iter_mut().zip(&harmonics) {
-                    o.0 += ea * sn;
-                    o.1 += ea * cn;
-                }
+                angle.add_residual(a, hb, dev_pct, ea);
                 theta_bins[a].add(bin, ea, pred);
                 time_bins[a].add(tb, ea, 0.0);
                 temp[a].add(p.temp_c, ea);
-                rate_sums[a].add(rbin, ea, harmonics[1]);
+                rate_sums[a].add(rbin, ea, centres[hb]);
             }
             if row.iter().all(|v| !v.is_nan()) {
                 blocking.push(row);
@@ -606,30 +693,8 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             }
         }
         blocking.end_segment();
-        // Per axis: the residual's order sums, and the speed deviation's over the same samples.
-        let axis_sums = |a: usize, with: &dyn Fn(usize) -> (f64, f64)| -> [OrderSums; MAX_ORDER + 1] {
-            std::array::from_fn(|n| {
-                let (sh, cl) = (&shared[n], &clipped_sums[a][n]);
-                let (es, ec) = with(n);
-                OrderSums { ss: sh.ss - cl.ss, cc: sh.cc - cl.cc, sc: sh.sc - cl.sc, es, ec }
-            })
-        };
-        let orders: [[OrderSums; MAX_ORDER + 1]; 3] = std::array::from_fn(|a| axis_sums(a, &|n| e_sums[a][n]));
-        let dev_coefs: [[(f64, f64); MAX_ORDER + 1]; 3] = std::array::from_fn(|a| {
-            harmonic_coefficients(&axis_sums(a, &|n| {
-                (shared[n].es - clipped_sums[a][n].es, shared[n].ec - clipped_sums[a][n].ec)
-            }))
-        });
+        let AngleFits { orders, ripple: mut ripples } = angle.fits();
         let coefs: [[(f64, f64); MAX_ORDER + 1]; 3] = std::array::from_fn(|a| harmonic_coefficients(&orders[a]));
-        let devs = rk
-            .samples
-            .iter()
-            .zip(&rd.valid)
-            .filter(|(_, &v)| v)
-            .map(|(s, _)| speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps));
-        // θ2 of the used samples again, from the kinematics (not kept per sample: memory bar).
-        let thetas = (0..rk.samples.len()).filter(|&i| rd.valid[i]).map(|i| ev.theta2_at(r, i));
-        let mut ripples = ripple_tests(&e, thetas, devs, &coefs, &dev_coefs);
         let n_used = e[0].len().max(1);
         let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
         let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);
