@@ -662,6 +662,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let mut row = [f64::NAN; 3];
             let hb = angle_bin(p.theta2_rad);
             angle.add_sample(hb, dev_pct);
+            let preds = ev.predict3(&p);
             for a in 0..3 {
                 let r = ev.axis_rate(&p, a).abs();
                 let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
@@ -671,7 +672,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
                     angle.add_clipped(a, hb, dev_pct);
                     continue;
                 }
-                let pred = ev.predict(&p, a);
+                let pred = preds[a];
                 let ea = f64::from(s.rate_counts[a]) - pred;
                 row[a] = ea;
                 n_axis[a] += 1;

@@ -561,10 +561,12 @@ pub struct Point {
     /// The run's pose (the transmission error has a parameter set per pose).
     pub pose: Pose,
     /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame.
+    /// Horizontal parts NaN unless the evaluator's columns need them (`Evaluator::for_columns`).
     pub d_earth: [[f64; 3]; 3],
     /// ω̈ in the package frame, °/s³ (∂ω_s/∂κ).
     pub d_filter: [f64; 3],
     /// ∂ω_s/∂(pose-2 fixture rotation about x2, y2, z2), °/s per rad (zero outside pose 2).
+    /// NaN unless the evaluator's columns need it.
     pub d_fixture: [[f64; 3]; 3],
     /// ∂ω_s/∂ε through the in-plane part's cos ε, °/s per rad.
     pub d_tilt: [f64; 3],
@@ -598,8 +600,8 @@ struct Shifts {
     filter_s2: f64,
     /// Gear lag c, s.
     gear_lag_s: f64,
-    /// Table tilt ε, rad.
-    table_tilt_rad: f64,
+    /// sin and cos of the table tilt ε (once per evaluator, not per sample).
+    tilt_sin_cos: (f64, f64),
     /// Pose-2 fixture rotation, rad.
     fixture_rad: [f64; 3],
     /// (n, pose, a, b) of each ripple harmonic.
@@ -632,7 +634,7 @@ impl Shifts {
             drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
             filter_s2: m.theta_of(SharedPar::FilterCurvature).unwrap_or(0.0),
             gear_lag_s: m.theta_of(SharedPar::GearLag).unwrap_or(0.0),
-            table_tilt_rad: m.theta_of(SharedPar::TableTilt).unwrap_or(0.0),
+            tilt_sin_cos: m.theta_of(SharedPar::TableTilt).unwrap_or(0.0).sin_cos(),
             fixture_rad: std::array::from_fn(|k| m.theta_of(SharedPar::Fixture(k)).unwrap_or(0.0)),
             earth_dps: [
                 m.theta_of(SharedPar::EarthVertical).unwrap_or(m.earth_vertical_known_dps),
@@ -670,6 +672,77 @@ fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
     )
 }
 
+/// The knot columns of one stretch and spacing of the free drift within a column list.
+#[derive(Debug, Clone)]
+struct KnotGroup {
+    stretch: usize,
+    spacing_s: u16,
+    /// Index of the spacing in [`DRIFT_KNOT_SPACINGS_S`], whose knot position each point carries.
+    spacing_index: Option<usize>,
+    /// Where knot k sits in the column list, if it is there (the first stretch's first knot is
+    /// the offset's).
+    at: Vec<Option<usize>>,
+}
+
+/// A column list split for evaluation sample by sample: the columns every sample has, and the
+/// free drift's knots. A sample lies under at most two knots of a grid, so a pass evaluates those
+/// two, not the dozens a long capture has: evaluating every knot at every sample made the
+/// cost of a calibration grow faster than its length (issue 7).
+#[derive(Debug, Clone, Default)]
+struct ColPlan {
+    /// (position in the list, column) of every column but the knots.
+    dense: Vec<(usize, Col)>,
+    /// Whether each of `dense` has one value for all three axes (a linear column that does not
+    /// depend on the axis's own rate): it is evaluated once per sample, not once per axis.
+    common: Vec<bool>,
+    knots: Vec<KnotGroup>,
+}
+
+impl ColPlan {
+    fn of(cols: impl Iterator<Item = Col>) -> Self {
+        let mut plan = Self::default();
+        for (j, c) in cols.enumerate() {
+            let Col::Lin(LinCol::DriftKnot { stretch, knot, spacing_s }) = c else {
+                plan.dense.push((j, c));
+                plan.common.push(matches!(c, Col::Lin(l) if !matches!(l, LinCol::RateAbs | LinCol::RateSq)));
+                continue;
+            };
+            let stretch = usize::from(stretch);
+            let g = match plan.knots.iter().position(|g| g.stretch == stretch && g.spacing_s == spacing_s) {
+                Some(g) => g,
+                None => {
+                    plan.knots.push(KnotGroup {
+                        stretch,
+                        spacing_s,
+                        spacing_index: DRIFT_KNOT_SPACINGS_S.iter().position(|&d| d == spacing_s),
+                        at: Vec::new(),
+                    });
+                    plan.knots.len() - 1
+                }
+            };
+            let at = &mut plan.knots[g].at;
+            let k = usize::from(knot);
+            if at.len() <= k {
+                at.resize(k + 1, None);
+            }
+            at[k] = Some(j);
+        }
+        plan
+    }
+}
+
+/// What a column's value on one axis is made of, per sample (`Evaluator::axis_terms`).
+struct AxisTerms {
+    /// ∂(output)/∂ω_s, counts per °/s.
+    u: [f64; 3],
+    /// ∂(output)/∂θ2, counts per rad.
+    e2: f64,
+    /// ∂(output)/∂θ2', counts per °/s.
+    ez: f64,
+    /// Moving θ2 (before ripple) moves the rippled angle and speed too.
+    d_shift: f64,
+}
+
 /// Evaluates columns and predictions at samples for one model.
 pub struct Evaluator<'a> {
     data: &'a LoopData,
@@ -688,11 +761,30 @@ pub struct Evaluator<'a> {
     /// Per stretch and knot spacing of [`DRIFT_KNOT_SPACINGS_S`]: the first knot's time, s, and
     /// knots per second.
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
+    /// The model's linear columns, split for [`Evaluator::predict`].
+    lin_plan: ColPlan,
+    /// Whether the points need the base's heading θ1 (a sine and cosine per sample): only Earth's
+    /// horizontal components turn with it.
+    needs_heading: bool,
+    /// Whether the points need the pose-2 fixture's Jacobian.
+    needs_fixture: bool,
 }
 
 impl<'a> Evaluator<'a> {
-    /// An evaluator at the model's current values.
+    /// An evaluator at the model's current values, for the model's own columns.
     pub fn new(data: &'a LoopData, model: &'a Model) -> Self {
+        Self::for_columns(data, model, &model.cols())
+    }
+
+    /// An evaluator at the model's current values whose points serve `cols` (and the model's
+    /// own columns): what no column needs, a point leaves out (NaN), so a pass pays only for
+    /// the Jacobians it uses.
+    pub fn for_columns(data: &'a LoopData, model: &'a Model, cols: &[Col]) -> Self {
+        let wants = |f: &dyn Fn(SharedPar) -> bool| {
+            model.shared.iter().any(|&p| f(p)) || cols.iter().any(|c| matches!(c, Col::Shared(p) if f(*p)))
+        };
+        let needs_heading = wants(&|p| matches!(p, SharedPar::EarthNorthAtZero | SharedPar::EarthWestAtZero));
+        let needs_fixture = wants(&|p| matches!(p, SharedPar::Fixture(_)));
         let m = model.m();
         let coef = |c: LinCol| std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0));
         Self {
@@ -713,6 +805,9 @@ impl<'a> Evaluator<'a> {
             knot_grid: (0..data.layout.stretches.len())
                 .map(|st| std::array::from_fn(|k| data.layout.knot_grid(st, DRIFT_KNOT_SPACINGS_S[k])))
                 .collect(),
+            lin_plan: ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c))),
+            needs_heading,
+            needs_fixture,
         }
     }
 
@@ -750,7 +845,7 @@ impl<'a> Evaluator<'a> {
         let (se, ce) = th_eff.sin_cos();
         // A table axis tilted by ε from perpendicular puts θ1'·sin ε along z2 and scales the
         // in-plane part by cos ε: 1 − ε²/2 is 14 ppm at 0.3°, which every sensitivity would take.
-        let (sin_tilt, cos_tilt) = sh.table_tilt_rad.sin_cos();
+        let (sin_tilt, cos_tilt) = sh.tilt_sin_cos;
         let rate1_in_plane = rate1 * cos_tilt;
         let w2 = [rate1_in_plane * se, rate1_in_plane * ce, rate2_eff + rate1 * sin_tilt];
         let mut dw2 = [rate1_in_plane * ce, -rate1_in_plane * se, 0.0];
@@ -766,7 +861,8 @@ impl<'a> Evaluator<'a> {
         // ground (EXCITER.md, "Mechanism"), so θ2 = ratio·θ1_lab + const and the index fixes the
         // heading for every run, while the encoder's count restarts with each capture.
         // (Each angle's sine and cosine once: they were 4 of the 5 libm calls a point made.)
-        let (s1, c1) = (theta2 / rk.gear_ratio).sin_cos();
+        // Without a horizontal Earth term in the pass the heading multiplies zeros only.
+        let (s1, c1) = if self.needs_heading { (theta2 / rk.gear_ratio).sin_cos() } else { (0.0, 0.0) };
         let basis = earth_basis((s1, c1), (se, ce));
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
@@ -775,9 +871,15 @@ impl<'a> Evaluator<'a> {
         for (i, d) in dw2.iter_mut().enumerate() {
             *d += ev * d_basis[0][i] + en * d_basis[1][i] + ew * d_basis[2][i];
         }
-        let d_earth = [to_package(&basis[0]), to_package(&basis[1]), to_package(&basis[2])];
+        let d_earth = if self.needs_heading {
+            [to_package(&basis[0]), to_package(&basis[1]), to_package(&basis[2])]
+        } else {
+            [to_package(&basis[0]), [f64::NAN; 3], [f64::NAN; 3]]
+        };
         // ∂ω_s/∂e_k = −R2ᵀ(e_k × v) = R2ᵀ(v × e_k), v = ω2 + κ·ω̈2, in pose 2 only.
-        let d_fixture: [[f64; 3]; 3] = if rk.pose == Pose::Two {
+        let d_fixture: [[f64; 3]; 3] = if !self.needs_fixture {
+            [[f64::NAN; 3]; 3]
+        } else if rk.pose == Pose::Two {
             let v: [f64; 3] = std::array::from_fn(|i| w2[i] + sh.filter_s2 * w2_ddot[i]);
             std::array::from_fn(|k| {
                 let c = cross(&v, &std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 }));
@@ -844,8 +946,8 @@ impl<'a> Evaluator<'a> {
         match c {
             LinCol::Omega(k) => p.omega[k],
             LinCol::One => 1.0,
-            LinCol::DriftExp => (-p.t_rel_s / self.shifts.drift_tau_s).exp(),
-            LinCol::DriftExpFixed(t) => (-p.t_rel_s / t).exp(),
+            LinCol::DriftExp => decay(p.t_rel_s, self.shifts.drift_tau_s),
+            LinCol::DriftExpFixed(t) => decay(p.t_rel_s, t),
             LinCol::DriftT1 => p.t_scaled,
             LinCol::DriftT2 => 0.5 * (3.0 * p.t_scaled * p.t_scaled - 1.0),
             LinCol::DriftTemp => p.temp_c,
@@ -875,7 +977,69 @@ impl<'a> Evaluator<'a> {
     /// The model's output on axis `a`, counts.
     #[inline]
     pub fn predict(&self, p: &Point, a: usize) -> f64 {
-        self.model.lin.iter().zip(&self.model.beta[a]).map(|(&c, b)| b * self.lin_value(c, p, a)).sum()
+        let mut common = Vec::new();
+        self.common_values(p, &self.lin_plan, &mut common);
+        self.predict_with(p, a, &common)
+    }
+
+    /// The model's output on every axis, counts (the axis-independent columns once).
+    #[inline]
+    pub fn predict3(&self, p: &Point) -> [f64; 3] {
+        let mut common = Vec::new();
+        self.common_values(p, &self.lin_plan, &mut common);
+        std::array::from_fn(|a| self.predict_with(p, a, &common))
+    }
+
+    /// [`Evaluator::predict`] with the model's axis-independent column values at `p` given
+    /// (`common_values` of `lin_plan`).
+    #[inline]
+    fn predict_with(&self, p: &Point, a: usize, common: &[f64]) -> f64 {
+        let beta = &self.model.beta[a];
+        let mut sum = 0.0;
+        for (k, &(j, c)) in self.lin_plan.dense.iter().enumerate() {
+            if let Col::Lin(lc) = c {
+                let v = if self.lin_plan.common[k] { common[k] } else { self.lin_value(lc, p, a) };
+                sum += beta[j] * v;
+            }
+        }
+        self.for_each_knot(&self.lin_plan, p, |j, w| sum += beta[j] * w);
+        sum
+    }
+
+    /// The values at `p` of `plan`'s axis-independent columns, by position in `plan.dense`
+    /// (0 for the others).
+    #[inline]
+    fn common_values(&self, p: &Point, plan: &ColPlan, out: &mut Vec<f64>) {
+        out.clear();
+        out.extend(plan.dense.iter().zip(&plan.common).map(|(&(_, c), &common)| match c {
+            Col::Lin(lc) if common => self.lin_value(lc, p, 0),
+            _ => 0.0,
+        }));
+    }
+
+    /// The knots of `plan` under point `p`, with their hat functions' values (the
+    /// [`LinCol::DriftKnot`] arm of [`Evaluator::lin_value`], for the two that can be non-zero).
+    #[inline]
+    fn for_each_knot(&self, plan: &ColPlan, p: &Point, mut f: impl FnMut(usize, f64)) {
+        for g in plan.knots.iter().filter(|g| g.stretch == p.stretch) {
+            let x = match g.spacing_index {
+                Some(k) => p.knot_x[k],
+                None => {
+                    let (t0, per_s) = self.data.layout.knot_grid(p.stretch, g.spacing_s);
+                    (p.t_s - t0) * per_s
+                }
+            };
+            let below = x.floor();
+            for k in [below, below + 1.0] {
+                let w = (1.0 - (x - k).abs()).max(0.0);
+                if k < 0.0 || w == 0.0 {
+                    continue;
+                }
+                if let Some(&Some(j)) = g.at.get(k as usize) {
+                    f(j, w);
+                }
+            }
+        }
     }
 
     /// ∂(output of axis a)/∂ω_s, counts per °/s.
@@ -886,50 +1050,76 @@ impl<'a> Evaluator<'a> {
         std::array::from_fn(|i| self.m_rows[a][i] + self.s_hat[a][i] * g)
     }
 
+    /// The per-axis factors of the shared columns at `p`.
+    #[inline]
+    fn axis_terms(&self, p: &Point, a: usize) -> AxisTerms {
+        let u = self.gradient(p, a);
+        let (e2, ez) = (dot(&u, &p.d_theta2), dot(&u, &p.d_rate2));
+        AxisTerms { u, e2, ez, d_shift: e2 * p.dtheta_eff + ez * p.drate_eff_dps }
+    }
+
+    /// A column's value on axis `a` at `p`; knots are evaluated through [`ColPlan`].
+    #[inline]
+    fn column_value(&self, c: Col, p: &Point, a: usize, t: &AxisTerms) -> f64 {
+        let AxisTerms { u, e2, ez, d_shift } = *t;
+        match c {
+            Col::Lin(lc) => self.lin_value(lc, p, a),
+            // The index offset moves θ2 but not the gear mesh's angle (the ripple).
+            Col::Shared(SharedPar::IndexOffset) => e2,
+            Col::Shared(SharedPar::Phase) => d_shift,
+            Col::Shared(SharedPar::FilterCurvature) => dot(&u, &p.d_filter),
+            Col::Shared(SharedPar::TableTilt) => ez * p.theta1_rate_dps * p.cos_tilt + dot(&u, &p.d_tilt),
+            // Moving the gear angle moves the rippled angle by (ripple − 1) and the
+            // rippled speed by θ2'·∂ripple/∂θ.
+            Col::Shared(SharedPar::GearLag) => p.theta1_rate_rad_s * (e2 * (p.dtheta_eff - 1.0) + ez * p.drate_eff_dps),
+            Col::Shared(SharedPar::Fixture(k)) => dot(&u, &p.d_fixture[k]),
+            Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
+            Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
+            Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),
+            Col::Shared(SharedPar::Delay) => -p.rate2_dps.to_radians() * d_shift,
+            Col::Shared(SharedPar::DriftTau) => {
+                let t = self.shifts.drift_tau_s;
+                self.c_exp[a] * decay(p.t_rel_s, t) * p.t_rel_s / (t * t)
+            }
+            Col::Shared(SharedPar::Harmonic { pose, .. }) if pose != p.pose => 0.0,
+            Col::Shared(SharedPar::Harmonic { order, quadrature, .. }) => {
+                let n = f64::from(order);
+                let (sn, cn) = (n * p.mesh_rad).sin_cos();
+                if quadrature {
+                    -e2 * cn / n + ez * p.rate2_dps * sn
+                } else {
+                    e2 * sn / n + ez * p.rate2_dps * cn
+                }
+            }
+        }
+    }
+
     /// Fills `out[a * cols.len() + j]` with column j on axis a.
     pub fn fill(&self, p: &Point, cols: &[Col], out: &mut [f64]) {
         let l = cols.len();
         for a in 0..3 {
-            let u = self.gradient(p, a);
-            // ∂(output)/∂θ2 and ∂/∂θ2', counts per rad and counts per °/s.
-            let (e2, ez) = (dot(&u, &p.d_theta2), dot(&u, &p.d_rate2));
-            // Moving θ2 (before ripple) moves the rippled angle and speed too.
-            let d_shift = e2 * p.dtheta_eff + ez * p.drate_eff_dps;
+            let t = self.axis_terms(p, a);
             for (j, &c) in cols.iter().enumerate() {
-                out[a * l + j] = match c {
-                    Col::Lin(lc) => self.lin_value(lc, p, a),
-                    // The index offset moves θ2 but not the gear mesh's angle (the ripple).
-                    Col::Shared(SharedPar::IndexOffset) => e2,
-                    Col::Shared(SharedPar::Phase) => d_shift,
-                    Col::Shared(SharedPar::FilterCurvature) => dot(&u, &p.d_filter),
-                    Col::Shared(SharedPar::TableTilt) => ez * p.theta1_rate_dps * p.cos_tilt + dot(&u, &p.d_tilt),
-                    // Moving the gear angle moves the rippled angle by (ripple − 1) and the
-                    // rippled speed by θ2'·∂ripple/∂θ.
-                    Col::Shared(SharedPar::GearLag) => {
-                        p.theta1_rate_rad_s * (e2 * (p.dtheta_eff - 1.0) + ez * p.drate_eff_dps)
-                    }
-                    Col::Shared(SharedPar::Fixture(k)) => dot(&u, &p.d_fixture[k]),
-                    Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
-                    Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
-                    Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),
-                    Col::Shared(SharedPar::Delay) => -p.rate2_dps.to_radians() * d_shift,
-                    Col::Shared(SharedPar::DriftTau) => {
-                        let t = self.shifts.drift_tau_s;
-                        self.c_exp[a] * (-p.t_rel_s / t).exp() * p.t_rel_s / (t * t)
-                    }
-                    Col::Shared(SharedPar::Harmonic { pose, .. }) if pose != p.pose => 0.0,
-                    Col::Shared(SharedPar::Harmonic { order, quadrature, .. }) => {
-                        let n = f64::from(order);
-                        let (sn, cn) = (n * p.mesh_rad).sin_cos();
-                        if quadrature {
-                            -e2 * cn / n + ez * p.rate2_dps * sn
-                        } else {
-                            e2 * sn / n + ez * p.rate2_dps * cn
-                        }
-                    }
-                };
+                out[a * l + j] = self.column_value(c, p, a, &t);
             }
         }
+    }
+
+    /// The non-zero columns of `plan` on axis `a` at `p`, as (position, value): what
+    /// [`Evaluator::fill`] gives, without the zeros (the knots after the rest).
+    /// `common` holds `plan`'s axis-independent values at `p` (`common_values`).
+    fn fill_nonzero(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut Vec<(usize, f64)>) {
+        out.clear();
+        let t = self.axis_terms(p, a);
+        out.extend(
+            plan.dense
+                .iter()
+                .zip(&plan.common)
+                .zip(common)
+                .map(|((&(j, c), &is_common), &v)| (j, if is_common { v } else { self.column_value(c, p, a, &t) }))
+                .filter(|&(_, v)| v != 0.0),
+        );
+        self.for_each_knot(plan, p, |j, w| out.push((j, w)));
     }
 }
 
@@ -944,6 +1134,19 @@ impl<'a> Evaluator<'a> {
 #[inline]
 fn earth_basis((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> [[f64; 3]; 3] {
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
+}
+
+/// exp(−t/τ), 0 beyond 700 time constants: exp would return 1e-304 or a subnormal there, and
+/// glibc takes a slow path for the underflow (6 % of a 1-h calibration, from the warm-up
+/// candidates' short τ late in a long capture).
+#[inline]
+fn decay(t_s: f64, tau_s: f64) -> f64 {
+    let x = t_s / tau_s;
+    if x > 700.0 {
+        0.0
+    } else {
+        (-x).exp()
+    }
 }
 
 /// a × b.
@@ -1010,6 +1213,24 @@ impl Gram {
         }
     }
 
+    /// Adds the sums of `local` whose rows and columns are all in `rows` (every other entry of
+    /// it is zero) and zeroes them in `local`: a chunk touches a few of a long capture's
+    /// hundreds of knot columns, and merging and clearing the whole l×l matrix per chunk was
+    /// most of a pass (the sums are the same, bit for bit).
+    fn drain_rows(&mut self, local: &mut Gram, rows: &[usize]) {
+        let l = self.l;
+        for a in 0..3 {
+            for &r in rows {
+                self.xte[a][r] += std::mem::take(&mut local.xte[a][r]);
+                for &c in rows.iter().filter(|&&c| c >= r) {
+                    self.xtx[a][r * l + c] += std::mem::take(&mut local.xtx[a][r * l + c]);
+                }
+            }
+            self.ete[a] += std::mem::take(&mut local.ete[a]);
+            self.n[a] += std::mem::take(&mut local.n[a]);
+        }
+    }
+
     /// Adds another set of sums.
     pub fn merge(&mut self, o: &Gram) {
         for a in 0..3 {
@@ -1045,47 +1266,53 @@ impl Gram {
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
 /// their axis).
 pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
-    let ev = Evaluator::new(data, model);
+    let ev = Evaluator::for_columns(data, model, cols);
     let l = cols.len();
-    let mut z = vec![0.0; 3 * l];
+    let plan = ColPlan::of(cols.iter().copied());
     let mut nz: Vec<(usize, f64)> = Vec::with_capacity(l);
+    let (mut common, mut model_common) = (Vec::with_capacity(l), Vec::new());
     data.kin
         .runs
         .iter()
         .enumerate()
         .map(|(r, rk)| {
             let mut total = Gram::new(l);
+            let mut local = Gram::new(l);
+            let (mut touched, mut rows) = (vec![false; l], Vec::with_capacity(l));
             let valid = &data.runs[r].valid;
             for start in (0..rk.samples.len()).step_by(CHUNK) {
-                let mut local = Gram::new(l);
                 let end = (start + CHUNK).min(rk.samples.len());
                 for (i, _) in valid[start..end].iter().enumerate().filter(|(_, v)| **v) {
                     let i = start + i;
                     let p = ev.point(r, i);
-                    ev.fill(&p, cols, &mut z);
+                    ev.common_values(&p, &plan, &mut common);
+                    ev.common_values(&p, &ev.lin_plan, &mut model_common);
                     for (a, &count) in rk.samples[i].rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
                         }
-                        let e = f64::from(count) - ev.predict(&p, a);
-                        let x = &z[a * l..(a + 1) * l];
+                        let e = f64::from(count) - ev.predict_with(&p, a, &model_common);
                         // Only the non-zero columns: the free drift's knots are 2 of dozens
-                        // per sample, so the Gram update costs what the dense part does.
-                        nz.clear();
-                        nz.extend(x.iter().enumerate().filter(|(_, &v)| v != 0.0).map(|(j, &v)| (j, v)));
+                        // per sample, so the Gram update costs what the dense part does. Each
+                        // pair goes to the upper triangle (`symmetrise` fills the rest).
+                        ev.fill_nonzero(&p, &plan, a, &common, &mut nz);
                         let g = &mut local.xtx[a];
                         for (k, &(ii, xi)) in nz.iter().enumerate() {
+                            if !touched[ii] {
+                                touched[ii] = true;
+                                rows.push(ii);
+                            }
                             local.xte[a][ii] += xi * e;
-                            let row = &mut g[ii * l..(ii + 1) * l];
                             for &(jj, xj) in &nz[k..] {
-                                row[jj] += xi * xj;
+                                g[ii.min(jj) * l + ii.max(jj)] += xi * xj;
                             }
                         }
                         local.ete[a] += e * e;
                         local.n[a] += 1;
                     }
                 }
-                total.merge(&local);
+                total.drain_rows(&mut local, &rows);
+                rows.drain(..).for_each(|ii| touched[ii] = false);
             }
             total.symmetrise();
             total
