@@ -7,6 +7,7 @@
 //! members it does not know).
 
 use crate::capture::Capture;
+use crate::report::html::escape;
 use anyhow::{Context, Result};
 use protocol::GyroConfig;
 use serde::{Deserialize, Serialize};
@@ -244,10 +245,6 @@ impl fmt::Display for Provenance {
     }
 }
 
-fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
-}
-
 impl Provenance {
     /// The certificate block of the HTML report: who, what, when, from which bytes.
     pub fn html_section(&self) -> String {
@@ -283,8 +280,8 @@ impl Provenance {
         for (k, v) in rows {
             o.push_str(&format!(
                 "<tr><th scope=\"row\">{}</th><td style=\"overflow-wrap:anywhere\">{}</td></tr>\n",
-                html_escape(k),
-                html_escape(&v)
+                escape(k),
+                escape(&v)
             ));
         }
         o.push_str("</table>\n</section>\n");

@@ -107,7 +107,7 @@ fn unescape(s: &str) -> String {
             _ => {}
         }
     }
-    text.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", "\"").replace("&#39;", "'").replace("&amp;", "&")
+    html_escape::decode_html_entities(&text).into_owned()
 }
 
 /// Every table of the page as rows of cells (the report uses no colspan).

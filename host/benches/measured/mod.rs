@@ -56,15 +56,6 @@ pub fn run_measured(mut cmd: Command) -> Result<Usage, String> {
 }
 
 /// The median (NaN of nothing).
-pub fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+pub fn median(v: Vec<f64>) -> f64 {
+    statrs::statistics::OrderStatistics::median(&mut statrs::statistics::Data::new(v))
 }

@@ -586,7 +586,9 @@ fn high_pass_variance(e: &[f32], w: usize) -> f64 {
     power / (used as f64 * (1.0 - inv))
 }
 
-/// Ljung–Box statistic of the block means of `e` (blocks with a NaN dropped).
+/// Ljung–Box statistic of the block means of `e` (blocks with a NaN dropped). Written here: statrs
+/// has the χ² it is compared with (`stats`) but no Ljung–Box, and no kept crate takes block means
+/// of an f32 residual with NaN gaps; the statistic is one sum.
 fn ljung_box(e: &[f32], block: usize, lags: usize) -> (f64, usize) {
     let means: Vec<f64> = e
         .chunks_exact(block.max(1))

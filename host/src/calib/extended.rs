@@ -10,6 +10,11 @@
 //!
 //! The same accumulation over the union of the model's columns and every candidate's gives the
 //! linearised fit of any candidate model from one pass (see [`super::selection`]).
+//!
+//! Gauss-Newton is written here rather than taken from `levenberg-marquardt` or `argmin`: those
+//! want the residual vector and Jacobian in memory (samples × parameters, millions of rows),
+//! where this accumulates the normal equations run by run and reuses them for every candidate;
+//! the linear algebra is nalgebra's.
 
 use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;

@@ -249,6 +249,9 @@ fn pulses(run: &Run) -> Vec<Pulse> {
     out
 }
 
+/// The upper middle value, selected in place by std's `select_nth_unstable_by` (no sort, no
+/// copy): statrs's `OrderStatistics::median` would average the two middle values of an even
+/// count, a different estimator from the one every committed figure was made with.
 fn median(values: &mut [f64]) -> f64 {
     if values.is_empty() {
         return f64::NAN;

@@ -2,6 +2,10 @@
 //! rectangular windows, `realfft`), the amplitude spectrum for the plots, and the noise level of
 //! a band clear of the table harmonics, which is the long-run noise variance the loop's χ² tests
 //! and covariances use (white or low-pass-coloured, the low-frequency noise is what biases a fit).
+//!
+//! The Welch averaging around realfft stays here: it is one loop over segments, and its
+//! normalisation (|X_k|²/N_seg, the last segment zero-padded) is the one the χ² weights assume,
+//! where a spectral-estimation crate would bring its own windows and scaling.
 
 use realfft::RealFftPlanner;
 use serde::{Deserialize, Serialize};

@@ -39,6 +39,8 @@ pub fn lower_times_rotation(n: &Matrix3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
     (r.transpose(), q.transpose())
 }
 
+/// Written by hand, like the rest of this YAML: `serde_yaml` is unmaintained, and Kalibr's file
+/// wants flow-style matrix rows in a fixed layout, which a serialiser would choose for itself.
 fn yaml_matrix(o: &mut String, indent: &str, m: &Matrix3<f64>) {
     for i in 0..3 {
         let _ = writeln!(o, "{indent}- [{:.12e}, {:.12e}, {:.12e}]", m[(i, 0)], m[(i, 1)], m[(i, 2)]);

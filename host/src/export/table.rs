@@ -54,7 +54,8 @@ pub fn render_json(e: &Export) -> String {
     serde_json::to_string_pretty(&doc).expect("plain data serialises") + "\n"
 }
 
-/// CSV: `name,value,sigma,unit`, identity first (sigma empty where unknown).
+/// CSV: `name,value,sigma,unit`, identity first (sigma empty where unknown). Written without the
+/// `csv` crate: four fixed columns whose only free text, serial and date, is always quoted here.
 pub fn render_csv(e: &Export) -> String {
     let mut o = String::from("name,value,sigma,unit\n");
     let q = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));

@@ -2,6 +2,7 @@
 //! combined σ, and a production summary across sensors with outliers named.
 
 use super::store::Record;
+use statrs::statistics::{Data, OrderStatistics, Statistics};
 use std::fmt::Write as _;
 
 /// One line per record.
@@ -126,15 +127,10 @@ pub fn median_and_robust_sigma(values: &[f64]) -> (f64, f64) {
     (med, 1.4826 * median(&dev))
 }
 
+/// The median (the mean of the two middle values for an even count; NaN of nothing): `statrs`'s
+/// order statistics, selecting in place on a copy.
 fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    match n {
-        0 => f64::NAN,
-        _ if n % 2 == 1 => v[n / 2],
-        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
+    Data::new(values.to_vec()).median()
 }
 
 /// Robust z beyond which a sensor is named an outlier: 3.5, the modified z-score threshold of
@@ -220,8 +216,9 @@ fn distribution(name: &str, unit: &str, vals: &[(String, f64)]) -> Option<Distri
     }
     let v: Vec<f64> = vals.iter().map(|(_, x)| *x).collect();
     let n = v.len();
-    let mean = v.iter().sum::<f64>() / n as f64;
-    let sd = if n > 1 { (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt() } else { 0.0 };
+    let mean = v.iter().mean();
+    // The sample standard deviation (n − 1); one sensor has no spread rather than NaN.
+    let sd = if n > 1 { v.iter().std_dev() } else { 0.0 };
     let (med, rs) = median_and_robust_sigma(&v);
     let outliers = vals
         .iter()

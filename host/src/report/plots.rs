@@ -4,6 +4,9 @@
 //! points are drawn as gaps, data outside an explicit range is clipped at the frame, and
 //! undrawable input (nothing finite, bad ranges, mismatched lengths) is a [`PlotError`] rather
 //! than a blank or misleading figure.
+//!
+//! Drawn with plotters through [`super::chart`], whose doc says what plotters lacks and why that
+//! layer is ours; moving it onto another charting crate is left for a later round (issue 7).
 
 use super::chart::{self, Area, FrameText, LegendItem, Mapper, Stroke, Swatch, MARGIN_LEFT, MARGIN_RIGHT, TICK_PX};
 pub use super::error::PlotError;

@@ -1,6 +1,8 @@
 //! Axis ranges and tick positions, computed here rather than by plotters so that degenerate data
 //! (a single point, constant values, NaN) and log axes get sensible, predictable ranges, and so
-//! that the layout code knows every tick label before drawing.
+//! that the layout code knows every tick label before drawing. No other crate is taken for it:
+//! the 1-2-5 steps are a dozen lines, and the charting crate already used is the one whose ticks
+//! this replaces.
 
 use super::error::PlotError;
 

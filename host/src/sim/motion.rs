@@ -192,6 +192,8 @@ impl IndexPlate {
 }
 
 /// Time in `(a, b]` at which `above(t)` switches (to true if `rising`, else to false), to 1 ns.
+/// A plain bisection: root-finding crates (`roots`, `argmin`) want a continuous function's sign
+/// change, and this is a boolean predicate.
 fn bisect(mut a: f64, mut b: f64, above: impl Fn(f64) -> bool, rising: bool) -> f64 {
     while b - a > 1e-9 {
         let m = 0.5 * (a + b);
