@@ -50,6 +50,19 @@ pub fn elapsed_us(now: u32, since: u32) -> i32 {
     now.wrapping_sub(since) as i32
 }
 
+/// What this firmware says of itself in [`Hello`], with `gyro` the settings in force: the one
+/// place for it (the host's batch simulator announces the same).
+pub fn hello(gyro: GyroConfig) -> Hello {
+    Hello {
+        protocol_version: PROTOCOL_VERSION,
+        firmware: FIRMWARE_VERSION,
+        gyro,
+        encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
+        gear_ratio: GEAR_RATIO,
+        timestamp_hz: TIMESTAMP_HZ,
+    }
+}
+
 /// The gyro as the command handler sees it: something that can be (re)configured.
 pub trait GyroControl {
     /// Checks the gyro is there and applies `config`.
@@ -310,6 +323,12 @@ impl Rig {
         self.run.tag()
     }
 
+    /// The speed loop: where it is heading and how fast it ramps there. A simulated drive that
+    /// follows it (the host's `SimRig`) turns the table the way this firmware commands it.
+    pub fn speed_loop(&self) -> &SpeedLoop {
+        &self.speed_loop
+    }
+
     /// [`motor_faults`] bits since the last start.
     pub fn motor_faults(&self) -> u8 {
         self.motor_faults
@@ -361,14 +380,7 @@ impl Rig {
     }
 
     pub(crate) fn send_hello(&mut self) {
-        self.link.send(&RigMsg::Hello(Hello {
-            protocol_version: PROTOCOL_VERSION,
-            firmware: FIRMWARE_VERSION,
-            gyro: self.gyro_config,
-            encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
-            gear_ratio: GEAR_RATIO,
-            timestamp_hz: TIMESTAMP_HZ,
-        }));
+        self.link.send(&RigMsg::Hello(hello(self.gyro_config)));
     }
 
     fn send_motor_status(&mut self, t_us: u32, encoder: u32) {

@@ -183,6 +183,11 @@ impl SpeedLoop {
         self.duty
     }
 
+    /// Where the ramp is heading, counts/s (signed): 0 at rest, after a Stop or a trip.
+    pub fn target_cps(&self) -> i32 {
+        self.target_cps as i32
+    }
+
     /// Ramped setpoint, counts/s (signed).
     pub fn setpoint_cps(&self) -> i32 {
         self.setpoint_cps as i32

@@ -418,6 +418,35 @@ fn a_bad_simulation_config_is_a_usage_error_naming_the_field() {
     }
 }
 
+/// `host virtual-rig` with a setting it cannot serve: one `error:` line naming the option and
+/// what it must be, exit 2, and no pty served (nothing on standard output).
+#[test]
+fn a_bad_virtual_rig_setting_is_a_usage_error() {
+    for (args, expected) in [
+        (
+            &["virtual-rig", "--speedup", "0"][..],
+            "invalid value '0' for '--speedup <SPEEDUP>': \"0\" is not a positive number",
+        ),
+        (
+            &["virtual-rig", "--loss", "1"],
+            "invalid value '1' for '--loss <LOSS>': \"1\" is not a probability in [0, 1)",
+        ),
+        (
+            &["virtual-rig", "--drop", "Sample:0"],
+            "invalid value 'Sample:0' for '--drop <DROPS>': \"Sample:0\": N counts from 1",
+        ),
+        (
+            &["virtual-rig", "--duration", "nan"],
+            "invalid value 'nan' for '--duration <DURATION>': \"nan\" is not a positive number",
+        ),
+    ] {
+        let o = host(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert_eq!(stderr(&o), format!("error: {expected}\n\nFor more information, try '--help'.\n"), "{args:?}");
+        assert!(o.stdout.is_empty(), "{args:?}");
+    }
+}
+
 /// F10: a duration or rate that is not a finite number is a usage error (exit 2) naming it:
 /// `nan` seconds would record forever, `nan` °/s would send 0.
 #[test]

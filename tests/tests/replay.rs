@@ -38,8 +38,8 @@ fn timestamps_and_encoder_wrapping_mid_run_change_nothing() {
     // The µs clock wraps 6 s into the session (during pose 1), the encoder 2 s later.
     wrapped.start_t_us = u32::MAX - 6_000_000;
     wrapped.start_encoder = u32::MAX - 1_000_000;
-    let a = sim::simulate(&plain);
-    let b = sim::simulate(&wrapped);
+    let a = sim::simulate(&plain).unwrap();
+    let b = sim::simulate(&wrapped).unwrap();
     let (ca, cb) = (decode(&a.bytes), decode(&b.bytes));
     assert!(cb.loss.is_clean(), "{:?}", cb.loss);
     for (ra, rb) in ca.runs.iter().zip(&cb.runs) {
@@ -61,7 +61,8 @@ fn timestamps_and_encoder_wrapping_mid_run_change_nothing() {
 #[test]
 fn a_capture_with_one_pose_is_refused_with_the_missing_pose_named() {
     let out =
-        sim::simulate(&SimConfig::with_runs(3, vec![RunSpec { pose: Pose::Two, rate_dps: 180.0, duration_s: 4.0 }]));
+        sim::simulate(&SimConfig::with_runs(3, vec![RunSpec { pose: Pose::Two, rate_dps: 180.0, duration_s: 4.0 }]))
+            .unwrap();
     let cap = decode(&out.bytes);
     let err = calib::calibrate(&cap.runs, &CalOptions::default()).unwrap_err();
     assert_eq!(err.to_string(), "only pose 2 was captured: pose 1 is needed too (axis directions need both poses)");

@@ -23,7 +23,7 @@ struct SeedResult {
 }
 
 fn run_seed(seed: u64) -> SeedResult {
-    let out = simulate(&SimConfig::standard(seed, DURATION_S));
+    let out = simulate(&SimConfig::standard(seed, DURATION_S)).unwrap();
     let capture = decode(&out.bytes);
     assert!(capture.loss.is_clean(), "seed {seed}: {:?}", capture.loss);
     let report = calibrate(&capture.runs, &CalOptions::default()).unwrap_or_else(|e| panic!("seed {seed}: {e}"));

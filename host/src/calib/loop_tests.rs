@@ -42,7 +42,7 @@ fn capture_with(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str],
     for e in effects {
         cfg.effects.enable(e).expect("known effect");
     }
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let cap = decode(&out.bytes);
     assert!(cap.loss.is_clean());
     (cap.runs, out.truth)

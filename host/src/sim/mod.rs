@@ -138,10 +138,11 @@ impl SimConfig {
             "must be in (0, 180)",
         )?;
         for (i, r) in self.runs.iter().enumerate() {
-            // The rig's limit: the simulator must not promise what the firmware refuses.
+            // The simulator must not promise what the firmware refuses: each run is the Start the
+            // host would send for it, judged by the firmware's own validation.
             let max_dps = protocol::units::dps_from_mdps(protocol::MAX_RATE_MDPS);
             check(
-                r.rate_dps.is_finite() && r.rate_dps.abs() <= max_dps,
+                r.rate_dps.is_finite() && firmware::commands::setpoint_cps(&start_for(r)).is_ok(),
                 &format!("runs[{i}].rate_dps"),
                 &format!("must be within ±{max_dps} °/s, the rig's limit (0: a static run, for noise figures)"),
             )?;
@@ -178,6 +179,15 @@ impl SimConfig {
     }
 }
 
+/// The `Start` command that asks the rig for `run` (the host's session sends the same).
+fn start_for(run: &RunSpec) -> protocol::StartRun {
+    protocol::StartRun {
+        rate_mdps: protocol::units::mdps_from_dps(run.rate_dps),
+        direction: protocol::units::direction_of(run.rate_dps),
+        run_tag: run.pose.run_tag(),
+    }
+}
+
 /// A simulation setting that cannot be simulated: which field, and what it must be.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{field} {requirement}")]
@@ -200,17 +210,13 @@ pub struct SimOutput {
 /// Bytes of one `Sample` frame, roughly (for buffer sizing).
 const SAMPLE_FRAME_BYTES: u64 = 30;
 
-/// Simulates a whole session into memory.
-///
-/// # Panics
-/// If `cfg.validate()` fails.
-pub fn simulate(cfg: &SimConfig) -> SimOutput {
-    if let Err(e) = cfg.validate() {
-        panic!("invalid SimConfig: {e}");
-    }
+/// Simulates a whole session into memory; an unusable configuration is refused, naming the
+/// field.
+pub fn simulate(cfg: &SimConfig) -> Result<SimOutput, ConfigError> {
+    cfg.validate()?;
     let mut bytes = Vec::with_capacity((cfg.expected_samples() * SAMPLE_FRAME_BYTES) as usize + 4096);
-    let truth = simulate_to(cfg, &mut bytes).expect("writing to a Vec cannot fail");
-    SimOutput { bytes, truth }
+    let truth = simulate_to(cfg, &mut bytes).expect("a valid config, written to a Vec");
+    Ok(SimOutput { bytes, truth })
 }
 
 /// Simulates a whole session, streaming the bytes to `out` (buffered internally), so that long

@@ -1,5 +1,11 @@
 //! The simulation engine shared by the batch generator and the live emulator: one powered-up
-//! rig with one sensor, running runs and emitting every frame in time order.
+//! rig with one sensor.
+//!
+//! The batch generator ([`super::simulate_to`]) runs scripted runs and emits every frame itself,
+//! in time order, fast. The live emulator ([`super::SimRig`]) uses only the physics here (the
+//! tables' motion, the index edges, the gyro's samples and die temperature) and hands them to the
+//! firmware's own core, which decides and says everything ([`Session::mount`] and the methods
+//! after it).
 
 use super::effects::Effects;
 use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
@@ -11,7 +17,7 @@ use super::SimConfig;
 use crate::geometry::{omega2, Pose};
 use protocol::{
     timing, units, Counters, Fault, FaultReport, GyroConfig, Hello, IndexEdge, MotorStatus, RigMsg, RunStarted,
-    RunStopped, Sample, Temperature, ENCODER_COUNTS_PER_REV, PROTOCOL_VERSION, TIMESTAMP_HZ,
+    RunStopped, Sample, Temperature, ENCODER_COUNTS_PER_REV,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -84,6 +90,32 @@ struct ActiveRun {
     edges: u64,
 }
 
+/// The index edges of one stretch of time and the tables' state at its end.
+struct Interval {
+    edges: Vec<EdgeCrossing>,
+    base: BaseState,
+    theta2_rad: f64,
+}
+
+/// A run that has ended, for the truth.
+#[derive(Debug, Clone, Copy)]
+pub struct FinishedRun {
+    /// The pose the gyro was in.
+    pub pose: Pose,
+    /// Base-table rate commanded, °/s, signed.
+    pub rate_dps: f64,
+    /// `RunStarted`, s.
+    pub start_s: f64,
+    /// `RunStopped`, s.
+    pub end_s: f64,
+    /// Gyro samples in the run.
+    pub samples: u64,
+    /// Index edges in the run.
+    pub index_edges: u64,
+    /// Ended by a fault.
+    pub faulted: bool,
+}
+
 /// One powered-up simulated rig.
 pub struct Session {
     seed: u64,
@@ -114,7 +146,6 @@ pub struct Session {
     jitter_rng: ChaCha8Rng,
     jitter: Normal<f64>,
     samples_read: u32,
-    rx_errors: u32,
     run: Option<ActiveRun>,
     runs: Vec<RunTruth>,
     scratch: Vec<EdgeCrossing>,
@@ -161,7 +192,6 @@ impl Session {
             jitter_rng: rng(cfg.seed, Stream::Jitter),
             jitter: Normal::new(0.0, TIMESTAMP_JITTER_US).expect("finite σ"),
             samples_read: 0,
-            rx_errors: 0,
             run: None,
             runs: Vec::new(),
             scratch: Vec::with_capacity(8),
@@ -187,30 +217,13 @@ impl Session {
         });
     }
 
-    /// Whether a run is in progress.
-    pub fn running(&self) -> bool {
-        self.run.is_some()
-    }
-
-    /// Counts a host frame that failed to decode (reported in `Counters::rx_errors`).
-    pub fn count_rx_error(&mut self) {
-        self.rx_errors = self.rx_errors.wrapping_add(1);
-    }
-
-    /// The `Hello` message.
+    /// The `Hello` message: the firmware's own, for the gyro settings in force.
     pub fn hello(&self) -> Hello {
-        Hello {
-            protocol_version: PROTOCOL_VERSION,
-            firmware: FIRMWARE_VERSION,
-            gyro: self.gyro,
-            encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
-            gear_ratio: GEAR_RATIO,
-            timestamp_hz: TIMESTAMP_HZ,
-        }
+        firmware::rig::hello(self.gyro)
     }
 
     /// Timer value at `t_s` (the timer counts whole µs).
-    fn timer_us(&self, t_s: f64) -> u32 {
+    pub fn timer_us(&self, t_s: f64) -> u32 {
         (i64::from(self.start_t_us) + (t_s * 1e6).floor() as i64) as u32
     }
 
@@ -247,6 +260,13 @@ impl Session {
             gyro: self.gyro,
         }))?;
         self.motor.set_target(t_s, rate_dps, self.spin_up_s);
+        self.run = Some(self.new_run(t_s, pose, run_tag, rate_dps));
+        Ok(())
+    }
+
+    /// The gyro in `pose` from `t_s` on: its sensing chain, its filter settled, the next
+    /// data-ready after `t_s`.
+    fn new_run(&self, t_s: f64, pose: Pose, run_tag: u8, rate_dps: f64) -> ActiveRun {
         let next_k = ((t_s - self.clock_phase_s) / self.period_s).floor().max(0.0) as u64 + 1;
         let mount = self.effects.pose_fixture.map_or_else(|| pose.rotation(), |f| f.rotation(pose));
         let chain = SenseChain::new(&self.sensor, &mount, self.gyro.full_scale, &self.effects);
@@ -274,8 +294,7 @@ impl Session {
             let t0 = self.data_ready_s(next_k - 1) - self.effects.pure_delay_s();
             f.settle(self.sensed_counts(&run.chain, t0));
         }
-        self.run = Some(run);
-        Ok(())
+        run
     }
 
     /// Emits everything up to `t_s` (a run's frames up to its last data-ready ≤ `t_s`).
@@ -304,41 +323,46 @@ impl Session {
         let run = self.run.take().expect("checked above");
         w.send(&RigMsg::RunStopped(RunStopped { t_us: self.timer_us(t_s), run_tag: run.run_tag }))?;
         self.motor.set_target(t_s, 0.0, self.spin_up_s);
+        let done = FinishedRun {
+            pose: run.pose,
+            rate_dps: run.rate_dps,
+            start_s: run.start_s,
+            end_s: t_s,
+            samples: run.samples,
+            index_edges: run.edges,
+            faulted: fault.is_some(),
+        };
+        self.record_run(&done);
+        Ok(())
+    }
+
+    /// Adds a finished run to the truth.
+    pub fn record_run(&mut self, run: &FinishedRun) {
         let drive_hz = (run.rate_dps * self.gear_ratio).abs() / 360.0;
         let filter_ms =
             self.lowpass_coef.map_or(0.0, |c| 1e3 * c.group_delay_s(drive_hz, f64::from(OVERSAMPLING) / self.period_s));
         self.runs.push(RunTruth {
             pose: run.pose,
             rate_dps: run.rate_dps,
-            duration_s: t_s - run.start_s,
+            duration_s: run.end_s - run.start_s,
             start_s: run.start_s,
             samples: run.samples,
-            index_edges: run.edges,
+            index_edges: run.index_edges,
             gyro: self.gyro,
             drive_hz,
             filter_group_delay_ms: filter_ms,
             total_delay_ms: filter_ms + self.effects.pure_delay_s() * 1e3,
-            faulted: fault.is_some(),
+            faulted: run.faulted,
         });
-        Ok(())
     }
 
     /// Index edges and periodic messages in `(done_s, t_end_s]`, merged in time order.
     fn emit_interval<W: Write>(&mut self, t_end_s: f64, w: &mut FrameWriter<W>) -> io::Result<()> {
-        let Some(run) = self.run.as_ref() else { return Ok(()) };
-        let (t_a, theta2_a) = (run.done_s, run.theta2_done_rad);
-        let base_b = self.motor.state(t_end_s);
-        let theta2_b = self.theta2_rad(base_b.theta1_deg);
-        let mut edges = std::mem::take(&mut self.scratch);
-        edges.clear();
-        self.plate.crossings(
-            t_a,
-            t_end_s,
-            theta2_a,
-            theta2_b,
-            |t| self.theta2_rad(self.motor.theta1_deg(t)),
-            &mut edges,
-        );
+        if self.run.is_none() {
+            return Ok(());
+        }
+        let interval = self.open_interval(t_end_s);
+        let edges = &interval.edges;
         let mut next_edge = 0;
         loop {
             let run = self.run.as_ref().expect("checked above");
@@ -357,11 +381,7 @@ impl Session {
                 let e = edges[next_edge];
                 next_edge += 1;
                 // Captured by a timer input: exact to the µs tick, no interrupt jitter.
-                w.send(&RigMsg::Index(IndexEdge {
-                    t_us: self.timer_us(e.t_s),
-                    encoder: self.encoder.register(self.motor.theta1_deg(e.t_s)),
-                    edge: e.edge,
-                }))?;
+                w.send(&RigMsg::Index(self.index_edge(&e)))?;
                 self.run.as_mut().expect("checked above").edges += 1;
             } else {
                 let msg = match which {
@@ -377,7 +397,8 @@ impl Session {
                         samples_read: self.samples_read,
                         gyro_overruns: 0,
                         spi_errors: 0,
-                        rx_errors: self.rx_errors,
+                        // The batch capture has no host talking to the rig.
+                        rx_errors: 0,
                     }),
                 };
                 w.send(&msg)?;
@@ -389,12 +410,45 @@ impl Session {
                 }
             }
         }
-        self.scratch = edges;
-        let run = self.run.as_mut().expect("checked above");
-        run.done_s = t_end_s;
-        run.base_done = base_b;
-        run.theta2_done_rad = theta2_b;
+        self.close_interval(t_end_s, interval);
         Ok(())
+    }
+
+    /// The index edges in `(done_s, t_end_s]` and the state at its end (a run is mounted).
+    fn open_interval(&mut self, t_end_s: f64) -> Interval {
+        let run = self.run.as_ref().expect("a mounted gyro");
+        let (t_a, theta2_a) = (run.done_s, run.theta2_done_rad);
+        let base = self.motor.state(t_end_s);
+        let theta2_rad = self.theta2_rad(base.theta1_deg);
+        let mut edges = std::mem::take(&mut self.scratch);
+        edges.clear();
+        self.plate.crossings(
+            t_a,
+            t_end_s,
+            theta2_a,
+            theta2_rad,
+            |t| self.theta2_rad(self.motor.theta1_deg(t)),
+            &mut edges,
+        );
+        Interval { edges, base, theta2_rad }
+    }
+
+    /// Everything up to `t_end_s` has been said.
+    fn close_interval(&mut self, t_end_s: f64, interval: Interval) {
+        self.scratch = interval.edges;
+        let run = self.run.as_mut().expect("a mounted gyro");
+        run.done_s = t_end_s;
+        run.base_done = interval.base;
+        run.theta2_done_rad = interval.theta2_rad;
+    }
+
+    /// An edge as the index capture latches it: timer and encoder at its instant.
+    fn index_edge(&self, e: &EdgeCrossing) -> IndexEdge {
+        IndexEdge {
+            t_us: self.timer_us(e.t_s),
+            encoder: self.encoder.register(self.motor.theta1_deg(e.t_s)),
+            edge: e.edge,
+        }
     }
 
     fn motor_status(&self, t_s: f64) -> RigMsg {
@@ -443,7 +497,15 @@ impl Session {
 
     /// The sample at data-ready `next_k` (its interval has been emitted).
     fn emit_sample<W: Write>(&mut self, w: &mut FrameWriter<W>) -> io::Result<()> {
-        let mut run = self.run.take().expect("called during a run");
+        let sample = self.next_sample();
+        w.send(&RigMsg::Sample(sample))?;
+        self.samples_read = self.samples_read.wrapping_add(1);
+        Ok(())
+    }
+
+    /// The sample at data-ready `next_k` (its interval has been closed); moves on to the next.
+    fn next_sample(&mut self) -> Sample {
+        let mut run = self.run.take().expect("a mounted gyro");
         let t_s = self.data_ready_s(run.next_k);
         let delay_s = self.effects.pure_delay_s();
         let pre = match run.lowpass.as_mut() {
@@ -482,12 +544,75 @@ impl Session {
         let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 + jitter_us).round() as i64) as u32;
         debug_assert_eq!(run.done_s, t_s, "the sample's interval is emitted first");
         let encoder = self.encoder.register(run.base_done.theta1_deg);
-        w.send(&RigMsg::Sample(Sample { t_us, encoder, rate_counts, status: 0 }))?;
-        self.samples_read = self.samples_read.wrapping_add(1);
         run.samples += 1;
         run.next_k += 1;
         self.run = Some(run);
-        Ok(())
+        Sample { t_us, encoder, rate_counts, status: 0 }
+    }
+
+    /// The gyro in `pose` from `t_s` on (the live emulator's mount): it samples from then on, in
+    /// a run or not, as the firmware streams every data-ready. The edges up to `t_s` must have
+    /// been taken ([`Self::index_edges_until`]).
+    pub fn mount(&mut self, t_s: f64, pose: Pose) {
+        self.run = Some(self.new_run(t_s, pose, 0, 0.0));
+    }
+
+    /// The pose the gyro is mounted in.
+    pub fn mounted_pose(&self) -> Option<Pose> {
+        self.run.as_ref().map(|r| r.pose)
+    }
+
+    /// New gyro settings at `t_s`, the gyro staying in its pose (the live emulator, between runs).
+    pub fn reconfigure(&mut self, t_s: f64, gyro: GyroConfig) {
+        let pose = self.run.take().map(|r| r.pose);
+        self.configure(gyro);
+        if let Some(pose) = pose {
+            self.mount(t_s, pose);
+        }
+    }
+
+    /// The drive ramps from its speed at `t_s` to `target_dps` at `ramp_dps2` (the firmware's
+    /// speed loop decides both; the tables follow its ramp).
+    pub fn drive_to(&mut self, t_s: f64, target_dps: f64, ramp_dps2: f64) {
+        let from_dps = self.motor.state(t_s).setpoint_dps;
+        let ramp_s = if ramp_dps2 > 0.0 { (target_dps - from_dps).abs() / ramp_dps2 } else { 0.0 };
+        self.motor.set_target(t_s, target_dps, ramp_s);
+    }
+
+    /// The next data-ready of the mounted gyro, s.
+    pub fn next_data_ready_s(&self) -> Option<f64> {
+        self.run.as_ref().map(|r| self.data_ready_s(r.next_k))
+    }
+
+    /// Index edges up to `t_s`, each as the capture latches it.
+    pub fn index_edges_until(&mut self, t_s: f64, mut on_edge: impl FnMut(IndexEdge)) {
+        let Some(run) = self.run.as_ref() else { return };
+        if t_s <= run.done_s {
+            return;
+        }
+        let interval = self.open_interval(t_s);
+        for e in &interval.edges {
+            on_edge(self.index_edge(e));
+        }
+        self.run.as_mut().expect("checked above").edges += interval.edges.len() as u64;
+        self.close_interval(t_s, interval);
+    }
+
+    /// The sample at the next data-ready (its edges taken first) and the die temperature
+    /// (OUT_TEMP) then.
+    pub fn sample(&mut self) -> (Sample, i8) {
+        let t_s = self.next_data_ready_s().expect("a mounted gyro");
+        (self.next_sample(), self.thermal.out_temp_raw(t_s))
+    }
+
+    /// The encoder register at `t_s`.
+    pub fn encoder_at(&self, t_s: f64) -> u32 {
+        self.encoder.register(self.motor.theta1_deg(t_s))
+    }
+
+    /// Samples and index edges since the gyro was mounted.
+    pub fn mounted_counts(&self) -> (u64, u64) {
+        self.run.as_ref().map_or((0, 0), |r| (r.samples, r.edges))
     }
 
     /// The truth so far: the sensor for the current gyro settings and the finished runs.

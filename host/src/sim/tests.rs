@@ -84,7 +84,7 @@ pub(super) fn encoder_quantum_s(rate_dps: f64) -> f64 {
 #[test]
 fn standard_capture_decodes_cleanly_with_the_configured_structure() {
     let cfg = SimConfig::standard(7, 10.0);
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let cap = decode_clean(&out.bytes);
     let hello = cap.hello.expect("Hello first");
     assert_eq!(hello.protocol_version, protocol::PROTOCOL_VERSION);
@@ -122,7 +122,7 @@ fn standard_capture_decodes_cleanly_with_the_configured_structure() {
 #[test]
 fn sample_rate_encoder_rate_and_index_period_match_the_configuration() {
     let cfg = SimConfig::standard(11, 12.0);
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let cap = decode_clean(&out.bytes);
     let truth = &out.truth;
     assert!(truth.odr_error_ppm.abs() < 5.0 * 300.0);
@@ -167,7 +167,7 @@ fn index_centres_are_at_theta2_equal_to_the_index_offset_both_ways() {
         if offset_deg != 0.0 {
             cfg.effects.enable(&format!("index_offset_deg={offset_deg}")).unwrap();
         }
-        let out = simulate(&cfg);
+        let out = simulate(&cfg).unwrap();
         let cap = decode_clean(&out.bytes);
         let run = &cap.runs[0];
         assert_eq!(out.truth.index_offset_deg, offset_deg);
@@ -182,7 +182,7 @@ fn index_centres_are_at_theta2_equal_to_the_index_offset_both_ways() {
 
 #[test]
 fn truth_has_m_equal_k_times_s_with_unit_axes_and_survives_json() {
-    let out = simulate(&SimConfig::standard(5, 1.0));
+    let out = simulate(&SimConfig::standard(5, 1.0)).unwrap();
     let t = &out.truth;
     for i in 0..3 {
         let s = nalgebra::Vector3::from(t.s[i]);
@@ -216,15 +216,15 @@ fn truth_has_m_equal_k_times_s_with_unit_axes_and_survives_json() {
 
 #[test]
 fn deterministic_for_a_seed_and_the_sensor_independent_of_the_runs() {
-    let a = simulate(&SimConfig::standard(42, 2.0));
-    let b = simulate(&SimConfig::standard(42, 2.0));
+    let a = simulate(&SimConfig::standard(42, 2.0)).unwrap();
+    let b = simulate(&SimConfig::standard(42, 2.0)).unwrap();
     assert_eq!(a.bytes, b.bytes);
     assert_eq!(a.truth, b.truth);
-    let c = simulate(&SimConfig::standard(43, 2.0));
+    let c = simulate(&SimConfig::standard(43, 2.0)).unwrap();
     assert_ne!(a.truth.m_counts_per_dps, c.truth.m_counts_per_dps);
     assert_ne!(a.bytes, c.bytes);
     // Same seed, longer runs: same sensor, and the first run starts with the same samples.
-    let d = simulate(&SimConfig::standard(42, 5.0));
+    let d = simulate(&SimConfig::standard(42, 5.0)).unwrap();
     assert_eq!(a.truth.m_counts_per_dps, d.truth.m_counts_per_dps);
     assert_eq!(a.truth.offset_counts, d.truth.offset_counts);
     assert_eq!(a.truth.odr_hz_actual, d.truth.odr_hz_actual);
@@ -235,7 +235,7 @@ fn deterministic_for_a_seed_and_the_sensor_independent_of_the_runs() {
 #[test]
 fn simulate_to_streams_exactly_the_in_memory_bytes() {
     let cfg = SimConfig::standard(9, 1.5);
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let mut streamed = Vec::new();
     let truth = simulate_to(&cfg, &mut streamed).unwrap();
     assert_eq!(streamed, out.bytes);
@@ -254,7 +254,7 @@ fn several_speeds_and_both_directions_decode_with_their_rates() {
         RunSpec { pose: Pose::Two, rate_dps: 270.0, duration_s: 6.0 },
     ];
     let cfg = SimConfig::with_runs(21, runs.clone());
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let cap = decode_clean(&out.bytes);
     assert_eq!(cap.runs.len(), 3);
     for (run, spec) in cap.runs.iter().zip(&runs) {
@@ -284,7 +284,7 @@ fn timestamp_and_encoder_wrap_mid_run_decode_monotonic() {
     // The timer wraps 1 s into the first run, the encoder early in its spin-up.
     cfg.start_t_us = u32::MAX - 3_000_000;
     cfg.start_encoder = u32::MAX - 2_000;
-    let out = simulate(&cfg);
+    let out = simulate(&cfg).unwrap();
     let cap = decode_clean(&out.bytes);
     let mut raw_wrapped = false;
     StreamDecoder::new().feed::<RigMsg>(&out.bytes, |ev| {
@@ -302,7 +302,7 @@ fn timestamp_and_encoder_wrap_mid_run_decode_monotonic() {
     }
     assert_eq!(
         cap.runs[0].samples.len(),
-        decode_clean(&simulate(&SimConfig::standard(4, 3.0)).bytes).runs[0].samples.len()
+        decode_clean(&simulate(&SimConfig::standard(4, 3.0)).unwrap().bytes).runs[0].samples.len()
     );
 }
 
@@ -311,7 +311,7 @@ fn clipping_comes_from_the_range_not_from_the_rate() {
     let clipped = |fs: FullScale, rate_dps: f64| {
         let mut cfg = SimConfig::with_runs(8, vec![RunSpec { pose: Pose::One, rate_dps, duration_s: 5.0 }]);
         cfg.gyro.full_scale = fs;
-        let cap = decode_clean(&simulate(&cfg).bytes);
+        let cap = decode_clean(&simulate(&cfg).unwrap().bytes);
         let s = &cap.runs[0].samples;
         s.iter().filter(|s| s.rate_counts.iter().any(|&c| c == i16::MAX || c == i16::MIN)).count()
     };
@@ -327,8 +327,8 @@ fn with_and_without(seed: u64, spec: &str, secs: f64) -> (SimConfig, SimOutput, 
     let base_cfg = SimConfig::standard(seed, secs);
     let mut cfg = base_cfg.clone();
     cfg.effects.enable(spec).unwrap();
-    let base = simulate(&base_cfg);
-    let eff = simulate(&cfg);
+    let base = simulate(&base_cfg).unwrap();
+    let eff = simulate(&cfg).unwrap();
     let (cb, ce) = (decode_clean(&base.bytes), decode_clean(&eff.bytes));
     assert_eq!(cb.hello, ce.hello, "{spec}: Hello must not reveal an effect");
     assert_eq!(base.truth.m_counts_per_dps, eff.truth.m_counts_per_dps);
@@ -373,7 +373,7 @@ fn lowpass_delays_by_its_reported_group_delay() {
         let mut cfg = SimConfig::standard(32, 10.0);
         cfg.gyro.bandwidth = bw;
         cfg.effects.enable("filter_delay").unwrap();
-        let out = simulate(&cfg);
+        let out = simulate(&cfg).unwrap();
         let cap = decode_clean(&out.bytes);
         let fc = f64::from(bw.cutoff_dhz(cfg.gyro.odr)) / 10.0;
         assert_eq!(out.truth.lowpass_cutoff_hz, Some(fc));
