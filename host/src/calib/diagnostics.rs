@@ -626,6 +626,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
     let mut pooled = [(0.0f64, 0.0f64, 0.0f64, 0usize); 3]; // Σe², floor var·n, noise var·n, n
     let mut runs = Vec::with_capacity(n_runs);
     let centres = angle_bin_centres();
+    let mut scratch = Vec::new();
     for (r, rk) in data.kin.runs.iter().enumerate() {
         let rd = &data.runs[r];
         let fs = rk.sample_rate_hz;
@@ -664,7 +665,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let mut row = [f64::NAN; 3];
             let hb = angle_bin(p.theta2_rad);
             angle.add_sample(hb, dev_pct);
-            let preds = ev.predict3(&p);
+            let preds = ev.predict3(&p, &mut scratch);
             for a in 0..3 {
                 let r = ev.axis_rate(&p, a).abs();
                 let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);

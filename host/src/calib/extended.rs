@@ -987,12 +987,12 @@ impl<'a> Evaluator<'a> {
         self.predict_with(p, a, &common)
     }
 
-    /// The model's output on every axis, counts (the axis-independent columns once).
+    /// The model's output on every axis, counts (the axis-independent columns once; `common`
+    /// is scratch space a pass reuses from sample to sample).
     #[inline]
-    pub fn predict3(&self, p: &Point) -> [f64; 3] {
-        let mut common = Vec::new();
-        self.common_values(p, &self.lin_plan, &mut common);
-        std::array::from_fn(|a| self.predict_with(p, a, &common))
+    pub fn predict3(&self, p: &Point, common: &mut Vec<f64>) -> [f64; 3] {
+        self.common_values(p, &self.lin_plan, common);
+        std::array::from_fn(|a| self.predict_with(p, a, common))
     }
 
     /// [`Evaluator::predict`] with the model's axis-independent column values at `p` given
