@@ -153,6 +153,30 @@ impl Effect {
         matches!(self, Effect::EarthRotation | Effect::EarthRotationAtLatitude | Effect::EarthRotationHorizontal)
     }
 
+    /// For a drift model, the time or temperature its fitted offset (the constant column's
+    /// coefficient) holds at; None for the effects that leave the offset constant.
+    pub fn offset_reference(self) -> Option<&'static str> {
+        match self {
+            Effect::DriftWarmUp => Some("the warmed-up level (t → ∞ of the exponential)"),
+            Effect::DriftPolynomial => Some("the middle of the capture's time span, less half the quadratic term"),
+            Effect::DriftTemperature => Some("the capture's mean die temperature"),
+            Effect::DriftKnots(_) => Some("the first used sample of the first run (each pose has its own level)"),
+            Effect::Delay
+            | Effect::IndexOffset
+            | Effect::Phase
+            | Effect::RateScale
+            | Effect::GearLag
+            | Effect::FilterGain
+            | Effect::EarthRotation
+            | Effect::GSensitivity
+            | Effect::TableTilt
+            | Effect::EarthRotationAtLatitude
+            | Effect::EarthRotationHorizontal
+            | Effect::TableHarmonic(_)
+            | Effect::PoseFixture => None,
+        }
+    }
+
     /// What it means physically, as the report says it.
     pub fn meaning(self) -> &'static str {
         match self {

@@ -4,19 +4,21 @@
 //! step is reported with the residual against the floor, how far the base parameters moved in
 //! their σ, a held-out prediction and, on simulated data, the error against the truth.
 
+use super::axes::AXES;
 use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics};
 use super::extended::{
     effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
 };
-use super::lsq::AXES;
+use super::paper::{paper_check, PaperCheck};
+use super::report::RunSummary;
 use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
 use super::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
 use super::truth_check::TruthErrors;
-use super::{calibrate_kinematics, check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
+use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -262,48 +264,20 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
     for &p in &f.model.shared {
         let i = f.shared_index(p).expect("own parameter");
         let (v, s) = (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i));
-        let (name, scale, unit) = match p {
-            SharedPar::Delay => ("delay τ".to_string(), 1e3, "ms"),
-            SharedPar::IndexOffset => ("index offset δ".to_string(), 180.0 / std::f64::consts::PI, "°"),
-            SharedPar::Phase => ("phase δ − θ2'·τ".to_string(), 180.0 / std::f64::consts::PI, "°"),
-            SharedPar::DriftTau => ("warm-up time constant T".to_string(), 1.0, "s"),
-            SharedPar::GearLag => ("gear lag per unit of speed".to_string(), 1e3, "ms"),
-            SharedPar::TableTilt => ("sensor-table axis tilt ε".to_string(), 180.0 / std::f64::consts::PI, "°"),
-            SharedPar::FilterCurvature => ("filter curvature κ (gain 1 − κω²)".to_string(), 1e6, "ms²"),
-            SharedPar::Fixture(k) => {
-                (format!("pose-2 fixture rotation about {}2", ['x', 'y', 'z'][k]), 180.0 / std::f64::consts::PI, "°")
-            }
-            SharedPar::EarthVertical => ("Earth rate, vertical".to_string(), 3600.0, "°/h"),
-            SharedPar::EarthNorthAtZero => ("Earth rate, horizontal at θ2 = 0".to_string(), 3600.0, "°/h"),
-            SharedPar::EarthWestAtZero => ("Earth rate, horizontal 90° on".to_string(), 3600.0, "°/h"),
-            SharedPar::Harmonic { order, quadrature, pose } => (
-                format!("table-speed ripple {order}× {}, {pose}", if quadrature { "sin" } else { "cos" }),
-                1e6,
-                "ppm of θ2'",
-            ),
-        };
-        out.push(EffectParam { name, value: v * scale, sigma: s * scale, unit: unit.into() });
+        let r = p.reported();
+        out.push(EffectParam { name: r.name, value: v * r.scale, sigma: s * r.scale, unit: r.unit.into() });
     }
     for &c in &f.model.lin {
-        let (label, scale, unit): (&str, f64, &str) = match c {
-            LinCol::DriftExp => ("warm-up drift at the first sample", 1.0, "°/s"),
-            LinCol::DriftT1 => ("drift, linear term (over the half-span)", 1.0, "°/s"),
-            LinCol::DriftT2 => ("drift, quadratic term", 1.0, "°/s"),
-            LinCol::DriftTemp => ("offset vs temperature", 1.0, "°/s per °C"),
-            LinCol::RateAbs => ("scale asymmetry (|r| term)", 1e6, "ppm of |r|"),
-            LinCol::RateSq => ("odd quadratic (r·|r|) at full scale", 100.0 * full_scale_dps, "% of full scale"),
-            LinCol::Gravity(0) => ("g-sensitivity along package x", 1.0, "°/s per g"),
-            LinCol::Gravity(1) => ("g-sensitivity along package y", 1.0, "°/s per g"),
-            LinCol::Gravity(2) => ("g-sensitivity along package z", 1.0, "°/s per g"),
-            _ => continue,
+        let Some(r) = c.reported(full_scale_dps) else {
+            continue;
         };
         for (a, &ka) in k.iter().enumerate() {
             let i = f.lin_index(a, c).expect("own column");
             out.push(EffectParam {
-                name: format!("{label}, {}", AXES[a]),
-                value: f.model.beta[a][i - a * f.model.lin.len()] / ka * scale,
-                sigma: f.sigma(i) / ka * scale,
-                unit: unit.into(),
+                name: format!("{}, {}", r.name, AXES[a]),
+                value: f.model.beta[a][i - a * f.model.lin.len()] / ka * r.scale,
+                sigma: f.sigma(i) / ka * r.scale,
+                unit: r.unit.into(),
             });
         }
     }
@@ -326,6 +300,7 @@ struct State {
 struct Context<'a> {
     data: &'a LoopData,
     opts: &'a LoopOptions,
+    gyro: protocol::GyroConfig,
     cutoff_hz: f64,
     nominal: f64,
     full_scale_dps: f64,
@@ -335,7 +310,46 @@ struct Context<'a> {
     run_poses: Vec<crate::geometry::Pose>,
 }
 
-impl Context<'_> {
+impl<'a> Context<'a> {
+    fn new(
+        data: &'a LoopData,
+        opts: &'a LoopOptions,
+        gyro: protocol::GyroConfig,
+        truth: Option<&'a crate::sim::Truth>,
+    ) -> Self {
+        Context {
+            data,
+            opts,
+            gyro,
+            cutoff_hz: f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0,
+            nominal: nominal_counts_per_dps(gyro.full_scale),
+            full_scale_dps: f64::from(gyro.full_scale.range_dps()),
+            truth,
+            labels: data.kin.runs.iter().map(|r| r.label.clone()).collect(),
+            run_numbers: data.kin.runs.iter().map(|r| r.run).collect(),
+            run_poses: data.kin.runs.iter().map(|r| r.pose).collect(),
+        }
+    }
+
+    /// The linear model fitted from zero. It is linear in its parameters, so one pass solves
+    /// it, and that pass's per-run sums are of the raw counts (the residual of β = 0): the
+    /// paper's cross-check reads its per-pose regressions from them.
+    fn linear_fit(&self) -> Result<Fitted, CalError> {
+        let linear = fit(self.data, Model::for_data(self.data), [1.0; 3])?;
+        debug_assert_eq!(linear.passes, 1, "the linear model is solved in one pass");
+        Ok(linear)
+    }
+
+    /// The paper's method (EXCITER.md eq. 4-5) against the linear model's joint estimates, with
+    /// the noise level and autocorrelation `diag` measured on the residual.
+    fn paper_check(&self, linear: &Fitted, diag: &Diagnostics) -> Option<PaperCheck> {
+        let mut weighted = linear.clone();
+        reweight(&mut weighted, diag.weights());
+        let est = base_estimate(&weighted, self.nominal, self.data);
+        let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts]);
+        paper_check(&linear.per_run, &self.data.kin, diag.inflation, joint)
+    }
+
     fn state(&self, mut fitted: Fitted) -> State {
         let diag = diagnose(self.data, &fitted.model, self.cutoff_hz, self.opts.alpha, self.opts.cal.noise_window_s);
         reweight(&mut fitted, diag.weights());
@@ -413,58 +427,89 @@ impl Context<'_> {
     }
 }
 
-/// The final model as a `CalReport`: the base report's bookkeeping with the final M, offsets,
-/// covariance and residuals. The paper cross-check stays that of the linear model.
-fn final_cal_report(base: &CalReport, s: &State, data: &LoopData) -> CalReport {
-    let mut r = base.clone();
-    let est = &s.estimate;
-    r.drift = drift_table(&s.fitted.model, data);
-    r.model = std::iter::once("linear: v = K S ω + v_off".to_string())
-        .chain(s.fitted.model.effects.iter().map(|e| e.name()))
-        .collect::<Vec<_>>()
-        .join(" + ");
-    r.m_counts_per_dps = std::array::from_fn(|i| std::array::from_fn(|j| est.params[4 * i + j]));
-    r.offset_counts = std::array::from_fn(|i| est.params[4 * i + 3]);
-    r.param_names = param_names();
-    r.cov = (0..12).map(|i| (0..12).map(|j| est.cov[(i, j)]).collect()).collect();
-    r.axes = est.axes;
-    r.inter_axis = est.inter;
-    let d = &s.diag;
-    let k = sensitivities(&s.fitted.model);
-    let axis_residual = |a: usize, n: u64, rms_dps: f64, floor_dps: f64| AxisResidual {
-        axis: AXES[a],
-        n,
-        rms_counts: rms_dps * k[a],
-        rms_dps,
-        noise_floor_counts: floor_dps * k[a],
-        noise_floor_dps: floor_dps,
-        rms_over_floor: rms_dps / floor_dps,
-    };
-    let n_axis: [u64; 3] = std::array::from_fn(|a| d.runs.iter().map(|r| r.axes[a].n as u64).sum());
-    r.residuals = std::array::from_fn(|a| axis_residual(a, n_axis[a], d.rms_dps[a], d.floor_dps[a]));
-    r.run_residuals = d
-        .runs
-        .iter()
-        .map(|rd| RunResidualReport {
-            run: rd.run,
-            pose: rd.pose,
-            commanded_rate_dps: rd.commanded_rate_dps,
-            axes: std::array::from_fn(|a| {
-                let ad = &rd.axes[a];
-                axis_residual(a, ad.n as u64, ad.rms_dps, ad.floor_dps)
+impl Context<'_> {
+    /// A model's calibration report: M, offsets and their covariance, what derives from them,
+    /// the residual against the noise floor per run and axis (from the diagnostics), and the
+    /// bookkeeping of the runs. `paper` is the linear model's cross-check.
+    fn cal_report(&self, s: &State, paper: Option<PaperCheck>) -> CalReport {
+        let (data, est, d) = (self.data, &s.estimate, &s.diag);
+        let k = sensitivities(&s.fitted.model);
+        let axis_residual = |a: usize, n: u64, rms_dps: f64, floor_dps: f64| AxisResidual {
+            axis: AXES[a],
+            n,
+            rms_counts: rms_dps * k[a],
+            rms_dps,
+            noise_floor_counts: floor_dps * k[a],
+            noise_floor_dps: floor_dps,
+            rms_over_floor: rms_dps / floor_dps,
+        };
+        let n_axis: [u64; 3] = std::array::from_fn(|a| d.runs.iter().map(|r| r.axes[a].n as u64).sum());
+        let runs: Vec<RunSummary> = data
+            .kin
+            .runs
+            .iter()
+            .map(|k| RunSummary {
+                run: k.run,
+                pose: k.pose,
+                commanded_rate_dps: k.commanded_rate_dps,
+                steady_rate_dps: k.steady_rate_dps,
+                sample_rate_hz: k.sample_rate_hz,
+                samples_total: k.total,
+                samples_used: k.samples.len(),
+                excluded_unsteady: k.excluded_unsteady,
+                excluded_window_edge: k.excluded_window_edge,
+                excluded_stale: k.excluded_stale,
+                rate_window_samples: k.rate_window_samples,
+                rate_quantisation_dps: k.rate_quantisation_dps,
+                index: k.index,
+            })
+            .collect();
+        CalReport {
+            model: std::iter::once("linear: v = K S ω + v_off".to_string())
+                .chain(s.fitted.model.effects.iter().map(|e| e.name()))
+                .collect::<Vec<_>>()
+                .join(" + "),
+            gyro: self.gyro,
+            nominal_counts_per_dps: self.nominal,
+            m_counts_per_dps: std::array::from_fn(|i| std::array::from_fn(|j| est.params[4 * i + j])),
+            offset_counts: std::array::from_fn(|i| est.params[4 * i + 3]),
+            param_names: param_names(),
+            cov: (0..12).map(|i| (0..12).map(|j| est.cov[(i, j)]).collect()).collect(),
+            axes: est.axes,
+            inter_axis: est.inter,
+            residuals: std::array::from_fn(|a| axis_residual(a, n_axis[a], d.rms_dps[a], d.floor_dps[a])),
+            run_residuals: d
+                .runs
+                .iter()
+                .map(|rd| RunResidualReport {
+                    run: rd.run,
+                    pose: rd.pose,
+                    commanded_rate_dps: rd.commanded_rate_dps,
+                    axes: std::array::from_fn(|a| {
+                        let ad = &rd.axes[a];
+                        axis_residual(a, ad.n as u64, ad.rms_dps, ad.floor_dps)
+                    }),
+                })
+                .collect(),
+            autocorrelation: std::array::from_fn(|a| Autocorrelation {
+                axis: AXES[a],
+                inflation: d.inflation[a],
+                block_samples: d.block_samples[a],
+                effective_samples: n_axis[a] as f64 / d.inflation[a],
             }),
-        })
-        .collect();
-    r.autocorrelation = std::array::from_fn(|a| Autocorrelation {
-        axis: AXES[a],
-        inflation: d.inflation[a],
-        block_samples: d.block_samples[a],
-        effective_samples: n_axis[a] as f64 / d.inflation[a],
-    });
-    r.residual_correlation = d.correlation;
-    r.samples_used = data.runs.iter().map(|x| x.n_valid).sum();
-    r.clipped = std::array::from_fn(|a| d.runs.iter().map(|x| x.axes[a].clipped).sum());
-    r
+            residual_correlation: d.correlation,
+            samples_used: data.runs.iter().map(|x| x.n_valid).sum(),
+            samples_excluded: runs
+                .iter()
+                .map(|r| r.excluded_unsteady + r.excluded_window_edge + r.excluded_stale)
+                .sum(),
+            runs,
+            clipped: std::array::from_fn(|a| d.runs.iter().map(|x| x.axes[a].clipped).sum()),
+            gear: data.kin.gear,
+            paper,
+            drift: drift_table(&s.fitted.model, data),
+        }
+    }
 }
 
 /// Whether a linear column is part of the offset (the constant or a drift term).
@@ -533,13 +578,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         .copied()
         .find(|e| matches!(e, Effect::DriftKnots(_)))
         .or_else(|| m.effects.iter().copied().find(|e| e.is_drift()))?;
-    let refers_to = match drift {
-        Effect::DriftWarmUp => "the warmed-up level (t → ∞ of the exponential)",
-        Effect::DriftPolynomial => "the middle of the capture's time span, less half the quadratic term",
-        Effect::DriftTemperature => "the capture's mean die temperature",
-        Effect::DriftKnots(_) => "the first used sample of the first run (each pose has its own level)",
-        _ => return None,
-    };
+    let refers_to = drift.offset_reference()?;
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
     let i = data.runs[r].valid.iter().position(|&v| v)?;
     let ev = super::extended::Evaluator::new(data, m);
@@ -642,12 +681,23 @@ fn earth_implausible(f: &Fitted) -> Option<String> {
     })
 }
 
+/// The linear model alone, `v = M R_qᵀ ω2 + v_off` (no catalogued effect, no Earth rotation),
+/// fitted and diagnosed by the same engine as the loop's step 0, with the paper's cross-check.
+pub fn calibrate(runs: &[Run], cal: &CalOptions) -> Result<CalReport, CalError> {
+    check_runs(runs)?;
+    let data = LoopData::new(kinematics::reconstruct(runs, &cal.kinematics)?);
+    let opts = LoopOptions { cal: *cal, max_effects: 0, ..LoopOptions::default() };
+    let ctx = Context::new(&data, &opts, runs[0].gyro, None);
+    let linear = ctx.linear_fit()?;
+    let state = ctx.state(linear.clone());
+    Ok(ctx.cal_report(&state, ctx.paper_check(&linear, &state.diag)))
+}
+
 /// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
 pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::Truth>) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
-    let base_report = calibrate_kinematics(runs, &kin, &opts.cal)?;
-    loop_on(kin, base_report, runs[0].gyro, opts, truth)
+    loop_on(kin, runs[0].gyro, opts, truth)
 }
 
 /// [`close_loop`] on runs it may consume: each run's raw samples are freed once its kinematics
@@ -660,42 +710,35 @@ pub fn close_loop_owned(
 ) -> Result<LoopReport, CalError> {
     check_runs(&runs)?;
     let kin = kinematics::reconstruct_consuming(&mut runs, &opts.cal.kinematics)?;
-    let base_report = calibrate_kinematics(&runs, &kin, &opts.cal)?;
-    loop_on(kin, base_report, runs[0].gyro, opts, truth)
+    loop_on(kin, runs[0].gyro, opts, truth)
 }
 
-/// The loop proper, on reconstructed kinematics and the linear pipeline's report.
+/// The loop proper, on reconstructed kinematics.
 fn loop_on(
     kin: kinematics::Kinematics,
-    base_report: CalReport,
     gyro: protocol::GyroConfig,
     opts: &LoopOptions,
     truth: Option<&crate::sim::Truth>,
 ) -> Result<LoopReport, CalError> {
     let data = LoopData::new(kin);
-    let ctx = Context {
-        data: &data,
-        opts,
-        cutoff_hz: f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0,
-        nominal: nominal_counts_per_dps(gyro.full_scale),
-        full_scale_dps: f64::from(gyro.full_scale.range_dps()),
-        truth,
-        labels: data.kin.runs.iter().map(|r| r.label.clone()).collect(),
-        run_numbers: data.kin.runs.iter().map(|r| r.run).collect(),
-        run_poses: data.kin.runs.iter().map(|r| r.pose).collect(),
-    };
+    let ctx = Context::new(&data, opts, gyro, truth);
     // Earth rotation is in every lab. With the latitude known its vertical part is known, and
     // the model holds it from the start. Without, a fitted vertical part trades off against
     // the drift models and costs 10-20 ppm of σ in every sensitivity, so it is a candidate like
     // the others, and while it is not in the model the σ of every k carries what it may do
     // (`earth_type_b_rel`). Its Jacobian goes through M, so it starts from the fitted linear model.
-    let mut first = fit(&data, Model::for_data(&data), [1.0; 3])?;
-    if let Some(lat) = opts.latitude_deg {
-        let mut with_earth = first.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
-        with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();
-        first = fit(&data, with_earth, [1.0; 3])?;
-    }
+    let linear = ctx.linear_fit()?;
+    let first = match opts.latitude_deg {
+        Some(lat) => {
+            let mut with_earth = linear.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
+            with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();
+            fit(&data, with_earth, [1.0; 3])?
+        }
+        None => linear.clone(),
+    };
     let mut state = ctx.state(first);
+    let paper = ctx.paper_check(&linear, &state.diag);
+    drop(linear);
     let initial = state.diag.clone();
     let mut steps = vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())];
     let mut asks = Vec::new();
@@ -835,7 +878,7 @@ fn loop_on(
             )
         }
     };
-    let final_report = final_cal_report(&base_report, &state, &data);
+    let final_report = ctx.cal_report(&state, paper);
     let added = steps.len() > 1;
     Ok(LoopReport {
         steps,

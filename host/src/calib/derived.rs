@@ -2,7 +2,7 @@
 //! axes and the angles between them, each with a 1-σ from the covariance of M by the delta
 //! method (first-order propagation through a numerical Jacobian).
 
-use super::lsq::AXES;
+use super::axes::AXES;
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 

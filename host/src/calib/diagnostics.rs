@@ -4,9 +4,9 @@
 //! Bonferroni-corrected level, every significant one turned into a sentence that says what, where,
 //! how strong and what it suggests. Also the binned residual and spectrum the report plots.
 
+use super::axes::{is_clipped, AXES};
 use super::blocking::Blocking;
 use super::extended::{harmonics_of, Evaluator, LoopData, Model};
-use super::lsq::{is_clipped, AXES};
 use super::spectrum::{AmplitudeSpectrum, Periodogram};
 use super::stats::{chi2_to_sigma, chi2_upper_quantile};
 use crate::geometry::Pose;
@@ -556,8 +556,8 @@ fn speed_deviation_percent(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
     (theta1_rate_dps / steady_rate_dps - 1.0) * 100.0
 }
 
-/// White-noise variance from the remainder of a centred moving average of half-width `w`
-/// (see `residuals::high_pass_power`); windows holding a clipped (NaN) value are skipped.
+/// White-noise variance from the remainder of a centred moving average of half-width `w`;
+/// windows holding a clipped (NaN) value are skipped.
 fn high_pass_variance(e: &[f32], w: usize) -> f64 {
     let n = e.len();
     let width = 2 * w + 1;

@@ -53,8 +53,16 @@ pub enum CalError {
         /// Config of run 1.
         expected: GyroConfig,
     },
+    /// No sample of an axis is usable: every one sits on a rail.
+    #[error("axis {axis}: every one of the {samples} samples at steady speed is clipped at the output's rails (the axis is dead, or the rates exceed the full scale)")]
+    AxisClipped {
+        /// Axis name, x, y or z.
+        axis: char,
+        /// Samples at steady speed, clear of the runs' ends.
+        samples: usize,
+    },
     /// The runs do not excite every regressor independently.
-    #[error("normal matrix of axis {axis} is singular (reciprocal condition {rcond:.1e}): the runs do not excite all rate directions")]
+    #[error("normal matrix of axis {axis} is singular (reciprocal condition {rcond:.1e}): its unclipped samples do not excite every rate direction")]
     Singular {
         /// Axis name, x, y or z.
         axis: char,

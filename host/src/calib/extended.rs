@@ -16,10 +16,10 @@
 //! where this accumulates the normal equations run by run and reuses them for every candidate;
 //! the linear algebra is nalgebra's.
 
+use super::axes::{is_clipped, AXES};
 use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{KinSample, Kinematics};
-use super::lsq::is_clipped;
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -37,7 +37,8 @@ pub const TEMPERATURE_SMOOTHING_S: f64 = 20.0;
 /// 1e-13 leaves ~3 significant digits of f64's 16 in the worst-determined combination.
 const MIN_RCOND: f64 = 1e-13;
 
-/// Samples per local accumulator (see `lsq::CHUNK`: rounding stays O(√n) ulp).
+/// Samples summed into a local accumulator before it is added to the run total: rounding error
+/// then grows as O(√n) ulp in a long run instead of O(n).
 const CHUNK: usize = 1024;
 
 /// Gauss-Newton iterations at most; a converging fit needs 2–4 (the effects are small angles).
@@ -263,6 +264,112 @@ pub enum SharedPar {
         /// The pose (mount) the pair holds for.
         pose: Pose,
     },
+}
+
+/// A range a fitted parameter is held in, beyond which the model stops describing the rig.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bound {
+    /// Lowest value, in the parameter's unit.
+    pub lo: f64,
+    /// Highest value.
+    pub hi: f64,
+    /// What the parameter is, as an error message says it.
+    pub what: &'static str,
+    /// Its unit.
+    pub unit: &'static str,
+}
+
+/// How a parameter is reported: its name, the factor from its fitted unit to the reported one,
+/// and the reported unit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reported {
+    /// Name.
+    pub name: String,
+    /// Reported value per fitted value.
+    pub scale: f64,
+    /// Reported unit.
+    pub unit: &'static str,
+}
+
+impl Reported {
+    fn new(name: impl Into<String>, scale: f64, unit: &'static str) -> Self {
+        Self { name: name.into(), scale, unit }
+    }
+}
+
+impl SharedPar {
+    /// The range the fit holds it in, if any (the others are small angles and rates that the
+    /// data bounds by itself).
+    pub fn bound(self) -> Option<Bound> {
+        match self {
+            SharedPar::Delay => Some(Bound { lo: -MAX_DELAY_S, hi: MAX_DELAY_S, what: "delay", unit: "s" }),
+            SharedPar::DriftTau => Some(Bound {
+                lo: DRIFT_TAU_RANGE_S.0,
+                hi: DRIFT_TAU_RANGE_S.1,
+                what: "warm-up time constant",
+                unit: "s",
+            }),
+            SharedPar::IndexOffset
+            | SharedPar::Phase
+            | SharedPar::TableTilt
+            | SharedPar::GearLag
+            | SharedPar::FilterCurvature
+            | SharedPar::Fixture(_)
+            | SharedPar::EarthVertical
+            | SharedPar::EarthNorthAtZero
+            | SharedPar::EarthWestAtZero
+            | SharedPar::Harmonic { .. } => None,
+        }
+    }
+
+    /// Its name and reported unit.
+    pub fn reported(self) -> Reported {
+        let deg = 180.0 / std::f64::consts::PI;
+        match self {
+            SharedPar::Delay => Reported::new("delay τ", 1e3, "ms"),
+            SharedPar::IndexOffset => Reported::new("index offset δ", deg, "°"),
+            SharedPar::Phase => Reported::new("phase δ − θ2'·τ", deg, "°"),
+            SharedPar::DriftTau => Reported::new("warm-up time constant T", 1.0, "s"),
+            SharedPar::GearLag => Reported::new("gear lag per unit of speed", 1e3, "ms"),
+            SharedPar::TableTilt => Reported::new("sensor-table axis tilt ε", deg, "°"),
+            SharedPar::FilterCurvature => Reported::new("filter curvature κ (gain 1 − κω²)", 1e6, "ms²"),
+            SharedPar::Fixture(k) => {
+                Reported::new(format!("pose-2 fixture rotation about {}2", ['x', 'y', 'z'][k]), deg, "°")
+            }
+            SharedPar::EarthVertical => Reported::new("Earth rate, vertical", 3600.0, "°/h"),
+            SharedPar::EarthNorthAtZero => Reported::new("Earth rate, horizontal at θ2 = 0", 3600.0, "°/h"),
+            SharedPar::EarthWestAtZero => Reported::new("Earth rate, horizontal 90° on", 3600.0, "°/h"),
+            SharedPar::Harmonic { order, quadrature, pose } => Reported::new(
+                format!("table-speed ripple {order}× {}, {pose}", if quadrature { "sin" } else { "cos" }),
+                1e6,
+                "ppm of θ2'",
+            ),
+        }
+    }
+}
+
+impl LinCol {
+    /// Its name and reported unit per °/s of the axis's sensitivity (the coefficient is fitted
+    /// in counts), for the columns an effect adds; None for the base model's (reported as M and
+    /// the offsets), the free drift's knots (reported as the drift table) and the candidate
+    /// warm-ups' fixed time constants (never in a fitted model). `full_scale_dps` is the gyro's
+    /// range, the natural unit of a non-linearity.
+    pub fn reported(self, full_scale_dps: f64) -> Option<Reported> {
+        match self {
+            LinCol::DriftExp => Some(Reported::new("warm-up drift at the first sample", 1.0, "°/s")),
+            LinCol::DriftT1 => Some(Reported::new("drift, linear term (over the half-span)", 1.0, "°/s")),
+            LinCol::DriftT2 => Some(Reported::new("drift, quadratic term", 1.0, "°/s")),
+            LinCol::DriftTemp => Some(Reported::new("offset vs temperature", 1.0, "°/s per °C")),
+            LinCol::RateAbs => Some(Reported::new("scale asymmetry (|r| term)", 1e6, "ppm of |r|")),
+            LinCol::RateSq => {
+                Some(Reported::new("odd quadratic (r·|r|) at full scale", 100.0 * full_scale_dps, "% of full scale"))
+            }
+            LinCol::Gravity(k) => {
+                Some(Reported::new(format!("g-sensitivity along package {}", AXES[k]), 1.0, "°/s per g"))
+            }
+            LinCol::Omega(_) | LinCol::One | LinCol::DriftExpFixed(_) | LinCol::DriftKnot { .. } => None,
+        }
+    }
 }
 
 /// Any column of the accumulation.
@@ -1388,20 +1495,8 @@ pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<Joint
             }
         }
     }
-    let d = DVector::from_fn(np, |i, _| {
-        let v = a_mat[(i, i)];
-        if v > 0.0 {
-            1.0 / v.sqrt()
-        } else {
-            0.0
-        }
-    });
-    if d.iter().any(|&v| v == 0.0) {
-        return None;
-    }
-    let scaled = DMatrix::from_fn(np, np, |i, j| a_mat[(i, j)] * d[i] * d[j]);
-    let eig = scaled.clone().symmetric_eigenvalues();
-    if eig.max() <= 0.0 || eig.min() / eig.max() < MIN_RCOND {
+    let (scaled, d, rcond) = scaled_rcond(&a_mat);
+    if rcond < MIN_RCOND {
         return None;
     }
     let inv_scaled = scaled.cholesky()?.inverse();
@@ -1410,6 +1505,27 @@ pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<Joint
     let rss = residual_after(g, sel, &delta);
     let chi2 = (0..3).map(|a| weights[a] * rss[a]).sum();
     Some(JointSolution { delta, cov, chi2, rss, n: g.n })
+}
+
+/// A symmetric normal matrix scaled to unit diagonal, the scale, and the reciprocal condition
+/// number of the scaled matrix (0 when a diagonal entry is not positive: a column never excited).
+fn scaled_rcond(a_mat: &DMatrix<f64>) -> (DMatrix<f64>, DVector<f64>, f64) {
+    let np = a_mat.nrows();
+    let d = DVector::from_fn(np, |i, _| {
+        let v = a_mat[(i, i)];
+        if v > 0.0 {
+            1.0 / v.sqrt()
+        } else {
+            0.0
+        }
+    });
+    let scaled = DMatrix::from_fn(np, np, |i, j| a_mat[(i, j)] * d[i] * d[j]);
+    if d.iter().any(|&v| v == 0.0) {
+        return (scaled, d, 0.0);
+    }
+    let eig = scaled.clone().symmetric_eigenvalues();
+    let rcond = if eig.max() > 0.0 { (eig.min() / eig.max()).max(0.0) } else { 0.0 };
+    (scaled, d, rcond)
 }
 
 /// Residual sum of squares per axis of the sums `g` after the step `delta` (of a solve with the
@@ -1464,10 +1580,8 @@ impl Fitted {
     /// data pushed it further than the model allows, so its value and σ mean nothing.
     pub fn at_bound(&self) -> Option<String> {
         for (&p, &v) in self.model.shared.iter().zip(&self.model.theta) {
-            let (lo, hi, what, unit) = match p {
-                SharedPar::Delay => (-MAX_DELAY_S, MAX_DELAY_S, "delay", "s"),
-                SharedPar::DriftTau => (DRIFT_TAU_RANGE_S.0, DRIFT_TAU_RANGE_S.1, "warm-up time constant", "s"),
-                _ => continue,
+            let Some(Bound { lo, hi, what, unit }) = p.bound() else {
+                continue;
             };
             // A bound is reached when the value sits within 1e-9 of the range of it.
             let tol = 1e-9 * (hi - lo);
@@ -1507,10 +1621,8 @@ pub fn apply_step(m: &mut Model, sel_lin: usize, delta: &DVector<f64>, frozen: &
         q += 1;
     }
     for (p, th) in m.shared.iter().zip(m.theta.iter_mut()) {
-        match p {
-            SharedPar::Delay => *th = th.clamp(-MAX_DELAY_S, MAX_DELAY_S),
-            SharedPar::DriftTau => *th = th.clamp(DRIFT_TAU_RANGE_S.0, DRIFT_TAU_RANGE_S.1),
-            _ => {}
+        if let Some(b) = p.bound() {
+            *th = th.clamp(b.lo, b.hi);
         }
     }
     m.update_directions();
@@ -1536,7 +1648,7 @@ pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, C
             lin: (0..nl).collect(),
             shared: (0..model.shared.len()).filter(|&k| !frozen[k]).map(|k| nl + k).collect(),
         };
-        let solution = solve_joint(&total, &sel, weights).ok_or_else(|| singular(&model))?;
+        let solution = solve_joint(&total, &sel, weights).ok_or_else(|| singular(&model, &total, data))?;
         let converged = !frozen.contains(&true)
             && (0..solution.delta.len()).all(|i| {
                 let sd = solution.cov[(i, i)].max(0.0).sqrt();
@@ -1552,9 +1664,26 @@ pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, C
     unreachable!("the loop returns at MAX_ITERATIONS")
 }
 
-/// The error for a joint system that cannot be solved: the runs do not separate the model's
-/// parameters.
-fn singular(model: &Model) -> CalError {
+/// The error for a joint system that cannot be solved: an axis whose own base columns (ω_s and
+/// the offset) are singular, because the runs do not excite every rate direction or every one of
+/// its samples is clipped; otherwise the runs do not separate the model's parameters.
+fn singular(model: &Model, total: &Gram, data: &LoopData) -> CalError {
+    let base: Vec<usize> = [LinCol::Omega(0), LinCol::Omega(1), LinCol::Omega(2), LinCol::One]
+        .iter()
+        .filter_map(|c| model.lin.iter().position(|q| q == c))
+        .collect();
+    for (a, &axis) in AXES.iter().enumerate() {
+        if total.n[a] == 0 {
+            return CalError::AxisClipped { axis, samples: data.runs.iter().map(|r| r.n_valid).sum() };
+        }
+    }
+    for (a, &axis) in AXES.iter().enumerate() {
+        let block = DMatrix::from_fn(base.len(), base.len(), |i, j| total.xtx[a][base[i] * total.l + base[j]]);
+        let (_, _, rcond) = scaled_rcond(&block);
+        if rcond < MIN_RCOND {
+            return CalError::Singular { axis, rcond };
+        }
+    }
     CalError::Unidentifiable { effects: model.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ") }
 }
 

@@ -3,15 +3,16 @@
 //! e_z2; two poses' planes intersect in s_i; the amplitude gives k_i, the baseline the offset.
 //!
 //! Per pose q the regression `v = a·θ1' sinθ2 + b·θ1' cosθ2 + d·(θ2' − θ̄2') + c` handles a
-//! non-constant speed. Its columns are an invertible linear map of the joint fit's columns
+//! non-constant speed. Its columns are an invertible linear map of the linear model's columns
 //! restricted to that pose ([θ1' sinθ2, θ1' cosθ2, θ2'] = R_q ω_s), so its normal equations are
-//! the joint fit's per-run sums transformed, with no further pass over the samples.
+//! that fit's per-run sums transformed, with no further pass over the samples.
 
+use super::axes::AXES;
 use super::derived::{delta_method, dvec};
+use super::extended::Gram;
 use super::kinematics::Kinematics;
-use super::lsq::{Fit, NormalEq, AXES};
 use crate::geometry::Pose;
-use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3};
+use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 /// The sinusoid fitted to one axis in one pose.
@@ -83,11 +84,12 @@ struct SinFit {
     r: Matrix3<f64>,
 }
 
-/// Fits one axis in one pose from the joint fit's sums over that pose's runs.
-fn fit_pose(eq: &NormalEq<4>, r: Matrix3<f64>, axis: usize, inflation: f64, pose: Pose) -> Option<SinFit> {
-    let a = eq.xtx_axis(axis);
-    let b = eq.xty_axis(axis);
-    let n = eq.n_axis(axis);
+/// Fits one axis in one pose from the linear model's sums over that pose's runs:
+/// columns [ω_s (3), 1] and `sums` holds their products with the raw counts.
+fn fit_pose(sums: &Gram, r: Matrix3<f64>, axis: usize, inflation: f64, pose: Pose) -> Option<SinFit> {
+    let a = Matrix4::from_row_slice(&sums.xtx[axis]);
+    let b = Vector4::from_column_slice(&sums.xte[axis]);
+    let n = sums.n[axis];
     let mean_x = Vector3::new(a[(0, 3)], a[(1, 3)], a[(2, 3)]) / a[(3, 3)];
     let theta2_mean = (r * mean_x).z;
     let mut t = Matrix4::zeros();
@@ -98,7 +100,7 @@ fn fit_pose(eq: &NormalEq<4>, r: Matrix3<f64>, axis: usize, inflation: f64, pose
     let zty = t * b;
     let inv = ztz.try_inverse()?;
     let g = inv * zty;
-    let rss = (eq.yty[axis] - 2.0 * g.dot(&zty) + (g.transpose() * ztz * g)[(0, 0)]).max(0.0);
+    let rss = (sums.ete[axis] - 2.0 * g.dot(&zty) + (g.transpose() * ztz * g)[(0, 0)]).max(0.0);
     let cov = inv * (rss / (n as f64 - 4.0) * inflation);
     let coef: [f64; 4] = g.into();
     Some(SinFit {
@@ -138,16 +140,16 @@ fn construct(p: &[f64], r: [&Matrix3<f64>; 2], theta2_mean: [f64; 2], axis: usiz
     vec![s.x, s.y, s.z, k, offset]
 }
 
-/// Runs the paper's method on the joint fit's sums and compares it with the joint estimates
-/// (`joint[i]` = [s (3), k, offset] of axis i). `inflation[i]` scales each sinusoid's
-/// covariance for residual autocorrelation, as measured on the joint fit's residuals (the
-/// same noise). None if a pose has no samples or a 4×4 system is singular.
-pub fn paper_check(fit: &Fit<4>, kin: &Kinematics, inflation: [f64; 3], joint: [[f64; 5]; 3]) -> Option<PaperCheck> {
-    let mut eqs = [NormalEq::<4>::default(), NormalEq::<4>::default()];
-    for (run, eq) in kin.runs.iter().zip(&fit.per_run) {
-        let q = usize::from(run.pose.number()) - 1;
-        eqs[q].merge(eq);
-    }
+/// Runs the paper's method on the linear model's per-run sums of [ω_s (3), 1] against the raw
+/// counts (`sums`, in the order of `kin.runs`: `Fitted::per_run` of the model fitted from β = 0)
+/// and compares it with the joint estimates (`joint[i]` = [s (3), k, offset] of axis i).
+/// `inflation[i]` scales each sinusoid's covariance for residual autocorrelation, as measured on
+/// the joint fit's residuals (the same noise). None if a pose has no samples or a 4×4 system is
+/// singular.
+pub fn paper_check(sums: &[Gram], kin: &Kinematics, inflation: [f64; 3], joint: [[f64; 5]; 3]) -> Option<PaperCheck> {
+    debug_assert!(sums.iter().all(|g| g.l == 4), "the linear model has 4 columns");
+    let pose_sums = |pose: Pose| Gram::sum(kin.runs.iter().zip(sums).filter(|(r, _)| r.pose == pose).map(|(_, g)| g));
+    let eqs = [pose_sums(Pose::One)?, pose_sums(Pose::Two)?];
     let rot = [Pose::One.rotation(), Pose::Two.rotation()];
     let mut axes = Vec::with_capacity(3);
     let mut zs = Vec::with_capacity(12);

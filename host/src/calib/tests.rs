@@ -171,8 +171,20 @@ fn error_messages_say_what_and_where() {
     }
     assert_eq!(
         calibrate(&dead, &opts).unwrap_err().to_string(),
-        "normal matrix of axis z is singular (reciprocal condition 0.0e0): the runs do not excite all rate directions"
+        "axis z: every one of the 30250 samples at steady speed is clipped at the output's rails (the axis is dead, or the rates exceed the full scale)"
     );
+    // Three samples left on axis z cannot hold its four parameters (M's row and the offset).
+    for s in dead[0].samples.iter_mut().skip(5000).step_by(1000).take(3) {
+        s.rate_counts[2] = 100;
+    }
+    let err = calibrate(&dead, &opts).unwrap_err().to_string();
+    let (head, tail) = (
+        "normal matrix of axis z is singular (reciprocal condition ",
+        "): its unclipped samples do not excite every rate direction",
+    );
+    assert!(err.starts_with(head) && err.ends_with(tail), "{err}");
+    let rcond: f64 = err[head.len()..err.len() - tail.len()].parse().unwrap();
+    assert!(rcond < 1e-13, "{err}");
 }
 
 #[test]
