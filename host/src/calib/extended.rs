@@ -1700,6 +1700,47 @@ mod tests {
     const POSES: [Pose; 5] = [Pose::One, Pose::One, Pose::Two, Pose::Two, Pose::Two];
 
     #[test]
+    fn a_step_past_a_bound_stops_at_it() {
+        let base = Model::base_for(&[Pose::One, Pose::Two]);
+        let m = base.with(Effect::Delay, Default::default(), vec![0.0]).with(
+            Effect::DriftWarmUp,
+            std::array::from_fn(|_| vec![0.0]),
+            vec![600.0],
+        );
+        let nl = m.lin.len();
+        for (step, delay_s, tau_s) in
+            [(1.0, MAX_DELAY_S, DRIFT_TAU_RANGE_S.1), (-1.0, -MAX_DELAY_S, DRIFT_TAU_RANGE_S.0)]
+        {
+            let mut moved = m.clone();
+            let mut delta = DVector::zeros(3 * nl + 2);
+            delta[3 * nl] = step;
+            delta[3 * nl + 1] = step * 1e9;
+            apply_step(&mut moved, nl, &delta, &[false, false]);
+            assert_eq!(moved.theta_of(SharedPar::Delay), Some(delay_s));
+            assert_eq!(moved.theta_of(SharedPar::DriftTau), Some(tau_s));
+        }
+        // The angles and rates are bounded by the data alone.
+        assert_eq!(SharedPar::IndexOffset.bound(), None);
+        assert_eq!(SharedPar::Delay.bound().map(|b| (b.what, b.unit)), Some(("delay", "s")));
+    }
+
+    #[test]
+    fn effect_parameters_are_reported_in_their_units() {
+        let r = SharedPar::Delay.reported();
+        assert_eq!((r.name.as_str(), r.scale, r.unit), ("delay τ", 1e3, "ms"));
+        let r = SharedPar::Harmonic { order: 12, quadrature: true, pose: Pose::Two }.reported();
+        assert_eq!(r.name, "table-speed ripple 12× sin, pose 2");
+        // r·|r| per (°/s)² at 500 °/s full scale is 5e4 % of full scale per unit.
+        let r = LinCol::RateSq.reported(500.0).unwrap();
+        assert_eq!((r.scale, r.unit), (5e4, "% of full scale"));
+        assert_eq!(LinCol::Gravity(1).reported(500.0).unwrap().name, "g-sensitivity along package y");
+        // The base columns are M and the offsets, the knots the drift table: not effect parameters.
+        for c in [LinCol::Omega(0), LinCol::One, LinCol::DriftKnot { stretch: 0, knot: 1, spacing_s: 40 }] {
+            assert_eq!(c.reported(500.0), None);
+        }
+    }
+
+    #[test]
     fn a_stretch_is_the_runs_of_one_pose_on_one_clock_close_in_time() {
         let l = Layout::new(vec![Pose::One, Pose::Two], &POSES, &SPANS);
         // Runs 1-2 (pose 1, 12 s apart) and 3-4 (pose 2) join; run 5 restarts the clock.

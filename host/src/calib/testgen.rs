@@ -150,7 +150,7 @@ impl GenRun {
         Run {
             hello,
             pose: self.pose,
-            rate_mdps: (self.rate_dps.abs() * 1000.0).round() as u32,
+            rate_mdps: protocol::units::mdps_from_dps(self.rate_dps),
             direction: if self.rate_dps < 0.0 { Direction::Cw } else { Direction::Ccw },
             gyro,
             origin: RunOrigin::Started,
