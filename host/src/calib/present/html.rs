@@ -3,9 +3,9 @@
 //! harmonics marked, before (linear model) and after (final model). Written with
 //! `crate::report`'s primitives as `report.html` with the SVGs beside it.
 
-use super::axes::AXES;
-use super::closure::{LoopReport, Verdict};
-use super::diagnostics::{Diagnostics, RunDiag};
+use crate::calib::axes::AXES;
+use crate::calib::closure::{LoopReport, Verdict};
+use crate::calib::diagnostics::{Diagnostics, RunDiag};
 use crate::report::{
     palette, spectra_plot, theta2_panel, Document, Marker, PlotSpec, Spectrum, Theta2Bins, Theta2Spec,
 };

@@ -1,0 +1,10 @@
+//! Presentation: the calibration's results as the operator reads them, in plain text
+//! ([`cal_text`], [`loop_text`]) and as the HTML report with its figures ([`html`], drawn with
+//! [`crate::report`]'s primitives). The computation in the rest of [`super`] returns data and
+//! never depends on this module.
+
+pub mod cal_text;
+pub mod html;
+pub mod loop_text;
+
+pub use html::write_report;
