@@ -498,7 +498,7 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
             offset_counts: Default::default(),
         };
         let mut next_s = f64::NEG_INFINITY;
-        for (i, _) in data.runs[r].valid.iter().enumerate().filter(|(_, v)| **v) {
+        for i in data.runs[r].valid.indices() {
             let p = ev.point(r, i);
             if p.t_s < next_s {
                 continue;
@@ -541,7 +541,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         _ => return None,
     };
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
-    let i = data.runs[r].valid.iter().position(|&v| v)?;
+    let i = data.runs[r].valid.first()?;
     let ev = super::extended::Evaluator::new(data, m);
     let p = ev.point(r, i);
     let at_start: Vec<String> = (0..3)
