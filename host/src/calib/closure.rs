@@ -560,7 +560,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts; calibration.json's `drift` holds the modelled offset every 10 s of every run.",
         drift.name(),
         data.kin.runs[r].label,
-        data.kin.runs[r].samples[i].t_s(),
+        data.kin.runs[r].samples.get(i).t_s(),
         at_start.join(" / ")
     ))
 }

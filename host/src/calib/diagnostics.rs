@@ -661,7 +661,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         for i in rd.valid.indices() {
-            let s = &rk.samples[i];
+            let s = rk.samples.get(i);
             let p = ev.point(r, i);
             let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
             let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);

@@ -18,7 +18,7 @@
 
 use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
-use super::kinematics::{KinSample, Kinematics};
+use super::kinematics::{KinSamples, Kinematics};
 use super::lsq::is_clipped;
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -429,7 +429,7 @@ impl LoopData {
             let guard = (MAX_DELAY_S / dt).ceil() as usize + 1;
             // A gap is any spacing beyond 1.5 nominal periods (a dropped or excluded sample).
             let gap = 1.5 * dt;
-            let valid = ValidSamples::of(s.len(), |i| s[i].t_s(), gap, guard);
+            let valid = ValidSamples::of(s.len(), |i| s.get(i).t_s(), gap, guard);
             let n_valid = valid.len();
             // The moving average over 2h + 1 samples, from running sums of which only the 2h + 2
             // a window spans are kept (a ring), not a whole run's prefix array.
@@ -450,8 +450,8 @@ impl LoopData {
                 // OUT_TEMP falls 1 count per °C (datasheet Table 5).
                 temp_c.push((-((prefix[b % ring_len] - prefix[a % ring_len]) / (b - a) as f64 - temp_mean)) as f32);
             }
-            let first = valid.first().map_or(0.0, |i| s[i].t_s());
-            let last = valid.last().map_or(first, |i| s[i].t_s());
+            let first = valid.first().map_or(0.0, |i| s.get(i).t_s());
+            let last = valid.last().map_or(first, |i| s.get(i).t_s());
             runs.push(RunData { valid, temp_c, n_valid, span_s: (first, last) });
         }
         let mut poses: Vec<Pose> = Vec::new();
@@ -704,27 +704,32 @@ impl Shifts {
 
 /// θ2 and θ1' at `t_i − delay` by linear interpolation between the neighbouring samples (the
 /// sample is valid, so they exist within [`MAX_DELAY_S`]).
-fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
+fn interpolate(s: &KinSamples, i: usize, delay_s: f64) -> (f64, f64) {
+    let si = s.get(i);
     if delay_s == 0.0 {
-        return (s[i].theta2_rad(), s[i].theta1_rate_dps());
+        return (si.theta2_rad(), si.theta1_rate_dps());
     }
-    let target = s[i].t_s() - delay_s;
+    let target = si.t_s() - delay_s;
     let mut j = i;
+    let mut sj = si;
     if delay_s > 0.0 {
-        while j > 0 && s[j].t_s() > target {
+        while j > 0 && sj.t_s() > target {
             j -= 1;
+            sj = s.get(j);
         }
     } else {
-        while j + 1 < s.len() && s[j + 1].t_s() <= target {
+        while j + 1 < s.len() && s.get(j + 1).t_s() <= target {
             j += 1;
         }
+        sj = s.get(j);
     }
     let k = (j + 1).min(s.len() - 1);
-    let span = s[k].t_s() - s[j].t_s();
-    let w = if span > 0.0 { ((target - s[j].t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
+    let sk = s.get(k);
+    let span = sk.t_s() - sj.t_s();
+    let w = if span > 0.0 { ((target - sj.t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
     (
-        s[j].theta2_rad() + w * (s[k].theta2_rad() - s[j].theta2_rad()),
-        s[j].theta1_rate_dps() + w * (s[k].theta1_rate_dps() - s[j].theta1_rate_dps()),
+        sj.theta2_rad() + w * (sk.theta2_rad() - sj.theta2_rad()),
+        sj.theta1_rate_dps() + w * (sk.theta1_rate_dps() - sj.theta1_rate_dps()),
     )
 }
 
@@ -870,7 +875,7 @@ impl<'a> Evaluator<'a> {
     /// The kinematics at sample `i` of run `r`.
     pub fn point(&self, r: usize, i: usize) -> Point {
         let rk = &self.data.kin.runs[r];
-        let s = &rk.samples[i];
+        let s = rk.samples.get(i);
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
@@ -1342,7 +1347,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                     let p = ev.point(r, i);
                     ev.common_values(&p, &plan, &mut common);
                     ev.common_values(&p, &ev.lin_plan, &mut model_common);
-                    for (a, &count) in rk.samples[i].rate_counts.iter().enumerate() {
+                    for (a, &count) in rk.samples.get(i).rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
                         }

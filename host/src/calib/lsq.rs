@@ -148,7 +148,7 @@ pub fn accumulate_run<const P: usize, M: Columns<P>>(model: &M, run: &RunKinemat
     for chunk in run.samples.chunks(CHUNK) {
         let mut local = NormalEq::default();
         for s in chunk {
-            local.add(&model.row(run, s), s.rate_counts);
+            local.add(&model.row(run, &s), s.rate_counts);
         }
         total.merge(&local);
     }
@@ -255,8 +255,8 @@ pub fn run_residuals<const P: usize, M: Columns<P>>(
     out: &mut Vec<[f64; 3]>,
 ) {
     out.clear();
-    out.extend(run.samples.iter().map(|s: &KinSample| {
-        let x = model.row(run, s);
+    out.extend(run.samples.iter().map(|s: KinSample| {
+        let x = model.row(run, &s);
         let mut e = [f64::NAN; 3];
         for (axis, (ea, &c)) in e.iter_mut().zip(&s.rate_counts).enumerate() {
             if !is_clipped(c) {
