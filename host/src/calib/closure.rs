@@ -543,7 +543,7 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
             offset_counts: Default::default(),
         };
         let mut next_s = f64::NEG_INFINITY;
-        for (i, _) in data.runs[r].valid.iter().enumerate().filter(|(_, v)| **v) {
+        for i in data.runs[r].valid.indices() {
             let p = ev.point(r, i);
             if p.t_s < next_s {
                 continue;
@@ -580,7 +580,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         .or_else(|| m.effects.iter().copied().find(|e| e.is_drift()))?;
     let refers_to = drift.offset_reference()?;
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
-    let i = data.runs[r].valid.iter().position(|&v| v)?;
+    let i = data.runs[r].valid.first()?;
     let ev = super::extended::Evaluator::new(data, m);
     let p = ev.point(r, i);
     let at_start: Vec<String> = (0..3)
@@ -599,7 +599,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts; calibration.json's `drift` holds the modelled offset every 10 s of every run.",
         drift.name(),
         data.kin.runs[r].label,
-        data.kin.runs[r].samples[i].t_s(),
+        data.kin.runs[r].samples.get(i).t_s(),
         at_start.join(" / ")
     ))
 }

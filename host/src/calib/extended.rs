@@ -19,7 +19,7 @@
 use super::axes::{is_clipped, AXES};
 use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
-use super::kinematics::{KinSample, Kinematics};
+use super::kinematics::{KinSamples, Kinematics};
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -414,12 +414,76 @@ pub fn effect_columns(e: Effect, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar
     }
 }
 
+/// Which kinematic samples of a run the loop uses: those clear of the run's ends and gaps by
+/// [`MAX_DELAY_S`], i.e. one index range per stretch between gaps (a handful per run), held as
+/// ranges rather than a flag per sample (issue 7's memory bar: a 4-hour capture has 11.5 M).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ValidSamples {
+    /// Ascending, disjoint, non-empty index ranges.
+    ranges: Vec<std::ops::Range<usize>>,
+}
+
+impl ValidSamples {
+    /// Whether sample `i` is used.
+    pub fn contains(&self, i: usize) -> bool {
+        let k = self.ranges.partition_point(|r| r.end <= i);
+        self.ranges.get(k).is_some_and(|r| r.contains(&i))
+    }
+
+    /// The used samples' indices, ascending.
+    pub fn indices(&self) -> impl Iterator<Item = usize> + '_ {
+        self.ranges.iter().flat_map(|r| r.clone())
+    }
+
+    /// The used samples' indices in `lo..hi`, ascending.
+    pub fn indices_in(&self, lo: usize, hi: usize) -> impl Iterator<Item = usize> + '_ {
+        let k = self.ranges.partition_point(|r| r.end <= lo);
+        self.ranges[k..].iter().take_while(move |r| r.start < hi).flat_map(move |r| r.start.max(lo)..r.end.min(hi))
+    }
+
+    /// The first used sample.
+    pub fn first(&self) -> Option<usize> {
+        self.ranges.first().map(|r| r.start)
+    }
+
+    /// The last used sample.
+    pub fn last(&self) -> Option<usize> {
+        self.ranges.last().map(|r| r.end - 1)
+    }
+
+    /// Samples used.
+    pub fn len(&self) -> usize {
+        self.ranges.iter().map(|r| r.len()).sum()
+    }
+
+    /// Whether no sample is used.
+    pub fn is_empty(&self) -> bool {
+        self.ranges.is_empty()
+    }
+
+    /// Samples at times `t_s(0..n)` (s, ascending) whose spacing beyond `gap_s` is a gap, each
+    /// used when at least `guard` samples lie between it and the run's ends or a gap: stretch
+    /// [a, b] between gaps gives [a + guard, b − guard].
+    fn of(n: usize, t_s: impl Fn(usize) -> f64, gap_s: f64, guard: usize) -> Self {
+        let mut ranges = Vec::new();
+        let mut a = 0;
+        for b in 0..n {
+            if b + 1 == n || t_s(b + 1) - t_s(b) > gap_s {
+                if b >= a + 2 * guard {
+                    ranges.push(a + guard..b - guard + 1);
+                }
+                a = b + 1;
+            }
+        }
+        Self { ranges }
+    }
+}
+
 /// Per-run data the loop adds to the kinematics.
 #[derive(Debug, Clone)]
 pub struct RunData {
-    /// Whether each kinematic sample is used (clear of the run's ends and gaps by
-    /// [`MAX_DELAY_S`]).
-    pub valid: Vec<bool>,
+    /// Which kinematic samples are used (clear of the run's ends and gaps by [`MAX_DELAY_S`]).
+    pub valid: ValidSamples,
     /// Smoothed die temperature from the capture mean, °C, per sample.
     pub temp_c: Vec<f32>,
     /// Samples used.
@@ -472,42 +536,29 @@ impl LoopData {
             let guard = (MAX_DELAY_S / dt).ceil() as usize + 1;
             // A gap is any spacing beyond 1.5 nominal periods (a dropped or excluded sample).
             let gap = 1.5 * dt;
-            let mut valid = vec![false; s.len()];
-            let mut last_gap: Option<usize> = None;
-            let mut gaps_after = vec![usize::MAX; s.len()];
-            let mut next_gap = usize::MAX;
-            for i in (0..s.len()).rev() {
-                if i + 1 < s.len() && s[i + 1].t_s() - s[i].t_s() > gap {
-                    next_gap = i;
-                }
-                gaps_after[i] = next_gap;
-            }
-            let mut n_valid = 0;
-            for i in 0..s.len() {
-                if i > 0 && s[i].t_s() - s[i - 1].t_s() > gap {
-                    last_gap = Some(i);
-                }
-                let clear_before = i >= guard && last_gap.is_none_or(|g| i >= g + guard);
-                let clear_after = i + guard < s.len() && gaps_after[i].saturating_sub(i) >= guard;
-                valid[i] = clear_before && clear_after;
-                n_valid += usize::from(valid[i]);
-            }
+            let valid = ValidSamples::of(s.len(), |i| s.get(i).t_s(), gap, guard);
+            let n_valid = valid.len();
+            // The moving average over 2h + 1 samples, from running sums of which only the 2h + 2
+            // a window spans are kept (a ring), not a whole run's prefix array.
             let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
-            let mut prefix = Vec::with_capacity(s.len() + 1);
-            prefix.push(0.0f64);
-            for t in r.temperatures_counts() {
-                let v = if t.is_finite() { f64::from(t) } else { temp_mean };
-                prefix.push(prefix.last().copied().unwrap_or(0.0) + v);
+            let ring_len = 2 * h + 2;
+            let mut prefix = vec![0.0f64; ring_len];
+            let mut counts = r.temperatures_counts();
+            let (mut filled, mut sum) = (0, 0.0f64);
+            let mut temp_c = Vec::with_capacity(s.len());
+            for i in 0..s.len() {
+                let (a, b) = (i.saturating_sub(h), (i + h + 1).min(s.len()));
+                while filled < b {
+                    let t = counts.next().unwrap_or(f32::NAN);
+                    sum += if t.is_finite() { f64::from(t) } else { temp_mean };
+                    filled += 1;
+                    prefix[filled % ring_len] = sum;
+                }
+                // OUT_TEMP falls 1 count per °C (datasheet Table 5).
+                temp_c.push((-((prefix[b % ring_len] - prefix[a % ring_len]) / (b - a) as f64 - temp_mean)) as f32);
             }
-            let temp_c = (0..s.len())
-                .map(|i| {
-                    let (a, b) = (i.saturating_sub(h), (i + h + 1).min(s.len()));
-                    // OUT_TEMP falls 1 count per °C (datasheet Table 5).
-                    (-((prefix[b] - prefix[a]) / (b - a) as f64 - temp_mean)) as f32
-                })
-                .collect();
-            let first = valid.iter().position(|&v| v).map_or(0.0, |i| s[i].t_s());
-            let last = valid.iter().rposition(|&v| v).map_or(first, |i| s[i].t_s());
+            let first = valid.first().map_or(0.0, |i| s.get(i).t_s());
+            let last = valid.last().map_or(first, |i| s.get(i).t_s());
             runs.push(RunData { valid, temp_c, n_valid, span_s: (first, last) });
         }
         let mut poses: Vec<Pose> = Vec::new();
@@ -760,27 +811,32 @@ impl Shifts {
 
 /// θ2 and θ1' at `t_i − delay` by linear interpolation between the neighbouring samples (the
 /// sample is valid, so they exist within [`MAX_DELAY_S`]).
-fn interpolate(s: &[KinSample], i: usize, delay_s: f64) -> (f64, f64) {
+fn interpolate(s: &KinSamples, i: usize, delay_s: f64) -> (f64, f64) {
+    let si = s.get(i);
     if delay_s == 0.0 {
-        return (s[i].theta2_rad(), s[i].theta1_rate_dps());
+        return (si.theta2_rad(), si.theta1_rate_dps());
     }
-    let target = s[i].t_s() - delay_s;
+    let target = si.t_s() - delay_s;
     let mut j = i;
+    let mut sj = si;
     if delay_s > 0.0 {
-        while j > 0 && s[j].t_s() > target {
+        while j > 0 && sj.t_s() > target {
             j -= 1;
+            sj = s.get(j);
         }
     } else {
-        while j + 1 < s.len() && s[j + 1].t_s() <= target {
+        while j + 1 < s.len() && s.get(j + 1).t_s() <= target {
             j += 1;
         }
+        sj = s.get(j);
     }
     let k = (j + 1).min(s.len() - 1);
-    let span = s[k].t_s() - s[j].t_s();
-    let w = if span > 0.0 { ((target - s[j].t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
+    let sk = s.get(k);
+    let span = sk.t_s() - sj.t_s();
+    let w = if span > 0.0 { ((target - sj.t_s()) / span).clamp(0.0, 1.0) } else { 0.0 };
     (
-        s[j].theta2_rad() + w * (s[k].theta2_rad() - s[j].theta2_rad()),
-        s[j].theta1_rate_dps() + w * (s[k].theta1_rate_dps() - s[j].theta1_rate_dps()),
+        sj.theta2_rad() + w * (sk.theta2_rad() - sj.theta2_rad()),
+        sj.theta1_rate_dps() + w * (sk.theta1_rate_dps() - sj.theta1_rate_dps()),
     )
 }
 
@@ -926,7 +982,7 @@ impl<'a> Evaluator<'a> {
     /// The kinematics at sample `i` of run `r`.
     pub fn point(&self, r: usize, i: usize) -> Point {
         let rk = &self.data.kin.runs[r];
-        let s = &rk.samples[i];
+        let s = rk.samples.get(i);
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
@@ -1394,12 +1450,11 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
             let valid = &data.runs[r].valid;
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
-                for (i, _) in valid[start..end].iter().enumerate().filter(|(_, v)| **v) {
-                    let i = start + i;
+                for i in valid.indices_in(start, end) {
                     let p = ev.point(r, i);
                     ev.common_values(&p, &plan, &mut common);
                     ev.common_values(&p, &ev.lin_plan, &mut model_common);
-                    for (a, &count) in rk.samples[i].rate_counts.iter().enumerate() {
+                    for (a, &count) in rk.samples.get(i).rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
                         }
@@ -1780,5 +1835,44 @@ mod tests {
         assert!(!l.shares_levels_across_rates(&[180.0, 180.0, 90.0, 90.0, 90.0]));
         let apart = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (0.0, 100.0)]);
         assert!(!apart.shares_levels_across_rates(&[180.0, -180.0]));
+    }
+
+    /// The ranges mark exactly the samples the per-sample rule marks (clear of both ends and of
+    /// every gap by `guard` samples), and their queries agree with the flags.
+    #[test]
+    fn valid_ranges_match_the_per_sample_rule() {
+        let flags = |t: &[f64], gap: f64, guard: usize| -> Vec<bool> {
+            let n = t.len();
+            (0..n)
+                .map(|i| {
+                    let before = (0..=i).rev().find(|&j| j > 0 && t[j] - t[j - 1] > gap).unwrap_or(0);
+                    let after = (i..n).find(|&j| j + 1 < n && t[j + 1] - t[j] > gap).unwrap_or(usize::MAX);
+                    i >= before + guard && i + guard < n && after.saturating_sub(i) >= guard
+                })
+                .collect()
+        };
+        // Gaps after samples 9, 12 (a stretch too short to use) and 40; one right at the end.
+        let mut t: Vec<f64> = Vec::new();
+        let mut now = 0.0;
+        for i in 0..60 {
+            t.push(now);
+            now += if [9, 12, 40, 58].contains(&i) { 5.0 } else { 1.0 };
+        }
+        for guard in [0, 1, 2, 3, 30] {
+            let v = ValidSamples::of(t.len(), |i| t[i], 1.5, guard);
+            let f = flags(&t, 1.5, guard);
+            let expected: Vec<usize> = (0..t.len()).filter(|&i| f[i]).collect();
+            assert_eq!(v.indices().collect::<Vec<_>>(), expected, "guard {guard}");
+            assert_eq!(v.len(), expected.len());
+            assert_eq!((v.first(), v.last()), (expected.first().copied(), expected.last().copied()));
+            for (i, &fi) in f.iter().enumerate() {
+                assert_eq!(v.contains(i), fi, "guard {guard}, sample {i}");
+            }
+            for (lo, hi) in [(0, 60), (5, 15), (11, 12), (20, 50), (59, 60)] {
+                let want: Vec<usize> = expected.iter().copied().filter(|&i| i >= lo && i < hi).collect();
+                assert_eq!(v.indices_in(lo, hi).collect::<Vec<_>>(), want, "guard {guard}, {lo}..{hi}");
+            }
+        }
+        assert!(ValidSamples::of(t.len(), |i| t[i], 1.5, 30).is_empty());
     }
 }

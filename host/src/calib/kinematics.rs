@@ -112,6 +112,176 @@ impl KinSample {
     }
 }
 
+/// Longest time span of one block of [`KinSamples`], µs: the 16-bit time offset within a block
+/// reaches 65.5 ms, so 40 ms leaves room for a dropped or excluded sample or two (a spacing
+/// beyond that is stored whole, see `KinSamples::escapes`).
+const BLOCK_SPAN_US: f64 = 40_000.0;
+
+/// Most samples a [`KinSamples`] block holds: 32 at 800 Hz (38.75 ms); a base of 16 bytes per
+/// block is then half a byte per sample.
+const MAX_BLOCK_SAMPLES: usize = 32;
+
+/// Offset marking a sample stored whole in `KinSamples::escapes`.
+const ESCAPED: u16 = u16::MAX;
+
+/// One sample as [`KinSamples`] holds it, 14 bytes (align 2): time and encoder count as offsets
+/// from its block's first sample, θ1' as f32 bits, the raw gyro output.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PackedSample {
+    /// Time since the block's first sample, µs, or [`ESCAPED`].
+    dt_us: u16,
+    /// Encoder count since the block's first sample.
+    de_counts: i16,
+    /// θ1', °/s, as `f32::to_bits` split in two halves (so that the record keeps align 2).
+    theta1_rate_bits: [u16; 2],
+    /// Raw gyro output, counts.
+    rate_counts: [i16; 3],
+}
+
+/// A run's kept samples, packed: 14.5 bytes a sample instead of [`KinSample`]'s 24 (issue 7's
+/// memory bar: the loop holds every sample of the capture, 11.5 M at 4 hours). Time and encoder
+/// count are the capture's exact integers, as offsets from the first sample of each block of
+/// `block` samples; θ2 is made from the count on demand with the same expression, so every
+/// value read back is bit for bit what was stored before (no rounding is added anywhere).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KinSamples {
+    packed: Vec<PackedSample>,
+    /// (t_us, encoder count) of each block's first sample.
+    bases: Vec<(i64, i64)>,
+    /// (index, t_us, encoder count) of the samples whose offsets do not fit (gaps, or a rate
+    /// beyond 32767 counts a block), by index.
+    escapes: Vec<(usize, i64, i64)>,
+    /// log2 of the samples per block.
+    block_shift: u32,
+    /// Encoder count of θ2 = 0.
+    ref_counts: f64,
+    /// θ2 per encoder count, rad (2π over the index period).
+    rad_per_count: f64,
+}
+
+impl KinSamples {
+    /// An empty set with θ2 = (count − `ref_counts`)·`rad_per_count`, for samples `dt_s` apart.
+    pub fn new(ref_counts: f64, rad_per_count: f64, dt_s: f64) -> Self {
+        let fit = (BLOCK_SPAN_US / (dt_s * 1e6)).floor() as usize + 1;
+        let block = fit.clamp(1, MAX_BLOCK_SAMPLES);
+        // The largest power of two not above `block`.
+        let block_shift = usize::BITS - 1 - block.leading_zeros();
+        Self { packed: Vec::new(), bases: Vec::new(), escapes: Vec::new(), block_shift, ref_counts, rad_per_count }
+    }
+
+    /// Room for `n` more samples.
+    pub fn reserve(&mut self, n: usize) {
+        self.packed.reserve(n);
+        self.bases.reserve(n >> self.block_shift);
+    }
+
+    /// Appends a sample at `t_us` µs with encoder count `encoder`.
+    pub fn push(&mut self, t_us: i64, encoder: i64, theta1_rate_dps: f64, rate_counts: [i16; 3]) {
+        let i = self.packed.len();
+        if i & ((1 << self.block_shift) - 1) == 0 {
+            self.bases.push((t_us, encoder));
+        }
+        let (bt, be) = self.bases[i >> self.block_shift];
+        let bits = (theta1_rate_dps as f32).to_bits();
+        let theta1_rate_bits = [bits as u16, (bits >> 16) as u16];
+        let (dt, de) = (t_us - bt, encoder - be);
+        let fits = (0..i64::from(ESCAPED)).contains(&dt) && i16::try_from(de).is_ok();
+        let (dt_us, de_counts) = if fits {
+            (dt as u16, de as i16)
+        } else {
+            self.escapes.push((i, t_us, encoder));
+            (ESCAPED, 0)
+        };
+        self.packed.push(PackedSample { dt_us, de_counts, theta1_rate_bits, rate_counts });
+    }
+
+    /// Frees the room reserved beyond the samples.
+    pub fn shrink_to_fit(&mut self) {
+        self.packed.shrink_to_fit();
+        self.bases.shrink_to_fit();
+        self.escapes.shrink_to_fit();
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.packed.len()
+    }
+
+    /// Whether none is held.
+    pub fn is_empty(&self) -> bool {
+        self.packed.is_empty()
+    }
+
+    /// Sample `i` (panics beyond the end, as a slice does).
+    #[inline]
+    pub fn get(&self, i: usize) -> KinSample {
+        let p = &self.packed[i];
+        let (t_us, encoder) = if p.dt_us == ESCAPED {
+            let k = self.escapes.partition_point(|e| e.0 < i);
+            (self.escapes[k].1, self.escapes[k].2)
+        } else {
+            let (bt, be) = self.bases[i >> self.block_shift];
+            (bt + i64::from(p.dt_us), be + i64::from(p.de_counts))
+        };
+        let bits = u32::from(p.theta1_rate_bits[0]) | (u32::from(p.theta1_rate_bits[1]) << 16);
+        KinSample {
+            theta2: (encoder as f64 - self.ref_counts) * self.rad_per_count,
+            t_us_lo: t_us as u32,
+            theta1_rate: f32::from_bits(bits),
+            rate_counts: p.rate_counts,
+            t_us_hi: (t_us >> 32) as u16,
+        }
+    }
+
+    /// The first sample.
+    pub fn first(&self) -> Option<KinSample> {
+        (!self.is_empty()).then(|| self.get(0))
+    }
+
+    /// The last sample.
+    pub fn last(&self) -> Option<KinSample> {
+        self.len().checked_sub(1).map(|i| self.get(i))
+    }
+
+    /// Every sample, in order.
+    pub fn iter(&self) -> KinIter<'_> {
+        KinIter { samples: self, next: 0..self.len() }
+    }
+
+    /// The samples in consecutive runs of `n` (the last one shorter), as a slice's `chunks`.
+    pub fn chunks(&self, n: usize) -> impl Iterator<Item = KinIter<'_>> + '_ {
+        (0..self.len()).step_by(n.max(1)).map(move |a| KinIter { samples: self, next: a..(a + n).min(self.len()) })
+    }
+}
+
+/// The samples of a [`KinSamples`] in order, decoded one by one.
+#[derive(Debug, Clone)]
+pub struct KinIter<'a> {
+    samples: &'a KinSamples,
+    next: std::ops::Range<usize>,
+}
+
+impl Iterator for KinIter<'_> {
+    type Item = KinSample;
+    #[inline]
+    fn next(&mut self) -> Option<KinSample> {
+        self.next.next().map(|i| self.samples.get(i))
+    }
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.next.size_hint()
+    }
+}
+
+impl ExactSizeIterator for KinIter<'_> {}
+
+impl<'a> IntoIterator for &'a KinSamples {
+    type Item = KinSample;
+    type IntoIter = KinIter<'a>;
+    fn into_iter(self) -> KinIter<'a> {
+        self.iter()
+    }
+}
+
 /// Where θ2 = 0 lies in a run, from its index pulses.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct IndexStats {
@@ -164,7 +334,7 @@ pub struct RunKinematics {
     /// Gear ratio θ2'/θ1' used (the pooled estimate).
     pub gear_ratio: f64,
     /// Samples kept (steady speed, full rate window, not stale), in time order.
-    pub samples: Vec<KinSample>,
+    pub samples: KinSamples,
     /// Samples in the run.
     pub total: usize,
     /// Dropped as spin-up, stop or off-speed.
@@ -525,9 +695,10 @@ fn run_kinematics(
     let steady_rate_dps = if near.is_empty() { strided_median(windows, rate_at) } else { median(&mut near) };
     let tol = opts.steady_tolerance * steady_rate_dps.abs();
 
-    let mut samples = Vec::with_capacity(windows);
-    let (mut unsteady, mut stale) = (0, 0);
     let two_pi_over_period = std::f64::consts::TAU / period;
+    let mut samples = KinSamples::new(ref_counts, two_pi_over_period, dt_s);
+    samples.reserve(windows);
+    let (mut unsteady, mut stale) = (0, 0);
     let rot_t = run.pose.rotation().transpose();
     for_each_slope_cps(s, h, |i, slope_cps| {
         let smp = &s[i];
@@ -541,9 +712,9 @@ fn run_kinematics(
             unsteady += 1;
             return;
         }
-        let theta2_rad = (smp.encoder as f64 - ref_counts) * two_pi_over_period;
-        samples.push(KinSample::new(smp.t_us, theta2_rad, rate, smp.rate_counts));
+        samples.push(smp.t_us, smp.encoder, rate, smp.rate_counts);
     });
+    samples.shrink_to_fit();
 
     // One sensor-table revolution at the commanded speed: the paper's per-pose sinusoid fit needs
     // a whole period.
@@ -590,10 +761,57 @@ fn run_kinematics(
 mod tests {
     use super::*;
 
-    /// The sample record stays 24 bytes: every pass streams millions of them, and the loop
-    /// holds them all (issue 7's memory bar).
+    /// The decoded sample stays 24 bytes and the held one 14: every pass streams millions of
+    /// them, and the loop holds them all (issue 7's memory bar).
     #[test]
-    fn kin_sample_is_24_bytes() {
+    fn sample_records_are_24_and_14_bytes() {
         assert_eq!(std::mem::size_of::<KinSample>(), 24);
+        assert_eq!(std::mem::size_of::<PackedSample>(), 14);
+    }
+
+    /// Packing is exact: every time, count, θ1' (as f32) and output read back is the one pushed,
+    /// θ2 is the expression the reconstruction used, bit for bit, whether the sample fits its
+    /// block or is stored whole (a gap, a jump of the count, time running back, past 2^32 µs).
+    #[test]
+    fn packed_samples_read_back_exactly() {
+        let (ref_counts, rad_per_count) = (1234.5, std::f64::consts::TAU / 27_000.123);
+        for dt_s in [1.0 / 800.0, 1.0 / 100.0, 0.5] {
+            let mut packed = KinSamples::new(ref_counts, rad_per_count, dt_s);
+            let dt_us = (dt_s * 1e6) as i64;
+            let mut expected = Vec::new();
+            let (mut t_us, mut encoder) = ((1i64 << 32) - 40 * dt_us, -5_000_000i64);
+            for i in 0..1000i64 {
+                t_us += match i {
+                    100 => 70_000,
+                    200 => -3,
+                    300 => 10_000_000,
+                    _ => dt_us,
+                };
+                encoder += match i {
+                    400 => 40_000,
+                    401 => -40_000,
+                    _ => 202 - i % 5,
+                };
+                let rate = 180.0 + (i as f64 * 0.37).sin() * 1e-3;
+                let counts = [i as i16, -(i as i16), i16::MAX - i as i16];
+                packed.push(t_us, encoder, rate, counts);
+                let theta2 = (encoder as f64 - ref_counts) * rad_per_count;
+                expected.push(KinSample::new(t_us, theta2, rate, counts));
+            }
+            packed.shrink_to_fit();
+            assert_eq!(packed.len(), expected.len());
+            // Only the samples after a jump in the same block are stored whole.
+            let escaped = packed.escapes.len();
+            assert!((packed.block_shift == 0 || escaped > 0) && escaped <= 4 << packed.block_shift, "{escaped}");
+            for (i, (got, want)) in packed.iter().zip(&expected).enumerate() {
+                assert_eq!(got, *want, "dt {dt_s} s, sample {i}");
+                assert_eq!(got.theta2_rad().to_bits(), want.theta2_rad().to_bits());
+            }
+            assert_eq!((packed.first(), packed.last()), (expected.first().copied(), expected.last().copied()));
+        }
+        // 32 samples a block at 800 Hz (38.75 ms), 4 at 100 Hz (30 ms), 1 at 2 Hz.
+        assert_eq!(KinSamples::new(0.0, 1.0, 1.0 / 800.0).block_shift, 5);
+        assert_eq!(KinSamples::new(0.0, 1.0, 1.0 / 100.0).block_shift, 2);
+        assert_eq!(KinSamples::new(0.0, 1.0, 0.5).block_shift, 0);
     }
 }
