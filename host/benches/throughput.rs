@@ -115,24 +115,33 @@ impl Figures {
     }
 }
 
-fn measure(name: &str, files: &[PathBuf], runs: usize) -> Figures {
-    let samples = samples_in(files);
-    let usages: Vec<Usage> = (0..runs).map(|_| run_once(files)).collect();
+/// The children's figures on `files`, `runs` times. Nothing may grow the bench's own memory
+/// before the last child is spawned: a child's `ru_maxrss` includes its parent's peak resident
+/// set (at `exec` the kernel folds the high-water mark of the address space it leaves, shared
+/// with the parent under `posix_spawn`'s vfork, into the child's), so the sample counts, which
+/// decode whole captures here, are taken after every child ran ([`report`]).
+fn measure(files: &[PathBuf], runs: usize) -> Vec<Usage> {
+    (0..runs).map(|_| run_once(files)).collect()
+}
+
+/// Prints one case's figures from its children's usage.
+fn report(name: &str, files: &[PathBuf], usages: &[Usage]) -> Figures {
     let f = Figures {
-        samples,
+        samples: samples_in(files),
         wall_s: measured::median(usages.iter().map(|u| u.wall_s).collect()),
         cpu_s: measured::median(usages.iter().map(|u| u.cpu_s).collect()),
         peak_mib: measured::median(usages.iter().map(|u| u.peak_mib).collect()),
         cpu_all: usages.iter().map(|u| u.cpu_s).collect(),
     };
     println!(
-        "{name:>10}: {:>9} samples  CPU {:7.3} s  wall {:7.3} s  {:6.2} M samples/s per core  {:6.0} ns/sample  peak RSS {:6.1} MiB  (median of {runs}; CPU each: {})",
+        "{name:>10}: {:>9} samples  CPU {:7.3} s  wall {:7.3} s  {:6.2} M samples/s per core  {:6.0} ns/sample  peak RSS {:6.1} MiB  (median of {}; CPU each: {})",
         f.samples,
         f.cpu_s,
         f.wall_s,
         f.per_core() / 1e6,
         f.ns_per_sample(),
         f.peak_mib,
+        usages.len(),
         f.cpu_all.iter().map(|c| format!("{c:.3}")).collect::<Vec<_>>().join(" ")
     );
     f
@@ -154,14 +163,15 @@ fn main() {
     let wanted = |name: &str| only.as_ref().is_none_or(|o| o.iter().any(|x| x == name));
     println!("host calibrate --replay, whole path, {HOST}");
     println!("CPU = user + system time of the child (wait4), not wall; RSS = its ru_maxrss");
-    let mut figures = std::collections::HashMap::new();
+    // Every child first (see `measure`), then the figures.
+    let mut cases: Vec<(&str, Vec<PathBuf>, Vec<Usage>)> = Vec::new();
     for (name, per_pose_s) in CASES {
         if !wanted(name) {
             continue;
         }
         let path = simulated(name, per_pose_s);
         let n = if name == "4h" { runs.div_ceil(2) } else { runs };
-        figures.insert(name, measure(name, &[path], n));
+        cases.push((name, vec![path.clone()], measure(&[path], n)));
     }
     if wanted("realistic") {
         let dir = realistic_dir();
@@ -176,9 +186,12 @@ fn main() {
         if caps.is_empty() {
             println!("realistic: SKIPPED, no captures in {} (the shared validation folder is absent)", dir.display());
         } else {
-            measure("realistic", &caps, runs.div_ceil(2));
+            let usages = measure(&caps, runs.div_ceil(2));
+            cases.push(("realistic", caps, usages));
         }
     }
+    let figures: std::collections::HashMap<&str, Figures> =
+        cases.iter().map(|(name, files, usages)| (*name, report(name, files, usages))).collect();
     println!();
     if let Some(f) = figures.get("1h") {
         println!(
