@@ -1,13 +1,8 @@
-//! Kinematics of the two-table exciter (EXCITER.md, eq. 1-3 and 8-10).
+//! Kinematics of the two-table exciter (EXCITER.md, eq. 1-3 and 8-10) in the host's types: the
+//! maths is [`protocol::exciter`]'s, which the firmware's plant uses too.
 
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
-
-/// Tilt of the pose-1 mount: cos φ = 1/√3, φ = 54.7356° (EXCITER.md corrects the paper's
-/// misprinted 57.74°), so the package's [1, 1, 1] diagonal lies along z2.
-pub fn phi_rad() -> f64 {
-    (1.0f64 / 3.0f64.sqrt()).acos()
-}
 
 /// How the gyro package is mounted on the sensor table. The pose travels in the capture itself
 /// (`RunStarted::run_tag`), so that a capture cannot be attributed to the wrong pose.
@@ -47,11 +42,11 @@ impl Pose {
 
     /// Rotation R_q from the package frame to the sensor-table frame O2 (eq. 3).
     pub fn rotation(self) -> Matrix3<f64> {
-        let r1 = rx(phi_rad()) * rz(45f64.to_radians());
-        match self {
-            Pose::One => r1,
-            Pose::Two => ry(-90f64.to_radians()) * r1,
-        }
+        let r = match self {
+            Pose::One => &protocol::exciter::POSE_1_ROTATION,
+            Pose::Two => &protocol::exciter::POSE_2_ROTATION,
+        };
+        Matrix3::from_fn(|i, j| r[i][j])
     }
 }
 
@@ -61,25 +56,9 @@ impl std::fmt::Display for Pose {
     }
 }
 
-/// Rotation about x by `a_rad`.
-pub fn rx(a_rad: f64) -> Matrix3<f64> {
-    *Rotation3::from_axis_angle(&Vector3::x_axis(), a_rad).matrix()
-}
-
-/// Rotation about y by `a_rad`.
-pub fn ry(a_rad: f64) -> Matrix3<f64> {
-    *Rotation3::from_axis_angle(&Vector3::y_axis(), a_rad).matrix()
-}
-
-/// Rotation about z by `a_rad`.
-pub fn rz(a_rad: f64) -> Matrix3<f64> {
-    *Rotation3::from_axis_angle(&Vector3::z_axis(), a_rad).matrix()
-}
-
 /// Angular velocity of the sensor table in its own frame O2 (eq. 1), in the unit of the rates.
 pub fn omega2(theta1_rate: f64, theta2_rad: f64, theta2_rate: f64) -> Vector3<f64> {
-    let (s, c) = theta2_rad.sin_cos();
-    Vector3::new(theta1_rate * s, theta1_rate * c, theta2_rate)
+    Vector3::from(protocol::exciter::table_rate(theta1_rate, theta2_rad.sin_cos(), theta2_rate))
 }
 
 /// Angular velocity felt by the package, ω_s = R_qᵀ ω2 (eq. 2).
@@ -96,7 +75,9 @@ mod tests {
     #[test]
     fn poses_reproduce_the_papers_closed_forms() {
         let (w1, w2) = (1.3, 0.7);
-        let phi = phi_rad();
+        // Tilt of the pose-1 mount: cos φ = 1/√3, φ = 54.7356° (EXCITER.md corrects the
+        // paper's misprinted 57.74°).
+        let phi = (1.0f64 / 3.0f64.sqrt()).acos();
         assert!((phi.to_degrees() - 54.7356).abs() < 1e-4);
         for k in 0..36 {
             let th = k as f64 * 10f64.to_radians();

@@ -8,6 +8,7 @@
 #![deny(missing_docs)]
 
 pub mod decoder;
+pub mod exciter;
 pub mod frame;
 pub mod gyro;
 pub mod msg;

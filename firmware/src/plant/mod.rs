@@ -8,14 +8,15 @@ pub mod motor;
 pub mod photo_interrupter;
 
 use crate::pwm::MotorCommand;
-use core::f64::consts::{FRAC_PI_4, TAU};
+use core::f64::consts::TAU;
 use encoder::Encoder;
-use libm::{cos, sin, sqrt};
+use libm::{cos, sin};
 use motor::{DriveParams, Motor};
 use photo_interrupter::{Crossing, PhotoInterrupter};
 use protocol::ENCODER_COUNTS_PER_REV;
 
-/// Gyro mounting on the sensor table: `R = Rx(α) Ry(β) Rz(γ)` (EXCITER.md eq. 3).
+/// Gyro mounting on the sensor table: R_q from the package frame to the table frame O2
+/// (EXCITER.md eq. 3), one of the poses of [`protocol::exciter`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pose {
     /// Rotation from the package frame to the table frame O2.
@@ -23,43 +24,25 @@ pub struct Pose {
 }
 
 impl Pose {
-    /// `Rx(α) Ry(β) Rz(γ)`, angles in radians.
-    pub fn from_euler(alpha: f64, beta: f64, gamma: f64) -> Self {
-        let rx = [[1.0, 0.0, 0.0], [0.0, cos(alpha), -sin(alpha)], [0.0, sin(alpha), cos(alpha)]];
-        let ry = [[cos(beta), 0.0, sin(beta)], [0.0, 1.0, 0.0], [-sin(beta), 0.0, cos(beta)]];
-        let rz = [[cos(gamma), -sin(gamma), 0.0], [sin(gamma), cos(gamma), 0.0], [0.0, 0.0, 1.0]];
-        Self { r: mul(&mul(&rx, &ry), &rz) }
-    }
-
-    /// Pose 1: α = φ with cos φ = 1/√3 (54.7356°), β = 0, γ = 45° (EXCITER.md).
+    /// Pose 1 ([`protocol::exciter::POSE_1_ROTATION`]).
     pub fn pose1() -> Self {
-        Self::from_euler(libm::acos(1.0 / sqrt(3.0)), 0.0, FRAC_PI_4)
+        Self { r: protocol::exciter::POSE_1_ROTATION }
     }
 
-    /// Pose 2: pose 1 turned −90° about the table's y axis, `R2 = Ry(−90°) · R1` (EXCITER.md).
+    /// Pose 2 ([`protocol::exciter::POSE_2_ROTATION`]).
     pub fn pose2() -> Self {
-        let ry = Self::from_euler(0.0, -core::f64::consts::FRAC_PI_2, 0.0);
-        Self { r: mul(&ry.r, &Self::pose1().r) }
+        Self { r: protocol::exciter::POSE_2_ROTATION }
     }
 
     /// The pose a run tag names ([`protocol::run_tag`]); the virtual rig's "automatic mount".
     pub fn from_run_tag(tag: u8) -> Option<Self> {
-        match tag {
-            protocol::run_tag::POSE_1 => Some(Self::pose1()),
-            protocol::run_tag::POSE_2 => Some(Self::pose2()),
-            _ => None,
-        }
+        protocol::exciter::rotation(tag).map(|&r| Self { r })
     }
 
     /// `Rᵀ ω`: a table-frame vector in the package frame (eq. 2).
     pub fn to_package(&self, w: [f64; 3]) -> [f64; 3] {
-        let r = &self.r;
-        [0, 1, 2].map(|i| r[0][i] * w[0] + r[1][i] * w[1] + r[2][i] * w[2])
+        protocol::exciter::to_package(&self.r, w)
     }
-}
-
-fn mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
 }
 
 /// A level change of the index, located inside a step.
@@ -143,7 +126,8 @@ impl Plant {
     pub fn gyro_rates_dps(&self) -> [f64; 3] {
         let w1 = self.motor.omega_rad_s;
         let th2 = self.theta2_rad();
-        let table = [w1 * sin(th2), w1 * cos(th2), w1];
+        // The 1:1 gears turn the sensor table at the base's rate: θ2' = θ1'.
+        let table = protocol::exciter::table_rate(w1, (sin(th2), cos(th2)), w1);
         let package = self.pose.to_package(table).map(f64::to_degrees);
         let ks = &self.sensor_ks;
         [0, 1, 2].map(|i| (0..3).map(|j| ks[i][j] * package[j]).sum::<f64>() + self.sensor_offset_dps[i])
@@ -165,6 +149,7 @@ impl Plant {
 mod tests {
     use super::*;
     use core::f64::consts::{FRAC_PI_2, FRAC_PI_6, PI};
+    use libm::sqrt;
 
     #[test]
     fn pose1_rates_match_the_closed_form() {

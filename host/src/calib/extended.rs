@@ -1015,7 +1015,7 @@ impl<'a> Evaluator<'a> {
         // in-plane part by cos ε: 1 − ε²/2 is 14 ppm at 0.3°, which every sensitivity would take.
         let (sin_tilt, cos_tilt) = sh.tilt_sin_cos;
         let rate1_in_plane = rate1 * cos_tilt;
-        let w2 = [rate1_in_plane * se, rate1_in_plane * ce, rate2_eff + rate1 * sin_tilt];
+        let w2 = protocol::exciter::table_rate(rate1_in_plane, (se, ce), rate2_eff + rate1 * sin_tilt);
         let mut dw2 = [rate1_in_plane * ce, -rate1_in_plane * se, 0.0];
         // ω̈ of the table motion at steady speed (Earth's part is 1e-5 of it): the θ1' sinusoid
         // turns at θ2', so its second derivative is −θ2'²·(θ1' sin θ2, θ1' cos θ2, 0).
