@@ -7,7 +7,7 @@
 use super::axes::AXES;
 use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
-use super::diagnostics::{diagnose, Diagnostics};
+use super::diagnostics::{diagnose, Diagnostics, Finding};
 use super::extended::{
     effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
 };
@@ -128,7 +128,7 @@ pub struct StepReport {
     /// Against the simulated truth.
     pub truth: Option<TruthErrors>,
     /// Findings in the residual of this model.
-    pub findings: Vec<String>,
+    pub findings: Vec<Finding>,
     /// Gauss-Newton passes of the fit.
     pub passes: usize,
     /// Effects taken out after this step's addition made them redundant.
@@ -147,11 +147,16 @@ pub struct LoopReport {
     pub steps: Vec<StepReport>,
     /// Verdict.
     pub verdict: Verdict,
-    /// Verdict in words.
-    pub verdict_text: String,
+    /// The family-wise significance level the verdict was tested at.
+    pub alpha: f64,
+    /// A freely fitted Earth rate larger than the Earth turns, which makes the verdict
+    /// [`Verdict::UnexplainedStructure`] by itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub earth_excess: Option<EarthExcess>,
     /// Runs the data cannot do without, asked for in words.
     pub asks: Vec<String>,
-    /// Informative sentences (clipping, speed ripple, identifiability).
+    /// Informative sentences (identifiability, Earth rotation, the offsets' reference); the
+    /// diagnostics' own (clipping, speed ripple) are in [`super::present::findings::notes`].
     pub notes: Vec<String>,
     /// Candidates that passed a step's test but could not be fitted, with why (never fatal).
     pub skipped: Vec<Skipped>,
@@ -419,7 +424,7 @@ impl<'a> Context<'a> {
                 .then(|| (excess.iter().map(|e| e * e).sum::<f64>() / excess.len() as f64).sqrt()),
             held_out,
             truth: self.truth.map(|t| TruthErrors::of(&s.estimate.axes, t)),
-            findings: s.diag.findings.iter().map(|f| f.text.clone()).collect(),
+            findings: s.diag.findings.clone(),
             passes: s.fitted.passes,
             dropped: Vec::new(),
             replaced: Vec::new(),
@@ -656,12 +661,23 @@ fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
 /// effect: 2σ (one-sided 2.3 %) errs towards flagging, the safe side.
 const EARTH_EXCESS_SIGMAS: f64 = 2.0;
 
+/// A freely fitted Earth rate larger than the Earth turns.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EarthExcess {
+    /// Magnitude of the fitted rate, °/h.
+    pub total_dph: f64,
+    /// Its 1-σ, °/h.
+    pub sigma_dph: f64,
+    /// How far above 15.041 °/h, σ.
+    pub excess_sigma: f64,
+}
+
 /// When the freely fitted Earth rate is larger than the Earth turns (by more than
-/// [`EARTH_EXCESS_SIGMAS`]): a sentence saying so. Its vertical part is indistinguishable from a
+/// [`EARTH_EXCESS_SIGMAS`]): by how much. Its vertical part is indistinguishable from a
 /// g-sensitivity along M's rows, and speed-proportional terms (a table tilt) lean on it too, so
 /// an impossible value means the model holds a real effect in the wrong term, and the
 /// calibration must not be called good.
-fn earth_implausible(f: &Fitted) -> Option<String> {
+fn earth_implausible(f: &Fitted) -> Option<EarthExcess> {
     let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
     let (v, n, w) =
         (get(SharedPar::EarthVertical)?, get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
@@ -671,13 +687,11 @@ fn earth_implausible(f: &Fitted) -> Option<String> {
     }
     // σ of the magnitude from the three components (first order).
     let sigma = ((v.0 * v.1).powi(2) + (n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / total;
-    let excess = (total - earth_rate_dps()) / sigma;
-    (excess > EARTH_EXCESS_SIGMAS).then(|| {
-        format!(
-            "Earth rotation fitted at {:.1} ± {:.1} °/h, {excess:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
-            total * 3600.0,
-            sigma * 3600.0
-        )
+    let excess_sigma = (total - earth_rate_dps()) / sigma;
+    (excess_sigma > EARTH_EXCESS_SIGMAS).then_some(EarthExcess {
+        total_dph: total * 3600.0,
+        sigma_dph: sigma * 3600.0,
+        excess_sigma,
     })
 }
 
@@ -813,7 +827,7 @@ fn loop_on(
         }
     }
     let effects = &state.fitted.model.effects;
-    let mut notes = state.diag.notes.clone();
+    let mut notes = Vec::new();
     if effects.contains(&Effect::Phase) {
         let rate = data.kin.runs[0].steady_rate_dps;
         asks.push(format!(
@@ -852,38 +866,19 @@ fn loop_on(
             type_b * 1e6
         ));
     }
-    let implausible = earth_implausible(&state.fitted);
-    let verdict = if state.diag.has_structure() || implausible.is_some() {
+    let earth_excess = earth_implausible(&state.fitted);
+    let verdict = if state.diag.has_structure() || earth_excess.is_some() {
         Verdict::UnexplainedStructure
     } else {
         Verdict::AtNoiseFloor
-    };
-    let verdict_text = match verdict {
-        Verdict::AtNoiseFloor => {
-            let ratio: Vec<String> =
-                (0..3).map(|a| format!("{:.3}", state.diag.rms_dps[a] / state.diag.floor_dps[a])).collect();
-            format!(
-                "Calibrated, residual at the noise floor: RMS/floor x, y, z = {}; no structure left at the {} family-wise level ({} tests).",
-                ratio.join(", "),
-                opts.alpha,
-                state.diag.tests
-            )
-        }
-        Verdict::UnexplainedStructure => {
-            let what: Vec<String> =
-                implausible.iter().cloned().chain(state.diag.findings.iter().map(|f| f.text.clone())).collect();
-            format!(
-                "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
-                what.join(" ")
-            )
-        }
     };
     let final_report = ctx.cal_report(&state, paper);
     let added = steps.len() > 1;
     Ok(LoopReport {
         steps,
         verdict,
-        verdict_text,
+        alpha: opts.alpha,
+        earth_excess,
         asks,
         notes,
         skipped,

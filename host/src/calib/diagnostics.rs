@@ -11,7 +11,6 @@ use super::spectrum::{AmplitudeSpectrum, Periodogram};
 use super::stats::{chi2_to_sigma, chi2_upper_quantile};
 use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
-use std::fmt::Write as _;
 
 /// Highest harmonic of the table rate examined sample by sample (the catalogue's).
 pub const MAX_ORDER: usize = super::catalogue::MAX_HARMONIC_ORDER;
@@ -190,19 +189,56 @@ pub enum FindingKind {
     RmsExcess,
 }
 
-/// One significant structure, as a sentence and in numbers.
+/// One significant structure, in numbers ([`super::present::findings`] says it in words).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Finding {
     /// What.
     pub kind: FindingKind,
     /// (run, axis index) where it is significant.
     pub places: Vec<(usize, usize)>,
-    /// Largest size, °/s.
+    /// Largest size, in [`FindingKind::unit`].
     pub max_dps: f64,
     /// Largest significance, σ.
     pub max_sigma: f64,
-    /// The sentence.
-    pub text: String,
+    /// Where it is largest.
+    pub worst: Worst,
+}
+
+/// The largest instance of a finding.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Worst {
+    /// Run number, from 1.
+    pub run: usize,
+    /// The run's pose.
+    pub pose: Pose,
+    /// The run's commanded base-table rate, °/s.
+    pub commanded_rate_dps: f64,
+    /// Axis index.
+    pub axis: usize,
+    /// Size, in [`FindingKind::unit`].
+    pub size: f64,
+    /// Significance, σ (None for the RMS excess, which is a ratio, not a test).
+    pub sigma: Option<f64>,
+    /// The axis's RMS residual in that run, °/s.
+    pub rms_dps: f64,
+    /// Its noise floor there, °/s.
+    pub floor_dps: f64,
+}
+
+impl FindingKind {
+    /// The unit its sizes are in.
+    pub fn unit(self) -> &'static str {
+        match self {
+            FindingKind::Temperature => "°/s per °C",
+            FindingKind::SpeedRipple => "°/s per % of speed",
+            FindingKind::RunOffset
+            | FindingKind::Harmonic(_)
+            | FindingKind::NotWhite
+            | FindingKind::TimeDrift
+            | FindingKind::RateDependence
+            | FindingKind::RmsExcess => "°/s",
+        }
+    }
 }
 
 /// Diagnostics of a fit over all runs.
@@ -224,8 +260,6 @@ pub struct Diagnostics {
     pub correlation: [[f64; 3]; 3],
     /// Significant structures.
     pub findings: Vec<Finding>,
-    /// Informative sentences that are not structure (clipping, speed ripple checked).
-    pub notes: Vec<String>,
     /// Tests made (the Bonferroni divisor).
     pub tests: usize,
     /// Per-test significance level.
@@ -862,54 +896,14 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         block_samples,
         correlation,
         findings: Vec::new(),
-        notes: Vec::new(),
         tests,
         alpha_per_test,
     };
     d.findings = findings(&d);
-    d.notes = notes(&d);
     d
 }
 
-fn run_label(d: &RunDiag) -> String {
-    format!("run {} ({}, {:+.0} °/s)", d.run, d.pose, d.commanded_rate_dps)
-}
-
-/// What a kind of structure suggests.
-fn suggestion(kind: FindingKind) -> &'static str {
-    match kind {
-        FindingKind::RunOffset => {
-            "the offset differs between runs: offset drift (warm-up or temperature), or the constant θ2'·M R_qᵀ e_z2 term is mis-modelled"
-        }
-        FindingKind::Harmonic(1) => {
-            "the axes look turned about z2 differently in different runs: a delay between gyro and encoder (phase grows with θ2') or an index offset (same phase at every speed)"
-        }
-        FindingKind::Harmonic(_) => {
-            "a harmonic of the sensor-table rate: rate-dependent scale if it follows each axis's own rate, table-speed ripple if every axis shows it in proportion to M R_qᵀ e_z2, otherwise something outside the catalogue"
-        }
-        FindingKind::NotWhite => "the residual is correlated in time beyond the sensor noise: unmodelled structure",
-        FindingKind::TimeDrift => "the offset changes within the run: drift with time (warm-up) or with temperature",
-        FindingKind::Temperature => "the offset follows the die temperature",
-        FindingKind::RateDependence => "the output depends on the rate along the axis beyond the linear scale: non-linearity, asymmetry, or clipping",
-        FindingKind::SpeedRipple => "the residual follows the motor's speed ripple: the encoder-derived rate does not track the table",
-        FindingKind::RmsExcess => "the residual is larger than the noise floor measured from the data",
-    }
-}
-
-fn describe(kind: FindingKind) -> String {
-    match kind {
-        FindingKind::RunOffset => "Run-to-run offset (mean residual)".into(),
-        FindingKind::Harmonic(n) => format!("Residual at {n}× the sensor-table rate"),
-        FindingKind::NotWhite => "Residual not white (Ljung–Box on 40-ms block means)".into(),
-        FindingKind::TimeDrift => "Residual drifting in time (10-s means)".into(),
-        FindingKind::Temperature => "Residual following the temperature".into(),
-        FindingKind::RateDependence => "Residual depending on |rate along the axis|".into(),
-        FindingKind::SpeedRipple => "Residual following the speed ripple".into(),
-        FindingKind::RmsExcess => "Residual RMS above the noise floor".into(),
-    }
-}
-
-/// Groups the significant tests into sentences.
+/// Groups the significant tests by kind.
 fn findings(d: &Diagnostics) -> Vec<Finding> {
     let mut kinds: Vec<FindingKind> = vec![FindingKind::RunOffset];
     kinds.extend((1..=MAX_ORDER as u32).map(FindingKind::Harmonic));
@@ -962,69 +956,23 @@ fn findings(d: &Diagnostics) -> Vec<Finding> {
         }
         let worst = hits.iter().copied().max_by(|x, y| x.2.total_cmp(&y.2)).expect("non-empty");
         let max_sigma = hits.iter().map(|h| h.3).filter(|s| s.is_finite()).fold(0.0f64, f64::max);
-        let mut text = describe(kind);
-        text.push_str(": ");
-        let per_axis: Vec<String> = (0..3)
-            .filter_map(|a| {
-                let runs: Vec<String> = hits.iter().filter(|h| h.1 == a).map(|h| d.runs[h.0].run.to_string()).collect();
-                (!runs.is_empty()).then(|| format!("{} in run {}", AXES[a], runs.join(", ")))
-            })
-            .collect();
-        text.push_str(&per_axis.join("; "));
-        let unit = match kind {
-            FindingKind::Temperature => "°/s per °C",
-            FindingKind::SpeedRipple => "°/s per % of speed",
-            _ => "°/s",
-        };
-        let _ =
-            write!(text, ". Largest: {:.4} {unit} on {} in {}", worst.2, AXES[worst.1], run_label(&d.runs[worst.0]));
-        if worst.3.is_finite() {
-            let _ = write!(text, " ({:.0}σ)", worst.3);
-        } else {
-            let rd = &d.runs[worst.0].axes[worst.1];
-            let _ = write!(text, " (RMS {:.4} vs floor {:.4} °/s)", rd.rms_dps, rd.floor_dps);
-        }
-        let _ = write!(text, ". Suggests: {}.", suggestion(kind));
+        let (rd, ad) = (&d.runs[worst.0], &d.runs[worst.0].axes[worst.1]);
         out.push(Finding {
             kind,
             places: hits.iter().map(|h| (d.runs[h.0].run, h.1)).collect(),
             max_dps: worst.2,
             max_sigma,
-            text,
+            worst: Worst {
+                run: rd.run,
+                pose: rd.pose,
+                commanded_rate_dps: rd.commanded_rate_dps,
+                axis: worst.1,
+                size: worst.2,
+                sigma: worst.3.is_finite().then_some(worst.3),
+                rms_dps: ad.rms_dps,
+                floor_dps: ad.floor_dps,
+            },
         });
-    }
-    out
-}
-
-/// Sentences about clipping and the speed-ripple check.
-fn notes(d: &Diagnostics) -> Vec<String> {
-    let mut out = Vec::new();
-    let clipped: [u64; 3] = std::array::from_fn(|a| d.runs.iter().map(|r| r.axes[a].clipped).sum());
-    if clipped.iter().any(|&c| c > 0) {
-        out.push(format!(
-            "Clipping: {} / {} / {} samples on x / y / z sat at the output rails and were left out of that axis; a larger full scale avoids it.",
-            clipped[0], clipped[1], clipped[2]
-        ));
-    }
-    let dev = d.runs.iter().flat_map(|r| r.axes.first()).map(|a| a.speed_deviation_rms_percent).fold(0.0f64, f64::max);
-    let (mut worst, mut at) = (0.0f64, String::new());
-    for r in &d.runs {
-        for a in &r.axes {
-            if a.ripple.sigma.is_finite() && a.ripple.sigma > worst {
-                worst = a.ripple.sigma;
-                at = format!("{} in {}", a.axis, run_label(r));
-            }
-        }
-    }
-    let rippling = d.runs.iter().any(|r| r.axes.iter().any(|a| a.ripple.significant));
-    if rippling {
-        out.push(format!(
-            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most, and the residual (table harmonics removed) follows it at {worst:.1}σ on {at}: the kinematics may not track the table, or the rate estimate's own encoder noise echoes in the residual."
-        ));
-    } else {
-        out.push(format!(
-            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most; the residual does not follow it (largest slope {worst:.1}σ), so the kinematics track it."
-        ));
     }
     out
 }

@@ -200,7 +200,8 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
     assert!(f.places.iter().any(|&(_, axis)| axis == 0), "{f:?}");
     // 0.3 °/s injected; whatever the catalogue absorbed, most of it is still there.
     assert!(f.max_dps > 0.1, "{f:?}");
-    assert!(r.verdict_text.contains("DO NOT TRUST"), "{}", r.verdict_text);
+    let verdict = crate::calib::present::loop_text::verdict(&r);
+    assert!(verdict.contains("DO NOT TRUST"), "{verdict}");
     assert!(r.summary().contains("UNEXPLAINED STRUCTURE"));
 }
 
@@ -225,7 +226,8 @@ fn clipped_samples_are_excluded_and_reported() {
     let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
     let clipped: u64 = r.final_report().clipped.iter().sum();
     assert!(clipped > 0, "nothing clipped");
-    assert!(r.notes.iter().any(|n| n.starts_with("Clipping")), "{:?}", r.notes);
+    let notes = crate::calib::present::loop_text::notes(&r);
+    assert!(notes.iter().any(|n| n.starts_with("Clipping")), "{notes:?}");
     assert_within_3_sigma(&TruthErrors::of(&r.final_report().axes, &truth), "clipped");
 }
 

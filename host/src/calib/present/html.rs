@@ -3,6 +3,7 @@
 //! harmonics marked, before (linear model) and after (final model). Written with
 //! `crate::report`'s primitives as `report.html` with the SVGs beside it.
 
+use super::{findings, loop_text};
 use crate::calib::axes::AXES;
 use crate::calib::closure::{LoopReport, Verdict};
 use crate::calib::diagnostics::{Diagnostics, RunDiag};
@@ -98,12 +99,12 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
         Verdict::AtNoiseFloor => crate::report::Verdict::Ok,
         Verdict::UnexplainedStructure => crate::report::Verdict::Error,
     };
-    doc.verdict(kind, lr.verdict_text.clone());
+    doc.verdict(kind, loop_text::verdict(lr));
     doc.heading(2, "What the linear model left in the residual");
     if lr.initial.findings.is_empty() {
         doc.paragraph("Nothing: the residual of the linear model is at the noise floor.");
     } else {
-        doc.findings(lr.initial.findings.iter().map(|f| f.text.clone()));
+        doc.findings(lr.initial.findings.iter().map(findings::finding));
     }
     doc.heading(2, "Effects added, and the error before and after");
     let truth = lr.steps.iter().any(|s| s.truth.is_some());
@@ -171,15 +172,16 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
         doc.heading(2, "Runs needed");
         doc.findings(lr.asks.iter().cloned());
     }
-    if !lr.notes.is_empty() {
+    let notes = loop_text::notes(lr);
+    if !notes.is_empty() {
         doc.heading(2, "Notes");
-        doc.findings(lr.notes.iter().cloned());
+        doc.findings(notes);
     }
     doc.heading(2, "Residual of the final model");
     if lr.final_diagnostics().findings.is_empty() {
         doc.paragraph("No structure found.");
     } else {
-        doc.findings(lr.final_diagnostics().findings.iter().map(|f| f.text.clone()));
+        doc.findings(lr.final_diagnostics().findings.iter().map(findings::finding));
     }
     doc.heading(2, "Fit and residual against θ2, residual spectra");
     figures(&mut doc, &lr.initial, lr.final_diagnostics(), lr.steps.len() > 1);

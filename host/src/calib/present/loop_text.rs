@@ -1,7 +1,8 @@
 //! The loop's account in plain text: what the linear model left, each effect added and what it
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
-use crate::calib::closure::{LoopReport, StepReport, Verdict};
+use super::findings;
+use crate::calib::closure::{EarthExcess, LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
 impl LoopReport {
@@ -55,7 +56,7 @@ pub fn summary(r: &LoopReport) -> String {
         let _ = writeln!(o, "  nothing: residual at the noise floor.");
     }
     for f in &r.initial.findings {
-        let _ = writeln!(o, "  - {}", f.text);
+        let _ = writeln!(o, "  - {}", findings::finding(f));
     }
     for s in r.steps.iter().skip(1) {
         let Some(sc) = &s.score else { continue };
@@ -197,9 +198,10 @@ pub fn summary(r: &LoopReport) -> String {
             }
         }
     }
-    if !r.notes.is_empty() {
+    let notes = notes(r);
+    if !notes.is_empty() {
         let _ = writeln!(o, "\nNotes:");
-        for n in &r.notes {
+        for n in &notes {
             let _ = writeln!(o, "  - {n}");
         }
     }
@@ -220,12 +222,49 @@ pub fn summary(r: &LoopReport) -> String {
         let _ = writeln!(o, "  no structure found.");
     }
     for f in &r.final_diagnostics().findings {
-        let _ = writeln!(o, "  - {}", f.text);
+        let _ = writeln!(o, "  - {}", findings::finding(f));
     }
     let tag = match r.verdict {
         Verdict::AtNoiseFloor => "VERDICT: calibrated, residual at the noise floor.",
         Verdict::UnexplainedStructure => "VERDICT: UNEXPLAINED STRUCTURE — do not trust this calibration.",
     };
-    let _ = writeln!(o, "\n{tag}\n{}", r.verdict_text);
+    let _ = writeln!(o, "\n{tag}\n{}", verdict(r));
     o
+}
+
+/// The notes: the final diagnostics' (clipping, speed ripple), then the loop's.
+pub fn notes(r: &LoopReport) -> Vec<String> {
+    findings::notes(r.final_diagnostics()).into_iter().chain(r.notes.iter().cloned()).collect()
+}
+
+/// The verdict in words: the residual against the floor, or what is left unexplained.
+pub fn verdict(r: &LoopReport) -> String {
+    let d = r.final_diagnostics();
+    match r.verdict {
+        Verdict::AtNoiseFloor => {
+            let ratio: Vec<String> = (0..3).map(|a| format!("{:.3}", d.rms_dps[a] / d.floor_dps[a])).collect();
+            format!(
+                "Calibrated, residual at the noise floor: RMS/floor x, y, z = {}; no structure left at the {} family-wise level ({} tests).",
+                ratio.join(", "),
+                r.alpha,
+                d.tests
+            )
+        }
+        Verdict::UnexplainedStructure => {
+            let what: Vec<String> =
+                r.earth_excess.iter().map(earth_excess).chain(d.findings.iter().map(findings::finding)).collect();
+            format!(
+                "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
+                what.join(" ")
+            )
+        }
+    }
+}
+
+/// An Earth rate larger than the Earth turns, in words.
+fn earth_excess(e: &EarthExcess) -> String {
+    format!(
+        "Earth rotation fitted at {:.1} ± {:.1} °/h, {:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
+        e.total_dph, e.sigma_dph, e.excess_sigma
+    )
 }

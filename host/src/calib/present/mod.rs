@@ -4,6 +4,7 @@
 //! never depends on this module.
 
 pub mod cal_text;
+pub mod findings;
 pub mod html;
 pub mod loop_text;
 
