@@ -140,6 +140,82 @@ pub struct StepReport {
     pub replaced: Vec<Effect>,
 }
 
+/// A run the data cannot do without.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Ask {
+    /// Every run turns at one θ1' (`rate_dps`): a delay and an index offset were fitted as one
+    /// phase, right for these runs only.
+    SecondSpeed {
+        /// The runs' steady base-table rate, °/s.
+        rate_dps: f64,
+    },
+    /// A drift curve is in the model and all runs turn one way: the offset and the constant
+    /// θ2' term are separated only through the drift model and the speeds.
+    BothDirectionsForDrift,
+    /// g-sensitivity is in the model and all runs turn one way: only the speeds separate it
+    /// from the signal.
+    BothDirectionsForGSensitivity,
+}
+
+/// What the operator should know of the final model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Note {
+    /// The runs turn at more than one θ2', so a delay and an index offset are told apart.
+    DelayAndIndexSeparable,
+    /// With a drift model the offsets are those of a reference time or temperature; what the
+    /// model gives at the first used sample of the first run.
+    OffsetReference {
+        /// The drift model the offsets follow.
+        drift: Effect,
+        /// The first run's label.
+        run_label: String,
+        /// The sample's time on its capture clock, s.
+        t_s: f64,
+        /// The modelled offset there per axis, counts.
+        at_start_counts: [f64; 3],
+    },
+    /// Earth's rotation with its vertical part from the given latitude.
+    EarthAtLatitude {
+        /// The latitude given, °.
+        latitude_deg: f64,
+        /// Ω·sin(latitude), taken as known, °/h.
+        vertical_dph: f64,
+        /// Horizontal rate fitted, °/h.
+        horizontal_dph: f64,
+        /// Its 1-σ, °/h.
+        horizontal_sigma_dph: f64,
+        /// Ω·cos(latitude), °/h.
+        expected_horizontal_dph: f64,
+    },
+    /// Earth's rotation fitted freely.
+    EarthFitted {
+        /// Vertical rate, °/h.
+        vertical_dph: f64,
+        /// Its 1-σ, °/h.
+        vertical_sigma_dph: f64,
+        /// Horizontal rate, °/h.
+        horizontal_dph: f64,
+        /// Its 1-σ, °/h.
+        horizontal_sigma_dph: f64,
+        /// Magnitude, °/h (the Earth turns at 15.041 °/h).
+        total_dph: f64,
+    },
+    /// Earth's horizontal part fitted, its vertical part held by the g-sensitivity.
+    EarthHorizontalOnly {
+        /// Horizontal rate, °/h.
+        horizontal_dph: f64,
+        /// Its 1-σ, °/h.
+        horizontal_sigma_dph: f64,
+        /// The most the vertical part puts in the g-sensitivity, Ω/g, °/s per g.
+        vertical_max_dps_per_g: f64,
+    },
+    /// Earth's rotation is not in the model; every sensitivity's σ carries it as a Type-B term.
+    EarthNotModelled {
+        /// That term, ppm.
+        type_b_ppm: f64,
+    },
+}
+
 /// The loop's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LoopReport {
@@ -153,11 +229,11 @@ pub struct LoopReport {
     /// [`Verdict::UnexplainedStructure`] by itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub earth_excess: Option<EarthExcess>,
-    /// Runs the data cannot do without, asked for in words.
-    pub asks: Vec<String>,
-    /// Informative sentences (identifiability, Earth rotation, the offsets' reference); the
-    /// diagnostics' own (clipping, speed ripple) are in [`super::present::findings::notes`].
-    pub notes: Vec<String>,
+    /// Runs the data cannot do without.
+    pub asks: Vec<Ask>,
+    /// What the operator should know of the model (identifiability, Earth rotation, the
+    /// offsets' reference); the diagnostics' own (clipping, speed ripple) are derived from them.
+    pub notes: Vec<Note>,
     /// Candidates that passed a step's test but could not be fitted, with why (never fatal).
     pub skipped: Vec<Skipped>,
     /// Diagnostics of the linear model (with its plot data).
@@ -575,7 +651,7 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
 /// With a drift model the offset column alone is not "the offset": says what time or die
 /// temperature the reported offsets refer to, and what the model gives at the first sample of the
 /// first run (where a sensor's datasheet offset is usually taken: at power-up).
-fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
+fn offset_reference_note(m: &Model, data: &LoopData) -> Option<Note> {
     // The free drift, when in, is what the offsets follow (a curve beside it is only its shape).
     let drift = m
         .effects
@@ -583,30 +659,25 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
         .copied()
         .find(|e| matches!(e, Effect::DriftKnots(_)))
         .or_else(|| m.effects.iter().copied().find(|e| e.is_drift()))?;
-    let refers_to = drift.offset_reference()?;
+    drift.offset_reference()?;
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
     let i = data.runs[r].valid.first()?;
     let ev = super::extended::Evaluator::new(data, m);
     let p = ev.point(r, i);
-    let at_start: Vec<String> = (0..3)
-        .map(|a| {
-            let v: f64 = m
-                .lin
-                .iter()
-                .zip(&m.beta[a])
-                .filter(|(c, _)| is_offset_column(**c))
-                .map(|(&c, b)| b * ev.lin_value(c, &p, a))
-                .sum();
-            format!("{v:+.2}")
-        })
-        .collect();
-    Some(format!(
-        "The offsets reported are those of {refers_to} ({}); at the first sample of {} (t = {:.1} s) the model gives x/y/z = {} counts; calibration.json's `drift` holds the modelled offset every 10 s of every run.",
-        drift.name(),
-        data.kin.runs[r].label,
-        data.kin.runs[r].samples.get(i).t_s(),
-        at_start.join(" / ")
-    ))
+    let at_start_counts: [f64; 3] = std::array::from_fn(|a| {
+        m.lin
+            .iter()
+            .zip(&m.beta[a])
+            .filter(|(c, _)| is_offset_column(**c))
+            .map(|(&c, b)| b * ev.lin_value(c, &p, a))
+            .sum()
+    });
+    Some(Note::OffsetReference {
+        drift,
+        run_label: data.kin.runs[r].label.clone(),
+        t_s: data.kin.runs[r].samples.get(i).t_s(),
+        at_start_counts,
+    })
 }
 
 /// Earth's rate, °/s (IERS Conventions 2010: 7.292115e-5 rad/s).
@@ -617,42 +688,32 @@ fn earth_rate_dps() -> f64 {
 /// What the fit says of Earth's rotation: the fitted rate against the known 15.041 °/h (and,
 /// with a latitude, the horizontal part against Ω·cos(latitude)), or, when it is not modelled,
 /// nothing (a note about the runs it needs comes from the identifiability checks).
-fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
+fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<Note> {
     let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
     let (n, w) = (get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
     let h = (n.0 * n.0 + w.0 * w.0).sqrt();
     // σ of the magnitude from the two components (first order).
     let h_sigma = if h > 0.0 { ((n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / h } else { n.1.max(w.1) };
     let per_hour = 3600.0;
+    let (horizontal_dph, horizontal_sigma_dph) = (h * per_hour, h_sigma * per_hour);
     Some(match (latitude_deg, get(SharedPar::EarthVertical)) {
-        (Some(lat), _) => {
-            let expected = earth_rate_dps() * lat.to_radians().cos();
-            format!(
-                "Earth rotation at latitude {lat}°: vertical {:.2} °/h taken as known; horizontal fitted {:.2} ± {:.2} °/h against Ω·cos(latitude) = {:.2} °/h ({:+.1}σ).",
-                earth_rate_dps() * lat.to_radians().sin() * per_hour,
-                h * per_hour,
-                h_sigma * per_hour,
-                expected * per_hour,
-                (h - expected) / h_sigma
-            )
+        (Some(latitude_deg), _) => Note::EarthAtLatitude {
+            latitude_deg,
+            vertical_dph: earth_rate_dps() * latitude_deg.to_radians().sin() * per_hour,
+            horizontal_dph,
+            horizontal_sigma_dph,
+            expected_horizontal_dph: earth_rate_dps() * latitude_deg.to_radians().cos() * per_hour,
+        },
+        (None, Some(v)) => Note::EarthFitted {
+            vertical_dph: v.0 * per_hour,
+            vertical_sigma_dph: v.1 * per_hour,
+            horizontal_dph,
+            horizontal_sigma_dph,
+            total_dph: (v.0 * v.0 + h * h).sqrt() * per_hour,
+        },
+        (None, None) if f.model.effects.contains(&Effect::EarthRotationHorizontal) => {
+            Note::EarthHorizontalOnly { horizontal_dph, horizontal_sigma_dph, vertical_max_dps_per_g: earth_rate_dps() }
         }
-        (None, Some(v)) => {
-            let total = (v.0 * v.0 + h * h).sqrt();
-            format!(
-                "Earth rotation fitted: vertical {:.2} ± {:.2} °/h, horizontal {:.2} ± {:.2} °/h, together {:.2} °/h against 15.041 °/h. --latitude-deg gives its vertical part instead of fitting it.",
-                v.0 * per_hour,
-                v.1 * per_hour,
-                h * per_hour,
-                h_sigma * per_hour,
-                total * per_hour
-            )
-        }
-        (None, None) if f.model.effects.contains(&Effect::EarthRotationHorizontal) => format!(
-            "Earth rotation: horizontal part fitted {:.2} ± {:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two.",
-            h * per_hour,
-            h_sigma * per_hour,
-            earth_rate_dps()
-        ),
         (None, None) => return None,
     })
 }
@@ -829,15 +890,9 @@ fn loop_on(
     let effects = &state.fitted.model.effects;
     let mut notes = Vec::new();
     if effects.contains(&Effect::Phase) {
-        let rate = data.kin.runs[0].steady_rate_dps;
-        asks.push(format!(
-            "A delay and an index offset cannot be told apart: every run turns at θ1' = {rate:+.1} °/s, so only their combined phase δ − θ2'·τ was fitted. It corrects these runs, but not a run at another speed. Run again at a second speed, e.g. --rates-dps 180,90, or in both directions, --rates-dps 180,-180."
-        ));
+        asks.push(Ask::SecondSpeed { rate_dps: data.kin.runs[0].steady_rate_dps });
     } else if separates_delay_and_index(&data) {
-        notes.push(
-            "Delay and index offset are separable here: the runs turn at more than one θ2' (speed or direction)."
-                .into(),
-        );
+        notes.push(Note::DelayAndIndexSeparable);
     }
     if let Some(note) = offset_reference_note(&state.fitted.model, &data) {
         notes.push(note);
@@ -847,24 +902,17 @@ fn loop_on(
         && !effects.iter().any(|e| matches!(e, Effect::DriftKnots(_)))
         && !both_directions(&data)
     {
-        asks.push(
-            "The offset drifts, and all runs turn one way: the offset and the constant θ2'·M R_qᵀ e_z2 term are separated only through the drift model and the speeds. Runs in both directions (--rates-dps 180,-180) separate them directly.".into(),
-        );
+        asks.push(Ask::BothDirectionsForDrift);
     }
     if effects.contains(&Effect::GSensitivity) && !both_directions(&data) {
-        asks.push(
-            "g-sensitivity is in the model and every run turns one way: its gravity term turns with θ2 like the signal, and only the speeds (1/θ1') tell the two apart, which costs every sensitivity and direction σ. In runs in both directions (--rates-dps 180,-180) the term keeps its sign while the signal's flips, which separates them directly (on the simulator, 4-8× smaller σ).".into(),
-        );
+        asks.push(Ask::BothDirectionsForGSensitivity);
     }
     if let Some(note) = earth_note(&state.fitted, opts.latitude_deg) {
         notes.push(note);
     }
     let type_b = earth_type_b_rel(&state.fitted.model, &data);
     if type_b > 0.0 {
-        notes.push(format!(
-            "Earth rotation is not in the model (no --latitude-deg, and the test did not find it): every sensitivity's σ includes {:.1} ppm for it (up to 15.041 °/h against the slowest run's θ1', uniform). Give the lab's latitude to remove it.",
-            type_b * 1e6
-        ));
+        notes.push(Note::EarthNotModelled { type_b_ppm: type_b * 1e6 });
     }
     let earth_excess = earth_implausible(&state.fitted);
     let verdict = if state.diag.has_structure() || earth_excess.is_some() {

@@ -1,5 +1,6 @@
 //! Tests of the closed loop on simulated captures with effects the model was not told about.
 
+use super::closure::Note;
 use super::diagnostics::FindingKind;
 use super::extended::{Col, Evaluator, LoopData, Model, SharedPar};
 use super::truth_check::TruthErrors;
@@ -211,7 +212,8 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
 fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
     let (r, truth) = run_loop(2, &[180.0], SHORT_S, &["delay_ms=5"]);
     assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::Phase), "{}", r.summary());
-    assert!(r.asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{:?}", r.asks);
+    let asks = crate::calib::present::loop_text::asks(&r);
+    assert!(asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{asks:?}");
     // The combined phase corrects these runs: the calibration is right for them.
     let t = TruthErrors::of(&r.final_report().axes, &truth);
     assert_within_3_sigma(&t, "one speed");
@@ -393,7 +395,7 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
     for seed in [11, 12] {
         let (runs, truth) = capture_with(seed, &[180.0], BAR_DURATION_S, &["earth_rotation=60"], FullScale::Dps500);
         let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
-        assert!(r.notes.iter().any(|n| n.contains("Earth rotation is not in the model")), "{:?}", r.notes);
+        assert!(r.notes.iter().any(|n| matches!(n, Note::EarthNotModelled { .. })), "{:?}", r.notes);
         assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
         assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), &format!("earth, seed {seed}"));
     }
@@ -411,8 +413,8 @@ fn g_sensitivity_holds_earths_vertical_part_without_a_latitude() {
     let effects = r.effects();
     assert!(effects.contains(&Effect::GSensitivity), "{}", r.summary());
     assert_eq!(effects.last(), Some(&Effect::EarthRotationHorizontal), "{}", r.summary());
-    assert!(r.notes.iter().any(|n| n.contains("the g-sensitivity holds it")), "{:?}", r.notes);
-    assert!(!r.notes.iter().any(|n| n.contains("Earth rotation is not in the model")), "{:?}", r.notes);
+    assert!(r.notes.iter().any(|n| matches!(n, Note::EarthHorizontalOnly { .. })), "{:?}", r.notes);
+    assert!(!r.notes.iter().any(|n| matches!(n, Note::EarthNotModelled { .. })), "{:?}", r.notes);
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "g-sensitivity with Earth");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }

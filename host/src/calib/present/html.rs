@@ -170,7 +170,7 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
     );
     if !lr.asks.is_empty() {
         doc.heading(2, "Runs needed");
-        doc.findings(lr.asks.iter().cloned());
+        doc.findings(loop_text::asks(lr));
     }
     let notes = loop_text::notes(lr);
     if !notes.is_empty() {

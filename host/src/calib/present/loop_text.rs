@@ -1,8 +1,8 @@
 //! The loop's account in plain text: what the linear model left, each effect added and what it
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
-use super::findings;
-use crate::calib::closure::{EarthExcess, LoopReport, StepReport, Verdict};
+use super::{advice, findings};
+use crate::calib::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
 impl LoopReport {
@@ -213,7 +213,7 @@ pub fn summary(r: &LoopReport) -> String {
     }
     if !r.asks.is_empty() {
         let _ = writeln!(o, "\nRuns needed:");
-        for a in &r.asks {
+        for a in &asks(r) {
             let _ = writeln!(o, "  - {a}");
         }
     }
@@ -234,7 +234,12 @@ pub fn summary(r: &LoopReport) -> String {
 
 /// The notes: the final diagnostics' (clipping, speed ripple), then the loop's.
 pub fn notes(r: &LoopReport) -> Vec<String> {
-    findings::notes(r.final_diagnostics()).into_iter().chain(r.notes.iter().cloned()).collect()
+    findings::notes(r.final_diagnostics()).into_iter().chain(r.notes.iter().map(advice::note)).collect()
+}
+
+/// The runs asked for, in words.
+pub fn asks(r: &LoopReport) -> Vec<String> {
+    r.asks.iter().map(advice::ask).collect()
 }
 
 /// The verdict in words: the residual against the floor, or what is left unexplained.
@@ -251,20 +256,16 @@ pub fn verdict(r: &LoopReport) -> String {
             )
         }
         Verdict::UnexplainedStructure => {
-            let what: Vec<String> =
-                r.earth_excess.iter().map(earth_excess).chain(d.findings.iter().map(findings::finding)).collect();
+            let what: Vec<String> = r
+                .earth_excess
+                .iter()
+                .map(advice::earth_excess)
+                .chain(d.findings.iter().map(findings::finding))
+                .collect();
             format!(
                 "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
                 what.join(" ")
             )
         }
     }
-}
-
-/// An Earth rate larger than the Earth turns, in words.
-fn earth_excess(e: &EarthExcess) -> String {
-    format!(
-        "Earth rotation fitted at {:.1} ± {:.1} °/h, {:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
-        e.total_dph, e.sigma_dph, e.excess_sigma
-    )
 }

@@ -3,6 +3,7 @@
 //! [`crate::report`]'s primitives). The computation in the rest of [`super`] returns data and
 //! never depends on this module.
 
+pub mod advice;
 pub mod cal_text;
 pub mod findings;
 pub mod html;
