@@ -8,6 +8,7 @@ use super::axes::AXES;
 use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics};
+use super::estimate::Estimate;
 use super::extended::{
     effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
 };
@@ -18,6 +19,7 @@ use super::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
 use super::truth_check::TruthErrors;
+use super::wire::ParamMoveJson;
 use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
 use nalgebra::DMatrix;
@@ -59,15 +61,14 @@ pub enum Verdict {
 
 /// How far a base parameter moved in one step.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(into = "ParamMoveJson", from = "ParamMoveJson")]
 pub struct ParamMove {
     /// Parameter name (as in `CalReport::param_names`).
     pub name: String,
     /// Before the step.
     pub before: f64,
-    /// After.
-    pub after: f64,
-    /// 1-σ after.
-    pub sigma: f64,
+    /// After, with its σ.
+    pub after: Estimate,
     /// (after − before)/σ.
     pub moved_sigma: f64,
 }
@@ -77,10 +78,9 @@ pub struct ParamMove {
 pub struct EffectParam {
     /// What.
     pub name: String,
-    /// Value.
-    pub value: f64,
-    /// 1-σ.
-    pub sigma: f64,
+    /// Value and 1-σ, in `unit` (flat in loop.json: `value`, `sigma`).
+    #[serde(flatten)]
+    pub estimate: Estimate,
     /// Unit.
     pub unit: String,
 }
@@ -215,7 +215,7 @@ fn base_estimate(f: &Fitted, nominal: f64, data: &LoopData) -> BaseEstimate {
     let (mut axes, inter) = derive(&params, &cov, nominal);
     let type_b = earth_type_b_rel(&f.model, data);
     for a in &mut axes {
-        a.k_sigma = a.k_sigma.hypot(a.k_counts_per_dps * type_b);
+        a.k_counts_per_dps = a.k_counts_per_dps.widened(a.k_counts_per_dps.value * type_b);
     }
     BaseEstimate { params, cov, axes, inter }
 }
@@ -262,10 +262,9 @@ fn param_names() -> Vec<String> {
 fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectParam> {
     let mut out = Vec::new();
     for &p in &f.model.shared {
-        let i = f.shared_index(p).expect("own parameter");
-        let (v, s) = (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i));
+        let e = shared_estimate(f, p).expect("own parameter");
         let r = p.reported();
-        out.push(EffectParam { name: r.name, value: v * r.scale, sigma: s * r.scale, unit: r.unit.into() });
+        out.push(EffectParam { name: r.name, estimate: e.scaled(r.scale), unit: r.unit.into() });
     }
     for &c in &f.model.lin {
         let Some(r) = c.reported(full_scale_dps) else {
@@ -275,8 +274,10 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             let i = f.lin_index(a, c).expect("own column");
             out.push(EffectParam {
                 name: format!("{}, {}", r.name, AXES[a]),
-                value: f.model.beta[a][i - a * f.model.lin.len()] / ka * r.scale,
-                sigma: f.sigma(i) / ka * r.scale,
+                estimate: Estimate::new(
+                    f.model.beta[a][i - a * f.model.lin.len()] / ka * r.scale,
+                    f.sigma(i) / ka * r.scale,
+                ),
                 unit: r.unit.into(),
             });
         }
@@ -346,7 +347,7 @@ impl<'a> Context<'a> {
         let mut weighted = linear.clone();
         reweight(&mut weighted, diag.weights());
         let est = base_estimate(&weighted, self.nominal, self.data);
-        let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts]);
+        let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts].map(|e| e.value));
         paper_check(&linear.per_run, &self.data.kin, diag.inflation, joint)
     }
 
@@ -390,13 +391,12 @@ impl<'a> Context<'a> {
             .map(|p| {
                 (0..12)
                     .map(|i| {
-                        let sigma = s.estimate.cov[(i, i)].max(0.0).sqrt();
+                        let after = Estimate::from_variance(s.estimate.params[i], s.estimate.cov[(i, i)]);
                         ParamMove {
                             name: names[i].clone(),
                             before: p.estimate.params[i],
-                            after: s.estimate.params[i],
-                            sigma,
-                            moved_sigma: (s.estimate.params[i] - p.estimate.params[i]) / sigma,
+                            after,
+                            moved_sigma: after.z(p.estimate.params[i]),
                         }
                     })
                     .collect()
@@ -604,6 +604,11 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<String> {
     ))
 }
 
+/// A shared parameter of the fit with its σ, in the fit's units (None when not in the model).
+fn shared_estimate(f: &Fitted, p: SharedPar) -> Option<Estimate> {
+    f.shared_index(p).map(|i| Estimate::new(f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)))
+}
+
 /// Earth's rate, °/s (IERS Conventions 2010: 7.292115e-5 rad/s).
 fn earth_rate_dps() -> f64 {
     crate::sim::effects::EARTH_RATE_RAD_S.to_degrees()
@@ -613,13 +618,16 @@ fn earth_rate_dps() -> f64 {
 /// with a latitude, the horizontal part against Ω·cos(latitude)), or, when it is not modelled,
 /// nothing (a note about the runs it needs comes from the identifiability checks).
 fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
-    let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
-    let (n, w) = (get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
-    let h = (n.0 * n.0 + w.0 * w.0).sqrt();
+    let (n, w) = (shared_estimate(f, SharedPar::EarthNorthAtZero)?, shared_estimate(f, SharedPar::EarthWestAtZero)?);
+    let h = (n.value * n.value + w.value * w.value).sqrt();
     // σ of the magnitude from the two components (first order).
-    let h_sigma = if h > 0.0 { ((n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / h } else { n.1.max(w.1) };
+    let h_sigma = if h > 0.0 {
+        ((n.value * n.sigma).powi(2) + (w.value * w.sigma).powi(2)).sqrt() / h
+    } else {
+        n.sigma.max(w.sigma)
+    };
     let per_hour = 3600.0;
-    Some(match (latitude_deg, get(SharedPar::EarthVertical)) {
+    Some(match (latitude_deg, shared_estimate(f, SharedPar::EarthVertical)) {
         (Some(lat), _) => {
             let expected = earth_rate_dps() * lat.to_radians().cos();
             format!(
@@ -632,11 +640,11 @@ fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<String> {
             )
         }
         (None, Some(v)) => {
-            let total = (v.0 * v.0 + h * h).sqrt();
+            let total = (v.value * v.value + h * h).sqrt();
             format!(
                 "Earth rotation fitted: vertical {:.2} ± {:.2} °/h, horizontal {:.2} ± {:.2} °/h, together {:.2} °/h against 15.041 °/h. --latitude-deg gives its vertical part instead of fitting it.",
-                v.0 * per_hour,
-                v.1 * per_hour,
+                v.value * per_hour,
+                v.sigma * per_hour,
                 h * per_hour,
                 h_sigma * per_hour,
                 total * per_hour
@@ -662,15 +670,16 @@ const EARTH_EXCESS_SIGMAS: f64 = 2.0;
 /// an impossible value means the model holds a real effect in the wrong term, and the
 /// calibration must not be called good.
 fn earth_implausible(f: &Fitted) -> Option<String> {
-    let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
-    let (v, n, w) =
-        (get(SharedPar::EarthVertical)?, get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
-    let total = (v.0 * v.0 + n.0 * n.0 + w.0 * w.0).sqrt();
+    let v = shared_estimate(f, SharedPar::EarthVertical)?;
+    let n = shared_estimate(f, SharedPar::EarthNorthAtZero)?;
+    let w = shared_estimate(f, SharedPar::EarthWestAtZero)?;
+    let total = (v.value * v.value + n.value * n.value + w.value * w.value).sqrt();
     if total <= 0.0 {
         return None;
     }
     // σ of the magnitude from the three components (first order).
-    let sigma = ((v.0 * v.1).powi(2) + (n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / total;
+    let sigma =
+        ((v.value * v.sigma).powi(2) + (n.value * n.sigma).powi(2) + (w.value * w.sigma).powi(2)).sqrt() / total;
     let excess = (total - earth_rate_dps()) / sigma;
     (excess > EARTH_EXCESS_SIGMAS).then(|| {
         format!(

@@ -6,5 +6,7 @@
 pub mod cal_text;
 pub mod html;
 pub mod loop_text;
+pub mod plus_minus;
 
 pub use html::write_report;
+pub use plus_minus::PlusMinus;
