@@ -1,8 +1,9 @@
 //! The JSON layout of the report types that hold [`Estimate`]s: calibration.json and loop.json
-//! are read by scripts outside the project (`validation/check.py` reads `axes[i].k_counts_per_dps`
-//! and `axes[i].k_sigma`), so each estimate is written flat, its value and its σ as two fields
-//! side by side, as they were before the type existed. Each type converts to and from its layout
-//! here (`#[serde(into, from)]`); the field docs are on the types.
+//! are read by programs outside the crate (`validation/check.py` reads `axes[i].s`,
+//! `k_counts_per_dps` and `k_sigma`; the all-effects bench also `tilt_mount_sigma_deg`), so each
+//! estimate is written flat, its value and its σ as two fields side by side, as they were before
+//! the type existed. Each type converts to and from its layout here (`#[serde(into, from)]`);
+//! the field docs are on the types.
 
 use super::closure::ParamMove;
 use super::derived::{AxisEstimate, InterAxisAngle};
