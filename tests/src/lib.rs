@@ -145,11 +145,11 @@ pub fn errors(report: &CalReport, truth: &Truth) -> [AxisError; 3] {
         let (j, l) = ((i + 1) % 3, (i + 2) % 3);
         let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
         let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
-        let cos = (0..3).map(|c| a.s[c] * s[c]).sum::<f64>().clamp(-1.0, 1.0);
+        let cos = (0..3).map(|c| a.s[c].value * s[c]).sum::<f64>().clamp(-1.0, 1.0);
         AxisError {
-            k_z: (a.k_counts_per_dps - truth.k_counts_per_dps[i]) / a.k_sigma,
+            k_z: a.k_counts_per_dps.z(truth.k_counts_per_dps[i]),
             direction_md: host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2),
-            k_ppm: (a.k_counts_per_dps / truth.k_counts_per_dps[i] - 1.0) * 1e6,
+            k_ppm: (a.k_counts_per_dps.value / truth.k_counts_per_dps[i] - 1.0) * 1e6,
             direction_deg: cos.acos().to_degrees(),
         }
     })
@@ -187,13 +187,13 @@ pub fn assert_matches_virtual_gyro(report: &CalReport) {
         let (j, l) = ((i + 1) % 3, (i + 2) % 3);
         let tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
         let d = [a.tilt_components_deg[0] - tilt[0], a.tilt_components_deg[1] - tilt[1]];
-        let k_z = (a.k_counts_per_dps - k) / a.k_sigma;
-        let offset_z = (a.offset_counts - offset) / a.offset_sigma_counts;
+        let k_z = a.k_counts_per_dps.z(k);
+        let offset_z = a.offset_counts.z(offset);
         let direction_md = host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2);
         eprintln!(
             "axis {i}: k {:.3} vs {k:.3} ({k_z:+.2} σ), direction {direction_md:.2} σ, \
              offset {:.2} vs {offset:.2} counts ({offset_z:+.2} σ)",
-            a.k_counts_per_dps, a.offset_counts
+            a.k_counts_per_dps.value, a.offset_counts.value
         );
         assert!(
             k_z.abs() <= Z_1D && direction_md <= Z_2D && offset_z.abs() <= Z_1D,

@@ -44,8 +44,9 @@ fn calibrate(name: &str) -> (host::calib::LoopReport, SensorTruth) {
 fn errors(r: &CalReport, t: &SensorTruth) -> [(f64, f64, f64); 3] {
     std::array::from_fn(|i| {
         let a = &r.axes[i];
-        let cos = (0..3).map(|c| a.s[c] * t.s[i][c]).sum::<f64>().clamp(-1.0, 1.0);
-        ((a.k_counts_per_dps / t.k[i] - 1.0) * 1e6, (a.k_counts_per_dps - t.k[i]) / a.k_sigma, cos.acos().to_degrees())
+        let cos = (0..3).map(|c| a.s[c].value * t.s[i][c]).sum::<f64>().clamp(-1.0, 1.0);
+        let k = a.k_counts_per_dps;
+        ((k.value / t.k[i] - 1.0) * 1e6, k.z(t.k[i]), cos.acos().to_degrees())
     })
 }
 

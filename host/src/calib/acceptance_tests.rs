@@ -65,7 +65,7 @@ fn simulated_captures_meet_the_acceptance_bars() {
         let seed = r.truth.seed;
         for (i, a) in rep.axes.iter().enumerate() {
             // Sensitivity within 3σ.
-            let zk = (a.k_counts_per_dps - r.truth.k_counts_per_dps[i]) / a.k_sigma;
+            let zk = a.k_counts_per_dps.z(r.truth.k_counts_per_dps[i]);
             assert!(zk.abs() <= Z_1D, "seed {seed} axis {}: k z = {zk:.2}\n{}", a.axis, rep.summary());
             // Direction within the 2-D 3σ ellipse of its tilt components.
             let s = r.truth.s[i];

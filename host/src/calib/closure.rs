@@ -8,6 +8,7 @@ use super::axes::AXES;
 use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics, Finding};
+use super::estimate::Estimate;
 use super::extended::{
     effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
 };
@@ -18,6 +19,7 @@ use super::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
 use super::truth_check::TruthErrors;
+use super::wire::ParamMoveJson;
 use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
 use nalgebra::DMatrix;
@@ -59,15 +61,14 @@ pub enum Verdict {
 
 /// How far a base parameter moved in one step.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(into = "ParamMoveJson", from = "ParamMoveJson")]
 pub struct ParamMove {
     /// Parameter name (as in `CalReport::param_names`).
     pub name: String,
     /// Before the step.
     pub before: f64,
-    /// After.
-    pub after: f64,
-    /// 1-σ after.
-    pub sigma: f64,
+    /// After, with its σ.
+    pub after: Estimate,
     /// (after − before)/σ.
     pub moved_sigma: f64,
 }
@@ -77,10 +78,9 @@ pub struct ParamMove {
 pub struct EffectParam {
     /// What.
     pub name: String,
-    /// Value.
-    pub value: f64,
-    /// 1-σ.
-    pub sigma: f64,
+    /// Value and 1-σ, in `unit` (flat in loop.json: `value`, `sigma`).
+    #[serde(flatten)]
+    pub estimate: Estimate,
     /// Unit.
     pub unit: String,
 }
@@ -181,31 +181,23 @@ pub enum Note {
         /// Ω·sin(latitude), taken as known, °/h.
         vertical_dph: f64,
         /// Horizontal rate fitted, °/h.
-        horizontal_dph: f64,
-        /// Its 1-σ, °/h.
-        horizontal_sigma_dph: f64,
+        horizontal_dph: Estimate,
         /// Ω·cos(latitude), °/h.
         expected_horizontal_dph: f64,
     },
     /// Earth's rotation fitted freely.
     EarthFitted {
         /// Vertical rate, °/h.
-        vertical_dph: f64,
-        /// Its 1-σ, °/h.
-        vertical_sigma_dph: f64,
+        vertical_dph: Estimate,
         /// Horizontal rate, °/h.
-        horizontal_dph: f64,
-        /// Its 1-σ, °/h.
-        horizontal_sigma_dph: f64,
+        horizontal_dph: Estimate,
         /// Magnitude, °/h (the Earth turns at 15.041 °/h).
         total_dph: f64,
     },
     /// Earth's horizontal part fitted, its vertical part held by the g-sensitivity.
     EarthHorizontalOnly {
         /// Horizontal rate, °/h.
-        horizontal_dph: f64,
-        /// Its 1-σ, °/h.
-        horizontal_sigma_dph: f64,
+        horizontal_dph: Estimate,
         /// The most the vertical part puts in the g-sensitivity, Ω/g, °/s per g.
         vertical_max_dps_per_g: f64,
     },
@@ -296,7 +288,7 @@ fn base_estimate(f: &Fitted, nominal: f64, data: &LoopData) -> BaseEstimate {
     let (mut axes, inter) = derive(&params, &cov, nominal);
     let type_b = earth_type_b_rel(&f.model, data);
     for a in &mut axes {
-        a.k_sigma = a.k_sigma.hypot(a.k_counts_per_dps * type_b);
+        a.k_counts_per_dps = a.k_counts_per_dps.widened(a.k_counts_per_dps.value * type_b);
     }
     BaseEstimate { params, cov, axes, inter }
 }
@@ -343,10 +335,9 @@ fn param_names() -> Vec<String> {
 fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectParam> {
     let mut out = Vec::new();
     for &p in &f.model.shared {
-        let i = f.shared_index(p).expect("own parameter");
-        let (v, s) = (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i));
+        let e = shared_estimate(f, p).expect("own parameter");
         let r = p.reported();
-        out.push(EffectParam { name: r.name, value: v * r.scale, sigma: s * r.scale, unit: r.unit.into() });
+        out.push(EffectParam { name: r.name, estimate: e.scaled(r.scale), unit: r.unit.into() });
     }
     for &c in &f.model.lin {
         let Some(r) = c.reported(full_scale_dps) else {
@@ -356,8 +347,10 @@ fn effect_params(f: &Fitted, k: [f64; 3], full_scale_dps: f64) -> Vec<EffectPara
             let i = f.lin_index(a, c).expect("own column");
             out.push(EffectParam {
                 name: format!("{}, {}", r.name, AXES[a]),
-                value: f.model.beta[a][i - a * f.model.lin.len()] / ka * r.scale,
-                sigma: f.sigma(i) / ka * r.scale,
+                estimate: Estimate::new(
+                    f.model.beta[a][i - a * f.model.lin.len()] / ka * r.scale,
+                    f.sigma(i) / ka * r.scale,
+                ),
                 unit: r.unit.into(),
             });
         }
@@ -427,7 +420,7 @@ impl<'a> Context<'a> {
         let mut weighted = linear.clone();
         reweight(&mut weighted, diag.weights());
         let est = base_estimate(&weighted, self.nominal, self.data);
-        let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts]);
+        let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts].map(|e| e.value));
         paper_check(&linear.per_run, &self.data.kin, diag.inflation, joint)
     }
 
@@ -471,13 +464,12 @@ impl<'a> Context<'a> {
             .map(|p| {
                 (0..12)
                     .map(|i| {
-                        let sigma = s.estimate.cov[(i, i)].max(0.0).sqrt();
+                        let after = Estimate::from_variance(s.estimate.params[i], s.estimate.cov[(i, i)]);
                         ParamMove {
                             name: names[i].clone(),
                             before: p.estimate.params[i],
-                            after: s.estimate.params[i],
-                            sigma,
-                            moved_sigma: (s.estimate.params[i] - p.estimate.params[i]) / sigma,
+                            after,
+                            moved_sigma: after.z(p.estimate.params[i]),
                         }
                     })
                     .collect()
@@ -680,6 +672,11 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<Note> {
     })
 }
 
+/// A shared parameter of the fit with its σ, in the fit's units (None when not in the model).
+fn shared_estimate(f: &Fitted, p: SharedPar) -> Option<Estimate> {
+    f.shared_index(p).map(|i| Estimate::new(f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)))
+}
+
 /// Earth's rate, °/s (IERS Conventions 2010: 7.292115e-5 rad/s).
 fn earth_rate_dps() -> f64 {
     crate::sim::effects::EARTH_RATE_RAD_S.to_degrees()
@@ -689,30 +686,30 @@ fn earth_rate_dps() -> f64 {
 /// with a latitude, the horizontal part against Ω·cos(latitude)), or, when it is not modelled,
 /// nothing (a note about the runs it needs comes from the identifiability checks).
 fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<Note> {
-    let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
-    let (n, w) = (get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
-    let h = (n.0 * n.0 + w.0 * w.0).sqrt();
+    let (n, w) = (shared_estimate(f, SharedPar::EarthNorthAtZero)?, shared_estimate(f, SharedPar::EarthWestAtZero)?);
+    let h = (n.value * n.value + w.value * w.value).sqrt();
     // σ of the magnitude from the two components (first order).
-    let h_sigma = if h > 0.0 { ((n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / h } else { n.1.max(w.1) };
+    let h_sigma = if h > 0.0 {
+        ((n.value * n.sigma).powi(2) + (w.value * w.sigma).powi(2)).sqrt() / h
+    } else {
+        n.sigma.max(w.sigma)
+    };
     let per_hour = 3600.0;
-    let (horizontal_dph, horizontal_sigma_dph) = (h * per_hour, h_sigma * per_hour);
-    Some(match (latitude_deg, get(SharedPar::EarthVertical)) {
+    let horizontal_dph = Estimate::new(h, h_sigma).scaled(per_hour);
+    Some(match (latitude_deg, shared_estimate(f, SharedPar::EarthVertical)) {
         (Some(latitude_deg), _) => Note::EarthAtLatitude {
             latitude_deg,
             vertical_dph: earth_rate_dps() * latitude_deg.to_radians().sin() * per_hour,
             horizontal_dph,
-            horizontal_sigma_dph,
             expected_horizontal_dph: earth_rate_dps() * latitude_deg.to_radians().cos() * per_hour,
         },
         (None, Some(v)) => Note::EarthFitted {
-            vertical_dph: v.0 * per_hour,
-            vertical_sigma_dph: v.1 * per_hour,
+            vertical_dph: v.scaled(per_hour),
             horizontal_dph,
-            horizontal_sigma_dph,
-            total_dph: (v.0 * v.0 + h * h).sqrt() * per_hour,
+            total_dph: (v.value * v.value + h * h).sqrt() * per_hour,
         },
         (None, None) if f.model.effects.contains(&Effect::EarthRotationHorizontal) => {
-            Note::EarthHorizontalOnly { horizontal_dph, horizontal_sigma_dph, vertical_max_dps_per_g: earth_rate_dps() }
+            Note::EarthHorizontalOnly { horizontal_dph, vertical_max_dps_per_g: earth_rate_dps() }
         }
         (None, None) => return None,
     })
@@ -726,9 +723,7 @@ const EARTH_EXCESS_SIGMAS: f64 = 2.0;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EarthExcess {
     /// Magnitude of the fitted rate, °/h.
-    pub total_dph: f64,
-    /// Its 1-σ, °/h.
-    pub sigma_dph: f64,
+    pub total_dph: Estimate,
     /// How far above 15.041 °/h, σ.
     pub excess_sigma: f64,
 }
@@ -739,21 +734,19 @@ pub struct EarthExcess {
 /// an impossible value means the model holds a real effect in the wrong term, and the
 /// calibration must not be called good.
 fn earth_implausible(f: &Fitted) -> Option<EarthExcess> {
-    let get = |p: SharedPar| f.shared_index(p).map(|i| (f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)));
-    let (v, n, w) =
-        (get(SharedPar::EarthVertical)?, get(SharedPar::EarthNorthAtZero)?, get(SharedPar::EarthWestAtZero)?);
-    let total = (v.0 * v.0 + n.0 * n.0 + w.0 * w.0).sqrt();
+    let v = shared_estimate(f, SharedPar::EarthVertical)?;
+    let n = shared_estimate(f, SharedPar::EarthNorthAtZero)?;
+    let w = shared_estimate(f, SharedPar::EarthWestAtZero)?;
+    let total = (v.value * v.value + n.value * n.value + w.value * w.value).sqrt();
     if total <= 0.0 {
         return None;
     }
     // σ of the magnitude from the three components (first order).
-    let sigma = ((v.0 * v.1).powi(2) + (n.0 * n.1).powi(2) + (w.0 * w.1).powi(2)).sqrt() / total;
+    let sigma =
+        ((v.value * v.sigma).powi(2) + (n.value * n.sigma).powi(2) + (w.value * w.sigma).powi(2)).sqrt() / total;
     let excess_sigma = (total - earth_rate_dps()) / sigma;
-    (excess_sigma > EARTH_EXCESS_SIGMAS).then_some(EarthExcess {
-        total_dph: total * 3600.0,
-        sigma_dph: sigma * 3600.0,
-        excess_sigma,
-    })
+    (excess_sigma > EARTH_EXCESS_SIGMAS)
+        .then(|| EarthExcess { total_dph: Estimate::new(total, sigma).scaled(3600.0), excess_sigma })
 }
 
 /// The linear model alone, `v = M R_qᵀ ω2 + v_off` (no catalogued effect, no Earth rotation),

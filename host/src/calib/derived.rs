@@ -3,6 +3,8 @@
 //! method (first-order propagation through a numerical Jacobian).
 
 use super::axes::AXES;
+use super::estimate::Estimate;
+use super::wire::{AxisEstimateJson, InterAxisAngleJson};
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -52,28 +54,22 @@ pub fn mount_sigma_deg() -> f64 {
 
 /// One axis's calibration, from row i of M and offset i.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "AxisEstimateJson", from = "AxisEstimateJson")]
 pub struct AxisEstimate {
     /// Axis name.
     pub axis: char,
     /// Sensitivity k_i = |m_i|, counts per °/s.
-    pub k_counts_per_dps: f64,
-    /// 1-σ of k.
-    pub k_sigma: f64,
+    pub k_counts_per_dps: Estimate,
     /// k relative to the datasheet sensitivity of the full scale in use, percent.
     pub k_vs_nominal_percent: f64,
-    /// Direction s_i (unit vector, package frame).
-    pub s: [f64; 3],
-    /// 1-σ of each component of s.
-    pub s_sigma: [f64; 3],
+    /// Direction s_i (unit vector, package frame), per component.
+    pub s: [Estimate; 3],
     /// Offset, counts.
-    pub offset_counts: f64,
-    /// 1-σ of the offset.
-    pub offset_sigma_counts: f64,
-    /// Angle between s_i and the package axis e_i, degrees. Its σ is first-order, valid for tilts
+    pub offset_counts: Estimate,
+    /// Angle between s_i and the package axis e_i, degrees, with the runs' σ alone
+    /// ([`Self::tilt_extrinsic_deg`] adds the mount's). Its σ is first-order, valid for tilts
     /// well above it; `tilt_components_deg` are well-behaved at any size.
-    pub tilt_deg: f64,
-    /// 1-σ of the tilt.
-    pub tilt_sigma_deg: f64,
+    pub tilt_deg: Estimate,
     /// The package axes toward which the two tilt components lean.
     pub tilt_component_axes: [char; 2],
     /// Tilt of s_i toward each of those axes, atan2(s_j, s_i), degrees.
@@ -82,27 +78,25 @@ pub struct AxisEstimate {
     pub tilt_components_cov_deg2: [[f64; 2]; 2],
     /// 1-σ the mount adds to the tilt and to each tilt component ([`mount_sigma_deg`]): the
     /// extrinsic angles' uncertainty is this and the runs' σ together.
-    #[serde(default)]
     pub tilt_mount_sigma_deg: f64,
 }
 
 impl AxisEstimate {
-    /// 1-σ of the tilt from the package axis, runs and mount together.
-    pub fn tilt_extrinsic_sigma_deg(&self) -> f64 {
-        self.tilt_sigma_deg.hypot(self.tilt_mount_sigma_deg)
+    /// The tilt from the package axis with the runs' and the mount's σ together.
+    pub fn tilt_extrinsic_deg(&self) -> Estimate {
+        self.tilt_deg.widened(self.tilt_mount_sigma_deg)
     }
 }
 
 /// The angle between two real axes (intrinsic: the mount does not limit it).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "InterAxisAngleJson", from = "InterAxisAngleJson")]
 pub struct InterAxisAngle {
     /// The two axes, e.g. ['x', 'y'].
     pub axes: [char; 2],
     /// Angle between s_a and s_b, degrees.
-    pub angle_deg: f64,
-    /// 1-σ.
-    pub sigma_deg: f64,
-    /// angle − 90°, degrees.
+    pub angle_deg: Estimate,
+    /// angle − 90°, degrees (σ as the angle's).
     pub non_orthogonality_deg: f64,
 }
 
@@ -139,20 +133,16 @@ pub fn derive(
     nominal_counts_per_dps: f64,
 ) -> ([AxisEstimate; 3], [InterAxisAngle; 3]) {
     let (y, c) = delta_method(derived_vector, params, cov);
-    let sd = |i: usize| c[(i, i)].max(0.0).sqrt();
+    let est = |i: usize| Estimate::from_variance(y[i], c[(i, i)]);
     let axes = std::array::from_fn(|i| {
         let o = 8 * i;
         AxisEstimate {
             axis: AXES[i],
-            k_counts_per_dps: y[o],
-            k_sigma: sd(o),
+            k_counts_per_dps: est(o),
             k_vs_nominal_percent: (y[o] / nominal_counts_per_dps - 1.0) * 100.0,
-            s: [y[o + 1], y[o + 2], y[o + 3]],
-            s_sigma: [sd(o + 1), sd(o + 2), sd(o + 3)],
-            offset_counts: y[o + 4],
-            offset_sigma_counts: sd(o + 4),
-            tilt_deg: y[o + 5],
-            tilt_sigma_deg: sd(o + 5),
+            s: [est(o + 1), est(o + 2), est(o + 3)],
+            offset_counts: est(o + 4),
+            tilt_deg: est(o + 5),
             tilt_component_axes: [AXES[(i + 1) % 3], AXES[(i + 2) % 3]],
             tilt_components_deg: [y[o + 6], y[o + 7]],
             tilt_components_cov_deg2: [[c[(o + 6, o + 6)], c[(o + 6, o + 7)]], [c[(o + 7, o + 6)], c[(o + 7, o + 7)]]],
@@ -161,12 +151,7 @@ pub fn derive(
     });
     let angles = std::array::from_fn(|n| {
         let (a, b) = PAIRS[n];
-        InterAxisAngle {
-            axes: [AXES[a], AXES[b]],
-            angle_deg: y[24 + n],
-            sigma_deg: sd(24 + n),
-            non_orthogonality_deg: y[24 + n] - 90.0,
-        }
+        InterAxisAngle { axes: [AXES[a], AXES[b]], angle_deg: est(24 + n), non_orthogonality_deg: y[24 + n] - 90.0 }
     });
     (axes, angles)
 }
@@ -213,12 +198,12 @@ mod tests {
         p[8..].copy_from_slice(&[0.0, 0.0, 57.0, 0.0]);
         let cov = DMatrix::identity(12, 12) * 1e-6;
         let (axes, angles) = derive(&p, &cov, 57.142_857);
-        assert!((axes[0].k_counts_per_dps - 57.0).abs() < 1e-12);
-        assert!((axes[0].tilt_deg - 1.0).abs() < 1e-9);
+        assert!((axes[0].k_counts_per_dps.value - 57.0).abs() < 1e-12);
+        assert!((axes[0].tilt_deg.value - 1.0).abs() < 1e-9);
         assert!((axes[0].tilt_components_deg[0] - 1.0).abs() < 1e-9);
-        assert!((angles[0].angle_deg - 89.0).abs() < 1e-9);
+        assert!((angles[0].angle_deg.value - 89.0).abs() < 1e-9);
         // σ of k for isotropic σ² = 1e-6 on the row: exactly 1e-3.
-        assert!((axes[0].k_sigma - 1e-3).abs() < 1e-9);
+        assert!((axes[0].k_counts_per_dps.sigma - 1e-3).abs() < 1e-9);
         // σ of a tilt component: σ/k rad.
         assert!((axes[1].tilt_components_deg[0] - 0.0).abs() < 1e-12);
         assert!((axes[1].tilt_components_cov_deg2[0][0].sqrt() - (1e-3 / 57.0f64).to_degrees()).abs() < 1e-9);

@@ -9,6 +9,8 @@
 //! encoder count against sample time, θ2' = ratio·θ1'.
 
 use super::error::CalError;
+use super::estimate::Estimate;
+use super::wire::{GearEstimateJson, IndexStatsJson};
 use crate::capture::{Run, RunSample, RunTemperature};
 use crate::geometry::{omega2, Pose};
 use nalgebra::Matrix3;
@@ -284,37 +286,33 @@ impl<'a> IntoIterator for &'a KinSamples {
 
 /// Where θ2 = 0 lies in a run, from its index pulses.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "IndexStatsJson", from = "IndexStatsJson")]
 pub struct IndexStats {
     /// Complete pulses found (rising edge followed by a falling edge).
     pub pulses: usize,
     /// Pulses rejected as outliers from the line.
     pub rejected: usize,
     /// Encoder count of θ2 = 0 nearest the first pulse.
-    pub ref_counts: f64,
-    /// 1-σ of `ref_counts`, counts.
-    pub ref_sigma_counts: f64,
-    /// 1-σ of the reference as a θ2 angle, degrees.
+    pub ref_counts: Estimate,
+    /// 1-σ of the reference as a θ2 angle, degrees (through the pooled period).
     pub ref_sigma_deg: f64,
     /// RMS distance of pulse centres from the fitted line, counts.
     pub centre_rms_counts: f64,
     /// Median plate width, counts.
     pub plate_width_counts: f64,
     /// This run's own estimate of the encoder counts per θ2 revolution (NaN with one pulse).
-    pub period_counts: f64,
-    /// 1-σ of `period_counts`.
-    pub period_sigma_counts: f64,
+    pub period_counts: Estimate,
 }
 
 /// The actual gear ratio θ2'/θ1', from the encoder counts between index pulses of all runs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "GearEstimateJson", from = "GearEstimateJson")]
 pub struct GearEstimate {
     /// Nominal ratio from `Hello::gear_ratio`.
     pub nominal: f64,
-    /// Estimated ratio, used for θ2 and θ2'.
-    pub estimated: f64,
-    /// 1-σ of `estimated`.
-    pub sigma: f64,
-    /// (estimated − nominal)/nominal, parts per million.
+    /// Estimated ratio, used for θ2 and θ2' (`estimated` and `sigma` in the JSON).
+    pub ratio: Estimate,
+    /// (ratio − nominal)/nominal, parts per million.
     pub deviation_ppm: f64,
 }
 
@@ -586,7 +584,7 @@ pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalErr
     let out = preps
         .into_iter()
         .zip(runs)
-        .map(|(p, run)| run_kinematics(p, run, cpr, period, gear.estimated, opts))
+        .map(|(p, run)| run_kinematics(p, run, cpr, period, gear.ratio.value, opts))
         .collect::<Result<_, _>>()?;
     Ok(Kinematics { runs: out, gear })
 }
@@ -598,7 +596,7 @@ pub fn reconstruct_consuming(runs: &mut [Run], opts: &KinOptions) -> Result<Kine
     let (preps, cpr, period, gear) = prepare(runs)?;
     let mut out = Vec::with_capacity(runs.len());
     for (p, run) in preps.into_iter().zip(runs.iter_mut()) {
-        out.push(run_kinematics(p, run, cpr, period, gear.estimated, opts)?);
+        out.push(run_kinematics(p, run, cpr, period, gear.ratio.value, opts)?);
         run.samples = Vec::new();
     }
     Ok(Kinematics { runs: out, gear })
@@ -637,8 +635,7 @@ fn prepare(runs: &[Run]) -> Result<(Vec<RunPrep>, f64, f64, GearEstimate), CalEr
     let ratio = cpr / period;
     let gear = GearEstimate {
         nominal,
-        estimated: ratio,
-        sigma: ratio * period_sigma / period,
+        ratio: Estimate::new(ratio, ratio * period_sigma / period),
         deviation_ppm: (ratio - nominal) / nominal * 1e6,
     };
     Ok((preps, cpr, period, gear))
@@ -661,13 +658,11 @@ fn run_kinematics(
     let index = IndexStats {
         pulses: p.line.pulses,
         rejected: p.line.rejected,
-        ref_counts,
-        ref_sigma_counts: ref_sigma,
+        ref_counts: Estimate::new(ref_counts, ref_sigma),
         ref_sigma_deg: ref_sigma / period * 360.0,
         centre_rms_counts: p.fit.2,
         plate_width_counts: p.line.width_counts,
-        period_counts: if p.fit.4.is_finite() { p.fit.1 } else { f64::NAN },
-        period_sigma_counts: p.fit.4,
+        period_counts: Estimate::new(if p.fit.4.is_finite() { p.fit.1 } else { f64::NAN }, p.fit.4),
     };
 
     let s = &run.samples;

@@ -455,10 +455,10 @@ fn a_random_walk_ends_in_the_free_drift_and_the_tilt_is_found_beside_it() {
     let tilt = last.effect_params.iter().find(|p| p.name.starts_with("sensor-table axis tilt")).expect("tilt fitted");
     let truth_deg = crate::sim::TableTilt::default().tilt_deg;
     assert!(
-        (tilt.value - truth_deg).abs() <= Z_1D * tilt.sigma,
+        tilt.estimate.z(truth_deg).abs() <= Z_1D,
         "ε = {} ± {} °\n{}",
-        tilt.value,
-        tilt.sigma,
+        tilt.estimate.value,
+        tilt.estimate.sigma,
         r.summary()
     );
     assert_within_3_sigma(&truth_of(last), "random walk and tilt");

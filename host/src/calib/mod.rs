@@ -17,6 +17,7 @@ pub mod closure;
 pub mod derived;
 pub mod diagnostics;
 pub mod error;
+pub mod estimate;
 pub mod extended;
 pub mod kinematics;
 pub mod paper;
@@ -26,6 +27,7 @@ pub mod selection;
 pub mod spectrum;
 pub mod stats;
 pub mod truth_check;
+mod wire;
 
 #[cfg(test)]
 mod acceptance_tests;
@@ -40,6 +42,7 @@ pub use apply::{Calibration, CalibrationFileError};
 pub use catalogue::Effect;
 pub use closure::{calibrate, close_loop, close_loop_owned, LoopOptions, LoopReport, Verdict};
 pub use error::CalError;
+pub use estimate::Estimate;
 pub use kinematics::KinOptions;
 pub use present::write_report;
 pub use report::CalReport;

@@ -9,22 +9,23 @@
 
 use super::axes::AXES;
 use super::derived::{delta_method, dvec};
+use super::estimate::Estimate;
 use super::extended::Gram;
 use super::kinematics::Kinematics;
+use super::wire::{PaperAxisJson, PoseSinusoidJson};
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
 /// The sinusoid fitted to one axis in one pose.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "PoseSinusoidJson", from = "PoseSinusoidJson")]
 pub struct PoseSinusoid {
     /// Pose.
     pub pose: Pose,
     /// Coefficients [a, b, d, c]: of θ1' sinθ2 and θ1' cosθ2 (counts per °/s), of θ2' − θ̄2'
-    /// (counts per °/s), and the baseline at θ̄2' (counts).
-    pub coef: [f64; 4],
-    /// 1-σ of each coefficient.
-    pub coef_sigma: [f64; 4],
+    /// (counts per °/s), and the baseline at θ̄2' (counts), each with its σ.
+    pub coef: [Estimate; 4],
     /// Amplitude √(a² + b²), counts per °/s of θ1'.
     pub amplitude_counts_per_dps: f64,
     /// Phase φ of a sinθ2 + b cosθ2 = A sin(θ2 + φ), degrees.
@@ -37,21 +38,16 @@ pub struct PoseSinusoid {
 
 /// One axis by the paper's method, compared with the joint fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(into = "PaperAxisJson", from = "PaperAxisJson")]
 pub struct PaperAxis {
     /// Axis name.
     pub axis: char,
-    /// Direction s_i (sign chosen nearest e_i).
-    pub s: [f64; 3],
-    /// 1-σ of each component of s.
-    pub s_sigma: [f64; 3],
+    /// Direction s_i (sign chosen nearest e_i), per component.
+    pub s: [Estimate; 3],
     /// Sensitivity, counts per °/s.
-    pub k_counts_per_dps: f64,
-    /// 1-σ of k.
-    pub k_sigma: f64,
+    pub k_counts_per_dps: Estimate,
     /// Offset, counts.
-    pub offset_counts: f64,
-    /// 1-σ of the offset.
-    pub offset_sigma_counts: f64,
+    pub offset_counts: Estimate,
     /// (joint fit − paper)/σ_paper for s (3 components; the on-axis one is not pooled into
     /// `max_abs_z` / `rms_z`), k, offset.
     pub z_s: [f64; 3],
@@ -106,8 +102,7 @@ fn fit_pose(sums: &Gram, r: Matrix3<f64>, axis: usize, inflation: f64, pose: Pos
     Some(SinFit {
         sinusoid: PoseSinusoid {
             pose,
-            coef,
-            coef_sigma: std::array::from_fn(|i| cov[(i, i)].max(0.0).sqrt()),
+            coef: std::array::from_fn(|i| Estimate::from_variance(coef[i], cov[(i, i)])),
             amplitude_counts_per_dps: coef[0].hypot(coef[1]),
             phase_deg: coef[1].atan2(coef[0]).to_degrees(),
             mean_theta2_rate_dps: theta2_mean,
@@ -157,26 +152,23 @@ pub fn paper_check(sums: &[Gram], kin: &Kinematics, inflation: [f64; 3], joint: 
         let f1 = fit_pose(&eqs[0], rot[0], axis, inflation[axis], Pose::One)?;
         let f2 = fit_pose(&eqs[1], rot[1], axis, inflation[axis], Pose::Two)?;
         let mut p = [0.0; 8];
-        p[..4].copy_from_slice(&f1.sinusoid.coef);
-        p[4..].copy_from_slice(&f2.sinusoid.coef);
+        p[..4].copy_from_slice(&f1.sinusoid.coef.map(|c| c.value));
+        p[4..].copy_from_slice(&f2.sinusoid.coef.map(|c| c.value));
         let mut cov = DMatrix::zeros(8, 8);
         cov.view_mut((0, 0), (4, 4)).copy_from(&f1.cov);
         cov.view_mut((4, 4), (4, 4)).copy_from(&f2.cov);
         let means = [f1.sinusoid.mean_theta2_rate_dps, f2.sinusoid.mean_theta2_rate_dps];
         let (y, c) = delta_method(|v| construct(v, [&f1.r, &f2.r], means, axis), &p, &cov);
-        let sd: Vec<f64> = (0..5).map(|i| c[(i, i)].max(0.0).sqrt()).collect();
-        let z: Vec<f64> = (0..5).map(|i| (joint[axis][i] - y[i]) / sd[i]).collect();
+        let est: Vec<Estimate> = (0..5).map(|i| Estimate::from_variance(y[i], c[(i, i)])).collect();
+        let z: Vec<f64> = (0..5).map(|i| (joint[axis][i] - y[i]) / est[i].sigma).collect();
         // The on-axis component of s is cos(tilt): its first-order σ vanishes with the tilt,
         // so it is reported but not pooled.
         zs.extend(z.iter().enumerate().filter(|&(i, _)| i != axis).map(|(_, v)| *v));
         axes.push(PaperAxis {
             axis: AXES[axis],
-            s: [y[0], y[1], y[2]],
-            s_sigma: [sd[0], sd[1], sd[2]],
-            k_counts_per_dps: y[3],
-            k_sigma: sd[3],
-            offset_counts: y[4],
-            offset_sigma_counts: sd[4],
+            s: [est[0], est[1], est[2]],
+            k_counts_per_dps: est[3],
+            offset_counts: est[4],
             z_s: [z[0], z[1], z[2]],
             z_k: z[3],
             z_offset: z[4],

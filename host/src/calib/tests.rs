@@ -16,7 +16,7 @@ fn kinematics_reference_theta2_in_both_directions() {
         let kin = kinematics::reconstruct(std::slice::from_ref(&run), &KinOptions::default()).unwrap();
         let k = &kin.runs[0];
         // Gear ratio: ~19 pulses, centres to ±0.3 count over 19 × 324 000 counts: σ ~ 1e-8.
-        assert!((kin.gear.estimated - g.gear_ratio).abs() < 1e-6, "{:?}", kin.gear);
+        assert!((kin.gear.ratio.value - g.gear_ratio).abs() < 1e-6, "{:?}", kin.gear);
         assert!((kin.gear.deviation_ppm - 200.0).abs() < 1.0, "{:?}", kin.gear);
         // θ2 is known to the encoder quantum (360°/324 000 = 0.0011°) and the reference's σ.
         let tol_rad = (2.0 * 360.0 / f64::from(COUNTS_PER_REV)).to_radians();
@@ -94,7 +94,7 @@ fn spurious_index_pulse_is_rejected() {
     let kin = kinematics::reconstruct(&bad, &KinOptions::default()).unwrap();
     let (a, b) = (&kin.runs[0].index, &clean.runs[0].index);
     assert_eq!((a.pulses, a.rejected), (b.pulses + 1, 1));
-    assert_eq!(a.ref_counts, b.ref_counts);
+    assert_eq!(a.ref_counts.value, b.ref_counts.value);
 }
 
 #[test]
@@ -114,7 +114,7 @@ fn clipped_samples_are_excluded_per_axis_and_counted() {
         assert_eq!(rep.residuals[a].n, reference.residuals[a].n - c);
         // A rail value kept in the fit would pull the offset by ~32 000/n ≈ 0.8 counts per
         // sample: far more than σ. Excluded, the fit barely moves.
-        let sd = rep.axes[a].offset_sigma_counts;
+        let sd = rep.axes[a].offset_counts.sigma;
         assert!((rep.offset_counts[a] - reference.offset_counts[a]).abs() < 0.5 * sd, "axis {a}");
     }
 }

@@ -51,7 +51,7 @@ impl TruthErrors {
             intrinsic_direction_error_deg: [0.0; 3],
             common_rotation_deg: 0.0,
         };
-        let est: [[f64; 3]; 3] = std::array::from_fn(|i| axes[i].s);
+        let est: [[f64; 3]; 3] = std::array::from_fn(|i| axes[i].s.map(|c| c.value));
         let r = common_rotation(&est, &truth.s);
         out.common_rotation_deg = ((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
         for ((err, e), t) in out.intrinsic_direction_error_deg.iter_mut().zip(&est).zip(&truth.s) {
@@ -60,15 +60,15 @@ impl TruthErrors {
         }
         for (i, a) in axes.iter().enumerate() {
             let s = truth.s[i];
-            let dot: f64 = (0..3).map(|j| a.s[j] * s[j]).sum();
+            let dot: f64 = (0..3).map(|j| a.s[j].value * s[j]).sum();
             out.direction_error_deg[i] = dot.clamp(-1.0, 1.0).acos().to_degrees();
             let (j, l) = ((i + 1) % 3, (i + 2) % 3);
             let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
             let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
             out.direction_z[i] = mahalanobis2(d, a.tilt_components_cov_deg2);
             let k = truth.k_counts_per_dps[i];
-            out.sensitivity_error_ppm[i] = (a.k_counts_per_dps / k - 1.0) * 1e6;
-            out.sensitivity_z[i] = (a.k_counts_per_dps - k) / a.k_sigma;
+            out.sensitivity_error_ppm[i] = (a.k_counts_per_dps.value / k - 1.0) * 1e6;
+            out.sensitivity_z[i] = a.k_counts_per_dps.z(k);
         }
         out
     }

@@ -9,7 +9,7 @@ pub mod views;
 #[cfg(test)]
 mod tests;
 
-use crate::calib::CalReport;
+use crate::calib::{CalReport, Estimate};
 use crate::provenance::Provenance;
 use anyhow::{Context, Result};
 use db::Conn;
@@ -110,19 +110,20 @@ pub fn new_uid() -> String {
 /// The parameters a production view compares, each with its 1-σ from the report.
 pub fn params_from_report(r: &CalReport) -> Vec<Param> {
     let p = |name: String, value: f64, sigma: Option<f64>, unit: &str| Param { name, value, sigma, unit: unit.into() };
+    let est = |name: String, e: Estimate, unit: &str| p(name, e.value, Some(e.sigma), unit);
     let mut out = Vec::new();
     let axes = ['x', 'y', 'z'];
     for (i, a) in r.axes.iter().enumerate() {
         let ax = axes[i];
-        out.push(p(format!("k_{ax}"), a.k_counts_per_dps, Some(a.k_sigma), "counts/(deg/s)"));
+        out.push(est(format!("k_{ax}"), a.k_counts_per_dps, "counts/(deg/s)"));
         out.push(p(
             format!("k_{ax}_vs_nominal"),
             a.k_vs_nominal_percent,
-            Some(a.k_sigma / r.nominal_counts_per_dps * 100.0),
+            Some(a.k_counts_per_dps.sigma / r.nominal_counts_per_dps * 100.0),
             "%",
         ));
-        out.push(p(format!("offset_{ax}"), a.offset_counts, Some(a.offset_sigma_counts), "counts"));
-        out.push(p(format!("tilt_{ax}"), a.tilt_deg, Some(a.tilt_extrinsic_sigma_deg()), "deg"));
+        out.push(est(format!("offset_{ax}"), a.offset_counts, "counts"));
+        out.push(est(format!("tilt_{ax}"), a.tilt_extrinsic_deg(), "deg"));
         for k in 0..2 {
             out.push(p(
                 format!("tilt_{ax}_to_{}", a.tilt_component_axes[k]),
@@ -140,7 +141,7 @@ pub fn params_from_report(r: &CalReport) -> Vec<Param> {
         out.push(p(
             format!("non_orthogonality_{}{}", ia.axes[0], ia.axes[1]),
             ia.non_orthogonality_deg,
-            Some(ia.sigma_deg),
+            Some(ia.angle_deg.sigma),
             "deg",
         ));
     }

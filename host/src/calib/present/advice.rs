@@ -1,6 +1,7 @@
 //! The loop's advice in words: the runs it asks for, the notes on the final model, and an Earth
 //! rate the Earth cannot have.
 
+use super::PlusMinus;
 use crate::calib::closure::{Ask, EarthExcess, Note};
 
 /// A run the data cannot do without, as the operator is asked for it.
@@ -30,23 +31,19 @@ pub fn note(n: &Note) -> String {
                 at_start.join(" / ")
             )
         }
-        Note::EarthAtLatitude {
-            latitude_deg,
-            vertical_dph,
-            horizontal_dph,
-            horizontal_sigma_dph,
-            expected_horizontal_dph,
-        } => format!(
-            "Earth rotation at latitude {latitude_deg}°: vertical {vertical_dph:.2} °/h taken as known; horizontal fitted {horizontal_dph:.2} ± {horizontal_sigma_dph:.2} °/h against Ω·cos(latitude) = {expected_horizontal_dph:.2} °/h ({:+.1}σ).",
-            (horizontal_dph - expected_horizontal_dph) / horizontal_sigma_dph
+        Note::EarthAtLatitude { latitude_deg, vertical_dph, horizontal_dph, expected_horizontal_dph } => format!(
+            "Earth rotation at latitude {latitude_deg}°: vertical {vertical_dph:.2} °/h taken as known; horizontal fitted {:.2} °/h against Ω·cos(latitude) = {expected_horizontal_dph:.2} °/h ({:+.1}σ).",
+            PlusMinus(*horizontal_dph),
+            horizontal_dph.z(*expected_horizontal_dph)
         ),
-        Note::EarthFitted { vertical_dph, vertical_sigma_dph, horizontal_dph, horizontal_sigma_dph, total_dph } => {
-            format!(
-                "Earth rotation fitted: vertical {vertical_dph:.2} ± {vertical_sigma_dph:.2} °/h, horizontal {horizontal_dph:.2} ± {horizontal_sigma_dph:.2} °/h, together {total_dph:.2} °/h against 15.041 °/h. --latitude-deg gives its vertical part instead of fitting it."
-            )
-        }
-        Note::EarthHorizontalOnly { horizontal_dph, horizontal_sigma_dph, vertical_max_dps_per_g } => format!(
-            "Earth rotation: horizontal part fitted {horizontal_dph:.2} ± {horizontal_sigma_dph:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {vertical_max_dps_per_g:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two."
+        Note::EarthFitted { vertical_dph, horizontal_dph, total_dph } => format!(
+            "Earth rotation fitted: vertical {:.2} °/h, horizontal {:.2} °/h, together {total_dph:.2} °/h against 15.041 °/h. --latitude-deg gives its vertical part instead of fitting it.",
+            PlusMinus(*vertical_dph),
+            PlusMinus(*horizontal_dph)
+        ),
+        Note::EarthHorizontalOnly { horizontal_dph, vertical_max_dps_per_g } => format!(
+            "Earth rotation: horizontal part fitted {:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {vertical_max_dps_per_g:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two.",
+            PlusMinus(*horizontal_dph)
         ),
         Note::EarthNotModelled { type_b_ppm } => format!(
             "Earth rotation is not in the model (no --latitude-deg, and the test did not find it): every sensitivity's σ includes {type_b_ppm:.1} ppm for it (up to 15.041 °/h against the slowest run's θ1', uniform). Give the lab's latitude to remove it."
@@ -57,7 +54,8 @@ pub fn note(n: &Note) -> String {
 /// An Earth rate larger than the Earth turns, in words.
 pub fn earth_excess(e: &EarthExcess) -> String {
     format!(
-        "Earth rotation fitted at {:.1} ± {:.1} °/h, {:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
-        e.total_dph, e.sigma_dph, e.excess_sigma
+        "Earth rotation fitted at {:.1} °/h, {:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
+        PlusMinus(e.total_dph),
+        e.excess_sigma
     )
 }

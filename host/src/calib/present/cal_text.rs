@@ -2,6 +2,7 @@
 //! and offset with their σ, the angles between the axes, the residual against the noise floor,
 //! the runs, the gear ratio and the paper's cross-check.
 
+use super::PlusMinus;
 use crate::calib::report::CalReport;
 use std::fmt::Write as _;
 
@@ -27,21 +28,18 @@ impl CalReport {
         for a in &self.axes {
             let _ = writeln!(
                 o,
-                "  {}   {:9.5} ± {:.5}   {:+7.3} %   {:+9.3} ± {:.3}   {:7.4} ± {:.4}   [{:+.6} ± {:.1e}, {:+.6} ± {:.1e}, {:+.6} ± {:.1e}]",
+                "  {}   {:9.5}   {:+7.3} %   {:+9.3}   {:7.4}   [{:+.6} ± {:.1e}, {:+.6} ± {:.1e}, {:+.6} ± {:.1e}]",
                 a.axis,
-                a.k_counts_per_dps,
-                a.k_sigma,
+                PlusMinus(a.k_counts_per_dps),
                 a.k_vs_nominal_percent,
-                a.offset_counts,
-                a.offset_sigma_counts,
-                a.tilt_deg,
-                a.tilt_extrinsic_sigma_deg(),
-                a.s[0],
-                a.s_sigma[0],
-                a.s[1],
-                a.s_sigma[1],
-                a.s[2],
-                a.s_sigma[2]
+                PlusMinus(a.offset_counts),
+                PlusMinus(a.tilt_extrinsic_deg()),
+                a.s[0].value,
+                a.s[0].sigma,
+                a.s[1].value,
+                a.s[1].sigma,
+                a.s[2].value,
+                a.s[2].sigma
             );
         }
         let _ = writeln!(o, "\nTilt components [°] (toward the other package axes):");
@@ -64,8 +62,11 @@ impl CalReport {
         for p in &self.inter_axis {
             let _ = writeln!(
                 o,
-                "  {}–{}: {:.4} ± {:.4}  (non-orthogonality {:+.4}°)",
-                p.axes[0], p.axes[1], p.angle_deg, p.sigma_deg, p.non_orthogonality_deg
+                "  {}–{}: {:.4}  (non-orthogonality {:+.4}°)",
+                p.axes[0],
+                p.axes[1],
+                PlusMinus(p.angle_deg),
+                p.non_orthogonality_deg
             );
         }
         let _ = writeln!(o, "\nResiduals (RMS vs noise floor measured from the data):");
@@ -95,10 +96,10 @@ impl CalReport {
         let _ = writeln!(
             o,
             "\nGear ratio θ2'/θ1': {:.8} (nominal {:.6}; {:+.3} ± {:.3} ppm from nominal)",
-            gr.estimated,
+            gr.ratio.value,
             gr.nominal,
             gr.deviation_ppm,
-            gr.sigma / gr.nominal * 1e6
+            gr.ratio.sigma / gr.nominal * 1e6
         );
         for r in &self.runs {
             let i = &r.index;
@@ -129,17 +130,15 @@ impl CalReport {
                 for a in &p.axes {
                     let _ = writeln!(
                         o,
-                        "  {}: k {:.5} ± {:.5} (z {:+.2}); offset {:+.3} ± {:.3} counts (z {:+.2}); s [{:+.6}, {:+.6}, {:+.6}] (z {:+.2}, {:+.2}, {:+.2})",
+                        "  {}: k {:.5} (z {:+.2}); offset {:+.3} counts (z {:+.2}); s [{:+.6}, {:+.6}, {:+.6}] (z {:+.2}, {:+.2}, {:+.2})",
                         a.axis,
-                        a.k_counts_per_dps,
-                        a.k_sigma,
+                        PlusMinus(a.k_counts_per_dps),
                         a.z_k,
-                        a.offset_counts,
-                        a.offset_sigma_counts,
+                        PlusMinus(a.offset_counts),
                         a.z_offset,
-                        a.s[0],
-                        a.s[1],
-                        a.s[2],
+                        a.s[0].value,
+                        a.s[1].value,
+                        a.s[2].value,
                         a.z_s[0],
                         a.z_s[1],
                         a.z_s[2]

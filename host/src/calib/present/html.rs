@@ -3,7 +3,7 @@
 //! harmonics marked, before (linear model) and after (final model). Written with
 //! `crate::report`'s primitives as `report.html` with the SVGs beside it.
 
-use super::{findings, loop_text};
+use super::{findings, loop_text, PlusMinus};
 use crate::calib::axes::AXES;
 use crate::calib::closure::{LoopReport, Verdict};
 use crate::calib::diagnostics::{Diagnostics, RunDiag};
@@ -144,7 +144,14 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
                 &["parameter", "value", "1σ", "unit"],
                 last.effect_params
                     .iter()
-                    .map(|p| vec![p.name.clone(), format!("{:.5}", p.value), format!("{:.5}", p.sigma), p.unit.clone()])
+                    .map(|p| {
+                        vec![
+                            p.name.clone(),
+                            format!("{:.5}", p.estimate.value),
+                            format!("{:.5}", p.estimate.sigma),
+                            p.unit.clone(),
+                        ]
+                    })
                     .collect(),
             );
         }
@@ -160,10 +167,10 @@ pub fn write_report(dir: &Path, lr: &LoopReport) -> io::Result<PathBuf> {
             .map(|a| {
                 vec![
                     a.axis.to_string(),
-                    format!("{:.5} ± {:.5}", a.k_counts_per_dps, a.k_sigma),
-                    format!("{:.4} ± {:.4} ± {:.3}", a.tilt_deg, a.tilt_sigma_deg, a.tilt_mount_sigma_deg),
-                    format!("{:+.3} ± {:.3}", a.offset_counts, a.offset_sigma_counts),
-                    format!("[{:+.6}, {:+.6}, {:+.6}]", a.s[0], a.s[1], a.s[2]),
+                    format!("{:.5}", PlusMinus(a.k_counts_per_dps)),
+                    format!("{:.4} ± {:.3}", PlusMinus(a.tilt_deg), a.tilt_mount_sigma_deg),
+                    format!("{:+.3}", PlusMinus(a.offset_counts)),
+                    format!("[{:+.6}, {:+.6}, {:+.6}]", a.s[0].value, a.s[1].value, a.s[2].value),
                 ]
             })
             .collect(),

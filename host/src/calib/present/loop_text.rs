@@ -1,7 +1,7 @@
 //! The loop's account in plain text: what the linear model left, each effect added and what it
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
-use super::{advice, findings};
+use super::{advice, findings, PlusMinus};
 use crate::calib::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
@@ -120,7 +120,7 @@ pub fn summary(r: &LoopReport) -> String {
             );
         }
         for p in &s.effect_params {
-            let _ = writeln!(o, "  {} = {:.5} ± {:.5} {}", p.name, p.value, p.sigma, p.unit);
+            let _ = writeln!(o, "  {} = {:.5} {}", p.name, PlusMinus(p.estimate), p.unit);
         }
         let prev = &r.steps[s.number - 1];
         let _ = writeln!(
@@ -164,25 +164,22 @@ pub fn summary(r: &LoopReport) -> String {
     for a in &cal.axes {
         let _ = writeln!(
             o,
-            "  {}     {:.5} ± {:.5}   {:.4} ± {:.4} ± {:.3}   {:+9.3} ± {:.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
+            "  {}     {:.5}   {:.4} ± {:.3}   {:+9.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
             a.axis,
-            a.k_counts_per_dps,
-            a.k_sigma,
-            a.tilt_deg,
-            a.tilt_sigma_deg,
+            PlusMinus(a.k_counts_per_dps),
+            PlusMinus(a.tilt_deg),
             a.tilt_mount_sigma_deg,
-            a.offset_counts,
-            a.offset_sigma_counts,
-            a.s[0],
-            a.s[1],
-            a.s[2],
-            a.s_sigma[0],
-            a.s_sigma[1],
-            a.s_sigma[2]
+            PlusMinus(a.offset_counts),
+            a.s[0].value,
+            a.s[1].value,
+            a.s[2].value,
+            a.s[0].sigma,
+            a.s[1].sigma,
+            a.s[2].sigma
         );
     }
     for p in &cal.inter_axis {
-        let _ = writeln!(o, "  angle {}–{}: {:.4} ± {:.4}°", p.axes[0], p.axes[1], p.angle_deg, p.sigma_deg);
+        let _ = writeln!(o, "  angle {}–{}: {:.4}°", p.axes[0], p.axes[1], PlusMinus(p.angle_deg));
     }
     let _ = writeln!(
         o,
@@ -194,7 +191,7 @@ pub fn summary(r: &LoopReport) -> String {
         if !last.effect_params.is_empty() {
             let _ = writeln!(o, "  effects:");
             for p in &last.effect_params {
-                let _ = writeln!(o, "    {} = {:.5} ± {:.5} {}", p.name, p.value, p.sigma, p.unit);
+                let _ = writeln!(o, "    {} = {:.5} {}", p.name, PlusMinus(p.estimate), p.unit);
             }
         }
     }

@@ -8,5 +8,7 @@ pub mod cal_text;
 pub mod findings;
 pub mod html;
 pub mod loop_text;
+pub mod plus_minus;
 
 pub use html::write_report;
+pub use plus_minus::PlusMinus;
