@@ -864,6 +864,8 @@ struct ColPlan {
     /// depend on the axis's own rate): it is evaluated once per sample, not once per axis.
     common: Vec<bool>,
     knots: Vec<KnotGroup>,
+    /// Whether `dense` holds a shared parameter's column.
+    has_shared: bool,
 }
 
 impl ColPlan {
@@ -871,6 +873,7 @@ impl ColPlan {
         let mut plan = Self::default();
         for (j, c) in cols.enumerate() {
             let Col::Lin(LinCol::DriftKnot { stretch, knot, spacing_s }) = c else {
+                plan.has_shared |= matches!(c, Col::Shared(_));
                 plan.dense.push((j, c));
                 plan.common.push(matches!(c, Col::Lin(l) if !matches!(l, LinCol::RateAbs | LinCol::RateSq)));
                 continue;
@@ -911,6 +914,11 @@ struct AxisTerms {
     d_shift: f64,
 }
 
+impl AxisTerms {
+    /// For a plan with no shared column, which reads none of them.
+    const UNUSED: AxisTerms = AxisTerms { u: [f64::NAN; 3], e2: f64::NAN, ez: f64::NAN, d_shift: f64::NAN };
+}
+
 /// Evaluates columns and predictions at samples for one model.
 pub struct Evaluator<'a> {
     data: &'a LoopData,
@@ -936,6 +944,10 @@ pub struct Evaluator<'a> {
     needs_heading: bool,
     /// Whether the points need the pose-2 fixture's Jacobian.
     needs_fixture: bool,
+    /// Whether the model moves no angle or rate and the pass needs no shared column's
+    /// Jacobian: the points are then eq. 1-2 alone ([`Evaluator::plain_point`]), which is every
+    /// pass of a calibration whose residual the linear model already explains.
+    plain: bool,
 }
 
 impl<'a> Evaluator<'a> {
@@ -953,6 +965,9 @@ impl<'a> Evaluator<'a> {
         };
         let needs_heading = wants(&|p| matches!(p, SharedPar::EarthNorthAtZero | SharedPar::EarthWestAtZero));
         let needs_fixture = wants(&|p| matches!(p, SharedPar::Fixture(_)));
+        let plain = model.shared.is_empty()
+            && model.earth_vertical_known_dps == 0.0
+            && !cols.iter().any(|c| matches!(c, Col::Shared(_)));
         let m = model.m();
         let coef = |c: LinCol| std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0));
         Self {
@@ -976,11 +991,15 @@ impl<'a> Evaluator<'a> {
             lin_plan: ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c))),
             needs_heading,
             needs_fixture,
+            plain,
         }
     }
 
     /// The kinematics at sample `i` of run `r`.
     pub fn point(&self, r: usize, i: usize) -> Point {
+        if self.plain {
+            return self.plain_point(r, i);
+        }
         let rk = &self.data.kin.runs[r];
         let s = rk.samples.get(i);
         let sh = &self.shifts;
@@ -1085,6 +1104,51 @@ impl<'a> Evaluator<'a> {
             d_tilt: to_package(&[-rate1 * sin_tilt * se, -rate1 * sin_tilt * ce, 0.0]),
             cos_tilt,
             theta1_rate_rad_s,
+            theta1_rate_dps: rate1,
+            run: r,
+            t_s: s.t_s(),
+            stretch: self.data.layout.run_stretch[r],
+            knot_x: std::array::from_fn(|k| {
+                let (t0, per_s) = self.knot_grid[self.data.layout.run_stretch[r]][k];
+                (s.t_s() - t0) * per_s
+            }),
+        }
+    }
+
+    /// [`Evaluator::point`] of a model that moves no angle or rate, when no shared column is
+    /// wanted: ω_s of eq. 1-2 and gravity's direction, each the same number the full point
+    /// gives (every shift it would add is an exact zero); the Jacobians of the shared
+    /// parameters are NaN. A third of a plain pass's time was spent on them.
+    fn plain_point(&self, r: usize, i: usize) -> Point {
+        let rk = &self.data.kin.runs[r];
+        let s = rk.samples.get(i);
+        let (th, rate1) = (s.theta2_rad(), s.theta1_rate_dps());
+        let rate2 = rk.gear_ratio * rate1;
+        let (se, ce) = th.sin_cos();
+        let rt = &self.rot_t[r];
+        let to_package =
+            |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
+        let nan3 = [f64::NAN; 3];
+        Point {
+            omega: to_package(&protocol::exciter::table_rate(rate1, (se, ce), rate2)),
+            d_theta2: nan3,
+            d_rate2: nan3,
+            theta2_rad: th,
+            rate2_dps: rate2,
+            rate2_eff_dps: rate2,
+            dtheta_eff: 1.0,
+            drate_eff_dps: 0.0,
+            t_rel_s: s.t_s() - self.data.t0_s,
+            t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
+            temp_c: f64::from(self.data.runs[r].temp_c[i]),
+            mesh_rad: th,
+            pose: rk.pose,
+            d_earth: [to_package(&earth_basis((0.0, 0.0), (se, ce))[0]), nan3, nan3],
+            d_filter: nan3,
+            d_fixture: [nan3; 3],
+            d_tilt: nan3,
+            cos_tilt: 1.0,
+            theta1_rate_rad_s: rate1.to_radians(),
             theta1_rate_dps: rate1,
             run: r,
             t_s: s.t_s(),
@@ -1278,7 +1342,8 @@ impl<'a> Evaluator<'a> {
     /// `common` holds `plan`'s axis-independent values at `p` (`common_values`).
     fn fill_nonzero(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut Vec<(usize, f64)>) {
         out.clear();
-        let t = self.axis_terms(p, a);
+        // The shared columns' chain-rule factors, for the plans that have shared columns.
+        let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
         out.extend(
             plan.dense
                 .iter()
