@@ -2,7 +2,7 @@
 //! and offset with their σ, the angles between the axes, the residual against the noise floor,
 //! the runs, the gear ratio and the paper's cross-check.
 
-use super::PlusMinus;
+use super::{axis_table, PlusMinus};
 use crate::calib::report::CalReport;
 use std::fmt::Write as _;
 
@@ -24,24 +24,11 @@ impl CalReport {
             "Samples: {} used, {} excluded (spin-up/stop, window edges, stale); clipped x/y/z: {}/{}/{}",
             self.samples_used, self.samples_excluded, self.clipped[0], self.clipped[1], self.clipped[2]
         );
-        let _ = writeln!(o, "\nAxis  k [counts/(°/s)]          vs nominal   offset [counts]      tilt [°]              direction s (±1σ)");
-        for a in &self.axes {
-            let _ = writeln!(
-                o,
-                "  {}   {:9.5}   {:+7.3} %   {:+9.3}   {:7.4}   [{:+.6} ± {:.1e}, {:+.6} ± {:.1e}, {:+.6} ± {:.1e}]",
-                a.axis,
-                PlusMinus(a.k_counts_per_dps),
-                a.k_vs_nominal_percent,
-                PlusMinus(a.offset_counts),
-                PlusMinus(a.tilt_extrinsic_deg()),
-                a.s[0].value,
-                a.s[0].sigma,
-                a.s[1].value,
-                a.s[1].sigma,
-                a.s[2].value,
-                a.s[2].sigma
-            );
-        }
+        let _ = writeln!(o);
+        axis_table::write(&mut o, self);
+        let vs_nominal: Vec<String> =
+            self.axes.iter().map(|a| format!("{} {:+.3} %", a.axis, a.k_vs_nominal_percent)).collect();
+        let _ = writeln!(o, "  k against the datasheet's nominal sensitivity: {}", vs_nominal.join(", "));
         let _ = writeln!(o, "\nTilt components [°] (toward the other package axes):");
         for a in &self.axes {
             let c = &a.tilt_components_cov_deg2;

@@ -1,7 +1,7 @@
 //! The loop's account in plain text: what the linear model left, each effect added and what it
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
-use super::{advice, findings, PlusMinus};
+use super::{advice, axis_table, findings, PlusMinus};
 use crate::calib::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
@@ -160,24 +160,7 @@ pub fn summary(r: &LoopReport) -> String {
     }
     let _ = writeln!(o, "\nBefore and after:\n{}", table(r));
     let _ = writeln!(o, "Final calibration ({}):", cal.model);
-    let _ = writeln!(o, "  axis  k [counts/(°/s)]        tilt [°] ± runs ± mount     offset [counts]     direction s");
-    for a in &cal.axes {
-        let _ = writeln!(
-            o,
-            "  {}     {:.5}   {:.4} ± {:.3}   {:+9.3}   [{:+.6}, {:+.6}, {:+.6}] ± [{:.1e}, {:.1e}, {:.1e}]",
-            a.axis,
-            PlusMinus(a.k_counts_per_dps),
-            PlusMinus(a.tilt_deg),
-            a.tilt_mount_sigma_deg,
-            PlusMinus(a.offset_counts),
-            a.s[0].value,
-            a.s[1].value,
-            a.s[2].value,
-            a.s[0].sigma,
-            a.s[1].sigma,
-            a.s[2].sigma
-        );
-    }
+    axis_table::write(&mut o, cal);
     for p in &cal.inter_axis {
         let _ = writeln!(o, "  angle {}–{}: {:.4}°", p.axes[0], p.axes[1], PlusMinus(p.angle_deg));
     }

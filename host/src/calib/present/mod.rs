@@ -4,6 +4,7 @@
 //! never depends on this module.
 
 pub mod advice;
+pub mod axis_table;
 pub mod cal_text;
 pub mod findings;
 pub mod html;
