@@ -1337,6 +1337,15 @@ impl<'a> Evaluator<'a> {
         }
     }
 
+    /// Every column of a knot-free `plan` on axis `a` at `p`, by position: what
+    /// [`Evaluator::fill`] gives. `common` as for [`Evaluator::fill_nonzero`].
+    fn fill_dense(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut [f64]) {
+        let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
+        for (((&(_, c), &is_common), &v), x) in plan.dense.iter().zip(&plan.common).zip(common).zip(out.iter_mut()) {
+            *x = if is_common { v } else { self.column_value(c, p, a, &t) };
+        }
+    }
+
     /// The non-zero columns of `plan` on axis `a` at `p`, as (position, value): what
     /// [`Evaluator::fill`] gives, without the zeros (the knots after the rest).
     /// `common` holds `plan`'s axis-independent values at `p` (`common_values`).
@@ -1504,6 +1513,10 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
     let plan = ColPlan::of(cols.iter().copied());
     let mut nz: Vec<(usize, f64)> = Vec::with_capacity(l);
     let (mut common, mut model_common) = (Vec::with_capacity(l), Vec::new());
+    // Without knots every column is in `plan.dense`, in column order.
+    let dense = plan.knots.is_empty();
+    debug_assert!(!dense || plan.dense.iter().enumerate().all(|(k, d)| d.0 == k));
+    let mut x = vec![0.0; l];
     data.kin
         .runs
         .iter()
@@ -1512,6 +1525,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
             let mut total = Gram::new(l);
             let mut local = Gram::new(l);
             let (mut touched, mut rows) = (vec![false; l], Vec::with_capacity(l));
+            let all_rows: Vec<usize> = (0..l).collect();
             let valid = &data.runs[r].valid;
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
@@ -1527,6 +1541,27 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                         // Only the non-zero columns: the free drift's knots are 2 of dozens
                         // per sample, so the Gram update costs what the dense part does. Each
                         // pair goes to the upper triangle (`symmetrise` fills the rest).
+                        if dense {
+                            // Every column at every sample, in column order: the same sums as
+                            // the sparse update below (a skipped zero adds nothing), without
+                            // its bookkeeping, which was most of a plain pass.
+                            ev.fill_dense(&p, &plan, a, &common, &mut x);
+                            let g = &mut local.xtx[a];
+                            for (ii, &xi) in x.iter().enumerate() {
+                                if xi == 0.0 {
+                                    continue;
+                                }
+                                local.xte[a][ii] += xi * e;
+                                for (gij, &xj) in g[ii * l + ii..(ii + 1) * l].iter_mut().zip(&x[ii..]) {
+                                    if xj != 0.0 {
+                                        *gij += xi * xj;
+                                    }
+                                }
+                            }
+                            local.ete[a] += e * e;
+                            local.n[a] += 1;
+                            continue;
+                        }
                         ev.fill_nonzero(&p, &plan, a, &common, &mut nz);
                         let g = &mut local.xtx[a];
                         for (k, &(ii, xi)) in nz.iter().enumerate() {
@@ -1543,7 +1578,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                         local.n[a] += 1;
                     }
                 }
-                total.drain_rows(&mut local, &rows);
+                total.drain_rows(&mut local, if dense { &all_rows } else { &rows });
                 rows.drain(..).for_each(|ii| touched[ii] = false);
             }
             total.symmetrise();
