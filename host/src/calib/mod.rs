@@ -38,7 +38,7 @@ mod tests;
 
 pub use apply::{Calibration, CalibrationFileError};
 pub use catalogue::Effect;
-pub use closure::{calibrate, close_loop, close_loop_owned, LoopOptions, LoopReport, Verdict};
+pub use closure::{calibrate, close_loop, close_loop_reconstructed, LoopOptions, LoopReport, Verdict};
 pub use error::CalError;
 pub use kinematics::KinOptions;
 pub use present::write_report;
