@@ -575,7 +575,7 @@ fn strided_median(len: usize, f: impl Fn(usize) -> f64) -> f64 {
 }
 
 /// Temperature at `t_us` by linear interpolation, held at the ends; `cursor` walks forward.
-fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f32 {
+pub fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f32 {
     match temps.len() {
         0 => return f32::NAN,
         1 => return f32::from(temps[0].raw),
