@@ -21,6 +21,120 @@ pub struct RunSample {
     pub status: u8,
 }
 
+/// A run's gyro samples in order, however they are held: read from any position onwards.
+pub trait Samples {
+    /// Samples held.
+    fn len(&self) -> usize;
+
+    /// Whether none is held.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The samples from index `start` (at most `len`) to the end, in order.
+    fn iter_from(&self, start: usize) -> impl Iterator<Item = RunSample> + '_;
+}
+
+impl Samples for [RunSample] {
+    fn len(&self) -> usize {
+        <[RunSample]>::len(self)
+    }
+
+    fn iter_from(&self, start: usize) -> impl Iterator<Item = RunSample> + '_ {
+        self[start..].iter().copied()
+    }
+}
+
+/// Samples a [`PackedSamples`] block holds: one absolute (time, count) per 32 samples is 0.5
+/// bytes a sample, and reaching sample `i` from its block's start costs at most 31 steps.
+const PACKED_BLOCK: usize = 32;
+
+/// Step marking a sample stored whole in `PackedSamples::escapes`.
+const ESCAPED_STEP: u16 = u16::MAX;
+
+/// One sample as [`PackedSamples`] holds it, 12 bytes: time and encoder count as steps from the
+/// previous sample, the raw gyro output and status.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PackedSample {
+    /// Time since the previous sample, µs (0 at a block's start), or [`ESCAPED_STEP`].
+    dt_us: u16,
+    /// Encoder count since the previous sample.
+    de_counts: i16,
+    /// Raw gyro output, counts.
+    rate_counts: [i16; 3],
+    /// `protocol::sample_status` bits.
+    status: u8,
+}
+
+/// A run's samples packed while a long capture is replayed, 12.5 bytes a sample instead of
+/// [`RunSample`]'s 24 (issue 7's memory bar: an hour's run is 2.9 M samples). Time and encoder
+/// count are the capture's exact integers, as steps from the sample before (a gyro sample is
+/// 1.25-10 ms after the last one, the table turns at most a few hundred counts in that time),
+/// with every [`PACKED_BLOCK`]-th sample's values whole; a step that does not fit (a gap, time
+/// running back, a jump of the count) is stored whole beside. Every sample read back is the one
+/// pushed, bit for bit.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PackedSamples {
+    packed: Vec<PackedSample>,
+    /// (t_us, encoder count) of each block's first sample.
+    bases: Vec<(i64, i64)>,
+    /// (index, t_us, encoder count) of the samples whose steps do not fit, by index (never a
+    /// block's first sample: its base holds it).
+    escapes: Vec<(usize, i64, i64)>,
+    /// (t_us, encoder count) of the last sample pushed.
+    last: (i64, i64),
+}
+
+impl PackedSamples {
+    /// Appends a sample.
+    pub fn push(&mut self, s: RunSample) {
+        let i = self.packed.len();
+        let (dt, de) = (s.t_us.wrapping_sub(self.last.0), s.encoder.wrapping_sub(self.last.1));
+        self.last = (s.t_us, s.encoder);
+        let (dt_us, de_counts) = if i.is_multiple_of(PACKED_BLOCK) {
+            self.bases.push((s.t_us, s.encoder));
+            (0, 0)
+        } else if let (true, Ok(de)) = ((0..i64::from(ESCAPED_STEP)).contains(&dt), i16::try_from(de)) {
+            (dt as u16, de)
+        } else {
+            self.escapes.push((i, s.t_us, s.encoder));
+            (ESCAPED_STEP, 0)
+        };
+        self.packed.push(PackedSample { dt_us, de_counts, rate_counts: s.rate_counts, status: s.status });
+    }
+
+    /// The samples unpacked.
+    pub fn to_vec(&self) -> Vec<RunSample> {
+        self.iter_from(0).collect()
+    }
+}
+
+impl Samples for PackedSamples {
+    fn len(&self) -> usize {
+        self.packed.len()
+    }
+
+    fn iter_from(&self, start: usize) -> impl Iterator<Item = RunSample> + '_ {
+        let block = start - start % PACKED_BLOCK;
+        let mut at = (0, 0);
+        let mut escape = self.escapes.partition_point(|e| e.0 < block);
+        (block..self.packed.len())
+            .map(move |i| {
+                let p = &self.packed[i];
+                at = if i.is_multiple_of(PACKED_BLOCK) {
+                    self.bases[i / PACKED_BLOCK]
+                } else if p.dt_us == ESCAPED_STEP {
+                    escape += 1;
+                    (self.escapes[escape - 1].1, self.escapes[escape - 1].2)
+                } else {
+                    (at.0 + i64::from(p.dt_us), at.1 + i64::from(p.de_counts))
+                };
+                RunSample { t_us: at.0, encoder: at.1, rate_counts: p.rate_counts, status: p.status }
+            })
+            .skip(start - block)
+    }
+}
+
 /// One index edge, unwrapped.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RunIndexEdge {
@@ -108,10 +222,16 @@ impl Run {
     /// fingerprint are the same data given twice, never two recordings (the gyro's noise alone
     /// makes every recording different).
     pub fn fingerprint(&self) -> u64 {
+        self.fingerprint_with(&self.samples[..])
+    }
+
+    /// [`Run::fingerprint`] with the run's samples held elsewhere (packed, in a replay that
+    /// decodes run by run): the same digest of the same samples.
+    pub fn fingerprint_with(&self, samples: &(impl Samples + ?Sized)) -> u64 {
         use std::hash::{Hash, Hasher};
         let mut h = std::collections::hash_map::DefaultHasher::new();
-        (self.pose.number(), self.rate_mdps, self.direction.sign(), self.samples.len()).hash(&mut h);
-        for s in &self.samples {
+        (self.pose.number(), self.rate_mdps, self.direction.sign(), samples.len()).hash(&mut h);
+        for s in samples.iter_from(0) {
             (s.t_us, s.encoder, s.rate_counts, s.status).hash(&mut h);
         }
         for e in &self.index {
@@ -279,6 +399,13 @@ pub struct CaptureDecoder {
     open: Option<Run>,
     /// Scratch buffer reused across `feed` calls.
     events: Vec<Event<RigMsg>>,
+    /// Whether the open run's samples go to `open_packed` (a replay run by run,
+    /// [`decode_reader_by_run`]) instead of its `samples`.
+    packing: bool,
+    /// The open run's samples, when packing.
+    open_packed: PackedSamples,
+    /// Runs closed while packing, with their samples, until [`decode_reader_by_run`] takes them.
+    closed: Vec<(Run, PackedSamples)>,
 }
 
 impl CaptureDecoder {
@@ -309,12 +436,18 @@ impl CaptureDecoder {
 
     /// Ends the stream: reports a trailing partial frame and closes the open run.
     pub fn finish(mut self) -> Capture {
+        self.end();
+        self.capture
+    }
+
+    /// [`CaptureDecoder::finish`] without giving up the decoder (a packing one still holds the
+    /// last run in `closed`).
+    fn end(&mut self) {
         if let Some(Event::Error { offset, len, error }) = self.stream.finish::<RigMsg>() {
             self.capture.loss.push_error(StreamError { offset, len, error });
         }
         self.close_run(false);
         self.capture.loss.bytes = self.stream.position();
-        self.capture
     }
 
     fn on_event(&mut self, ev: Event<RigMsg>) {
@@ -355,6 +488,7 @@ impl CaptureDecoder {
                     status: s.status,
                 };
                 match self.open.as_mut() {
+                    Some(_) if self.packing => self.open_packed.push(sample),
                     Some(run) => run.samples.push(sample),
                     None => self.capture.loss.orphan_samples += 1,
                 }
@@ -453,7 +587,11 @@ impl CaptureDecoder {
     fn close_run(&mut self, stopped: bool) {
         if let Some(mut run) = self.open.take() {
             run.stopped = stopped;
-            self.capture.runs.push(run);
+            if self.packing {
+                self.closed.push((run, std::mem::take(&mut self.open_packed)));
+            } else {
+                self.capture.runs.push(run);
+            }
         }
     }
 }
@@ -487,9 +625,109 @@ pub fn decode_reader(mut reader: impl std::io::Read) -> std::io::Result<Capture>
     }
 }
 
+/// Decodes a capture from a reader run by run, for a long replay: while a run is read its
+/// samples are held packed ([`PackedSamples`], half the size of [`RunSample`]s), and as soon as
+/// it closes `on_run` gets it with them; the capture keeps the run `on_run` returns, in stream
+/// order. Turning each run's samples into something smaller there (or dropping them) means the
+/// samples of one run at most are held at a time, whatever the capture's length. Everything
+/// else (losses, faults, `Hello`) is what [`decode_reader`] gives.
+pub fn decode_reader_by_run(
+    mut reader: impl std::io::Read,
+    mut on_run: impl FnMut(Run, PackedSamples) -> Run,
+) -> std::io::Result<Capture> {
+    let mut dec = CaptureDecoder { packing: true, ..CaptureDecoder::new() };
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        match reader.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => dec.feed(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        }
+        for (run, samples) in dec.closed.drain(..) {
+            dec.capture.runs.push(on_run(run, samples));
+        }
+    }
+    dec.end();
+    for (run, samples) in dec.closed.drain(..) {
+        dec.capture.runs.push(on_run(run, samples));
+    }
+    Ok(dec.capture)
+}
+
 /// Decodes a whole capture held in memory.
 pub fn decode(bytes: &[u8]) -> Capture {
     let mut dec = CaptureDecoder::new();
     dec.feed(bytes);
     dec.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The packed sample stays 12 bytes: a long replay holds a whole run of them.
+    #[test]
+    fn packed_sample_is_12_bytes() {
+        assert_eq!(std::mem::size_of::<PackedSample>(), 12);
+    }
+
+    /// Packing is exact: every sample read back, from any start, is the one pushed, whether its
+    /// step fits or it is stored whole (a gap, time running back, a jump of the count, a block's
+    /// first sample after a jump).
+    #[test]
+    fn packed_samples_read_back_exactly() {
+        let mut pushed = Vec::new();
+        let (mut t_us, mut encoder) = ((1i64 << 32) - 5_000, -5_000_000i64);
+        for i in 0..1000i64 {
+            t_us += match i {
+                100 => 70_000,
+                200 => -3,
+                320 | 321 => 10_000_000,
+                _ => 1250,
+            };
+            encoder += match i {
+                400 => 40_000,
+                401 => -40_000,
+                _ => 202 - i % 5,
+            };
+            let status = (i % 3) as u8;
+            pushed.push(RunSample { t_us, encoder, rate_counts: [i as i16, -(i as i16), i16::MAX - i as i16], status });
+        }
+        let mut packed = PackedSamples::default();
+        pushed.iter().for_each(|&s| packed.push(s));
+        assert_eq!(Samples::len(&packed), pushed.len());
+        assert!(!packed.escapes.is_empty() && packed.escapes.len() <= 6, "{:?}", packed.escapes);
+        assert_eq!(packed.to_vec(), pushed);
+        for start in [0, 1, 31, 32, 33, 100, 101, 320, 321, 322, 401, 999, 1000] {
+            assert_eq!(packed.iter_from(start).collect::<Vec<_>>(), pushed[start..], "from {start}");
+        }
+    }
+
+    /// A capture decoded run by run is the capture decoded whole, losses included, each run's
+    /// samples handed over with it: on a clean capture, one with corrupted bytes and one cut
+    /// short.
+    #[test]
+    fn decoding_run_by_run_gives_the_same_capture() {
+        let clean = crate::sim::simulate(&crate::sim::SimConfig::standard(3, 4.0)).expect("simulates").bytes;
+        let mut corrupted = clean.clone();
+        for k in (clean.len() / 7..clean.len()).step_by(clean.len() / 5) {
+            corrupted[k] ^= 0x5a;
+        }
+        let cut = &clean[..clean.len() * 2 / 3];
+        for bytes in [&clean[..], &corrupted[..], cut] {
+            let whole = decode(bytes);
+            let mut handed = Vec::new();
+            let by_run = decode_reader_by_run(bytes, |mut run, samples| {
+                assert!(run.samples.is_empty());
+                handed.push(run.fingerprint_with(&samples));
+                run.samples = samples.to_vec();
+                run
+            })
+            .expect("reads from memory");
+            assert!(whole.runs.len() >= 2, "{} runs", whole.runs.len());
+            assert_eq!(handed, whole.runs.iter().map(Run::fingerprint).collect::<Vec<_>>());
+            assert_eq!(format!("{by_run:?}"), format!("{whole:?}"));
+        }
+    }
 }

@@ -7,7 +7,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use host::calib;
-use host::capture::{self, Capture};
+use host::capture::{self, Capture, Samples as _};
 use host::export;
 use host::geometry::Pose;
 use host::link::{self, Link};
@@ -534,6 +534,16 @@ fn read_capture(path: &Path) -> Result<Capture> {
     capture::decode_reader(file).with_context(|| format!("cannot read capture {}", path.display()))
 }
 
+/// Reads and decodes a capture file run by run: `on_run` gets each run with its samples (packed)
+/// as soon as it is decoded, and returns the run the capture keeps.
+fn read_capture_by_run(
+    path: &Path,
+    on_run: impl FnMut(capture::Run, capture::PackedSamples) -> capture::Run,
+) -> Result<Capture> {
+    let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
+    capture::decode_reader_by_run(file, on_run).with_context(|| format!("cannot read capture {}", path.display()))
+}
+
 /// Ctrl-C, SIGTERM and SIGHUP set a flag that the session loops check, so the motor is stopped
 /// and the file closed.
 fn interrupt_flag() -> Result<Arc<AtomicBool>> {
@@ -619,10 +629,24 @@ fn calibrate(
     let mut caps = Vec::new();
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
+    // The moving runs' kinematics, made run by run as the captures are decoded.
+    let mut kinematics = calib::kinematics::Reconstruction::new(opts.cal.kinematics);
     for f in files {
-        let cap = read_capture(f)?;
-        for (i, run) in cap.runs.iter().enumerate().filter(|(_, r)| !r.samples.is_empty()) {
-            if let Some((first, j)) = seen.insert(run.fingerprint(), (f.clone(), i + 1)) {
+        let mut fingerprints = Vec::new();
+        let cap = read_capture_by_run(f, |mut run, samples| {
+            fingerprints.push((!samples.is_empty()).then(|| run.fingerprint_with(&samples)));
+            // Static runs (0 °/s) give the noise figures, from their samples.
+            if run.rate_mdps == 0 {
+                run.samples = samples.to_vec();
+            } else {
+                kinematics.add(&run, &samples);
+            }
+            run
+        })?;
+        let runs_with_samples =
+            cap.runs.iter().zip(fingerprints).enumerate().filter_map(|(i, (r, p))| Some((i, r, p?)));
+        for (i, run, fingerprint) in runs_with_samples {
+            if let Some((first, j)) = seen.insert(fingerprint, (f.clone(), i + 1)) {
                 bail!(
                     "run {} of {} ({}) is the same data as run {j} of {}: give each capture once",
                     i + 1,
@@ -680,7 +704,7 @@ fn calibrate(
         runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop_owned(runs, opts, truth.as_ref()).context("calibration failed")?;
+    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
     print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());

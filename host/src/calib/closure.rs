@@ -768,16 +768,19 @@ pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::T
     loop_on(kin, runs[0].gyro, opts, truth)
 }
 
-/// [`close_loop`] on runs it may consume: each run's raw samples are freed once its kinematics
-/// are reconstructed, so the two copies of a long capture are never held together with the
-/// loop's own data (what `host calibrate` runs).
-pub fn close_loop_owned(
-    mut runs: Vec<Run>,
+/// [`close_loop`] on runs whose samples were turned into kinematics as they were decoded
+/// (`rec`, fed with each of `runs` in order; the runs keep their index and temperatures, their
+/// samples may be gone): what `host calibrate --replay` runs, so that a long capture's raw
+/// samples are never all held at once (issue 7's memory bar). The same checks and result as
+/// [`close_loop`] on the runs with their samples.
+pub fn close_loop_reconstructed(
+    runs: &[Run],
+    rec: kinematics::Reconstruction,
     opts: &LoopOptions,
     truth: Option<&crate::sim::Truth>,
 ) -> Result<LoopReport, CalError> {
-    check_runs(&runs)?;
-    let kin = kinematics::reconstruct_consuming(&mut runs, &opts.cal.kinematics)?;
+    check_runs(runs)?;
+    let kin = rec.finish(runs)?;
     loop_on(kin, runs[0].gyro, opts, truth)
 }
 

@@ -19,7 +19,7 @@
 use super::axes::{is_clipped, AXES};
 use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
 use super::error::CalError;
-use super::kinematics::{KinSamples, Kinematics};
+use super::kinematics::{temperature_at, KinSamples, Kinematics, RunKinematics};
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -484,8 +484,6 @@ impl ValidSamples {
 pub struct RunData {
     /// Which kinematic samples are used (clear of the run's ends and gaps by [`MAX_DELAY_S`]).
     pub valid: ValidSamples,
-    /// Smoothed die temperature from the capture mean, °C, per sample.
-    pub temp_c: Vec<f32>,
     /// Samples used.
     pub n_valid: usize,
     /// Time of the first and last used sample, s.
@@ -509,6 +507,60 @@ pub struct LoopData {
     pub poses: Vec<Pose>,
     /// What the effects' columns depend on.
     pub layout: Layout,
+    /// Mean die temperature over every sample, OUT_TEMP counts: the smoothed temperature is
+    /// reckoned from it ([`RunTemperatures`]).
+    pub temp_mean_counts: f64,
+    /// Spread of the smoothed die temperature over every sample, °C.
+    pub temp_spread_c: f64,
+}
+
+/// The smoothed die temperature at one run's samples, °C from the capture mean: the moving
+/// average over [`TEMPERATURE_SMOOTHING_S`] of OUT_TEMP interpolated at each sample (falling 1
+/// count per °C, datasheet Table 5), rounded to f32. Computed as the samples are visited, from
+/// running sums of which only the 2h + 2 a window spans are kept (a ring), rather than held per
+/// sample (4 bytes each, 44 MiB at 4 hours: issue 7's memory bar). Every pass visits a run's
+/// samples forward, which costs one interpolation per sample; going back restarts the run.
+#[derive(Debug, Clone)]
+pub struct RunTemperatures<'a> {
+    run: &'a RunKinematics,
+    temp_mean_counts: f64,
+    /// Half-width of the moving average, samples.
+    h: usize,
+    /// Running sums: the sum of the first k interpolated readings at `prefix[k % prefix.len()]`.
+    prefix: Vec<f64>,
+    /// Readings summed so far.
+    filled: usize,
+    sum: f64,
+    /// Where `temperature_at` stands in the run's readings.
+    cursor: usize,
+}
+
+impl<'a> RunTemperatures<'a> {
+    /// The temperatures of `run`, from the mean over the capture, `temp_mean_counts`.
+    pub fn new(run: &'a RunKinematics, temp_mean_counts: f64) -> Self {
+        let dt = 1.0 / run.sample_rate_hz;
+        let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
+        Self { run, temp_mean_counts, h, prefix: vec![0.0; 2 * h + 2], filled: 0, sum: 0.0, cursor: 0 }
+    }
+
+    /// At kept sample `i`, °C from the capture mean.
+    pub fn at(&mut self, i: usize) -> f32 {
+        let ring_len = self.prefix.len();
+        let (a, b) = (i.saturating_sub(self.h), (i + self.h + 1).min(self.run.samples.len()));
+        if a + ring_len <= self.filled {
+            *self = Self::new(self.run, self.temp_mean_counts);
+        }
+        while self.filled < b {
+            let t_us = self.run.samples.get(self.filled).t_us();
+            let t = temperature_at(&self.run.temperatures, t_us, &mut self.cursor);
+            self.sum += if t.is_finite() { f64::from(t) } else { self.temp_mean_counts };
+            self.filled += 1;
+            self.prefix[self.filled % ring_len] = self.sum;
+        }
+        // OUT_TEMP falls 1 count per °C (datasheet Table 5).
+        let mean = (self.prefix[b % ring_len] - self.prefix[a % ring_len]) / (b - a) as f64;
+        (-(mean - self.temp_mean_counts)) as f32
+    }
 }
 
 impl LoopData {
@@ -530,6 +582,7 @@ impl LoopData {
             }
         }
         let temp_mean = if temp_n > 0 { temp_sum / temp_n as f64 } else { 0.0 };
+        let (mut temp_lo, mut temp_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for r in &kin.runs {
             let s = &r.samples;
             let dt = 1.0 / r.sample_rate_hz;
@@ -538,28 +591,15 @@ impl LoopData {
             let gap = 1.5 * dt;
             let valid = ValidSamples::of(s.len(), |i| s.get(i).t_s(), gap, guard);
             let n_valid = valid.len();
-            // The moving average over 2h + 1 samples, from running sums of which only the 2h + 2
-            // a window spans are kept (a ring), not a whole run's prefix array.
-            let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
-            let ring_len = 2 * h + 2;
-            let mut prefix = vec![0.0f64; ring_len];
-            let mut counts = r.temperatures_counts();
-            let (mut filled, mut sum) = (0, 0.0f64);
-            let mut temp_c = Vec::with_capacity(s.len());
+            let mut temps = RunTemperatures::new(r, temp_mean);
             for i in 0..s.len() {
-                let (a, b) = (i.saturating_sub(h), (i + h + 1).min(s.len()));
-                while filled < b {
-                    let t = counts.next().unwrap_or(f32::NAN);
-                    sum += if t.is_finite() { f64::from(t) } else { temp_mean };
-                    filled += 1;
-                    prefix[filled % ring_len] = sum;
-                }
-                // OUT_TEMP falls 1 count per °C (datasheet Table 5).
-                temp_c.push((-((prefix[b % ring_len] - prefix[a % ring_len]) / (b - a) as f64 - temp_mean)) as f32);
+                let t = f64::from(temps.at(i));
+                temp_lo = temp_lo.min(t);
+                temp_hi = temp_hi.max(t);
             }
             let first = valid.first().map_or(0.0, |i| s.get(i).t_s());
             let last = valid.last().map_or(first, |i| s.get(i).t_s());
-            runs.push(RunData { valid, temp_c, n_valid, span_s: (first, last) });
+            runs.push(RunData { valid, n_valid, span_s: (first, last) });
         }
         let mut poses: Vec<Pose> = Vec::new();
         for r in &kin.runs {
@@ -578,6 +618,8 @@ impl LoopData {
             t_half_s: (0.5 * (t_hi - t_lo)).max(1e-9),
             poses,
             layout,
+            temp_mean_counts: temp_mean,
+            temp_spread_c: temp_hi - temp_lo,
         }
     }
 }
@@ -716,7 +758,8 @@ pub struct Point {
     pub t_rel_s: f64,
     /// Time scaled to [−1, 1].
     pub t_scaled: f64,
-    /// Smoothed temperature from the capture mean, °C.
+    /// Smoothed temperature from the capture mean, °C (NaN unless a column needs it, or the
+    /// evaluator is [`Evaluator::new`]'s).
     pub temp_c: f64,
     /// The gear mesh's angle, rad: the transmission error's argument (index-referenced θ2 with
     /// the gear lag).
@@ -948,12 +991,20 @@ pub struct Evaluator<'a> {
     /// Jacobian: the points are then eq. 1-2 alone ([`Evaluator::plain_point`]), which is every
     /// pass of a calibration whose residual the linear model already explains.
     plain: bool,
+    /// Whether the points need the die temperature: only the temperature drift's column uses it,
+    /// and computing it for every point of every pass made the 1-h replay ~9 % slower.
+    needs_temperature: bool,
+    /// The smoothed temperatures of the run the last point was in (every pass visits a run's
+    /// samples forward, and each run after the other).
+    temperatures: std::cell::RefCell<Option<RunTemperatures<'a>>>,
 }
 
 impl<'a> Evaluator<'a> {
-    /// An evaluator at the model's current values, for the model's own columns.
+    /// An evaluator at the model's current values, for the model's own columns, whose points
+    /// carry the die temperature whether a column needs it or not (the diagnostics test the
+    /// residual against it, the drift table reports it).
     pub fn new(data: &'a LoopData, model: &'a Model) -> Self {
-        Self::for_columns(data, model, &model.cols())
+        Self { needs_temperature: true, ..Self::for_columns(data, model, &model.cols()) }
     }
 
     /// An evaluator at the model's current values whose points serve `cols` (and the model's
@@ -968,6 +1019,8 @@ impl<'a> Evaluator<'a> {
         let plain = model.shared.is_empty()
             && model.earth_vertical_known_dps == 0.0
             && !cols.iter().any(|c| matches!(c, Col::Shared(_)));
+        let needs_temperature =
+            model.lin.contains(&LinCol::DriftTemp) || cols.iter().any(|c| matches!(c, Col::Lin(LinCol::DriftTemp)));
         let m = model.m();
         let coef = |c: LinCol| std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0));
         Self {
@@ -992,7 +1045,20 @@ impl<'a> Evaluator<'a> {
             needs_heading,
             needs_fixture,
             plain,
+            needs_temperature,
+            temperatures: Default::default(),
         }
+    }
+
+    /// The smoothed die temperature at sample `i` of run `r`, °C from the capture mean.
+    fn temperature_c(&self, r: usize, i: usize) -> f32 {
+        let rk = &self.data.kin.runs[r];
+        let mut temps = self.temperatures.borrow_mut();
+        let temps = match &mut *temps {
+            Some(t) if std::ptr::eq(t.run, rk) => t,
+            other => other.insert(RunTemperatures::new(rk, self.data.temp_mean_counts)),
+        };
+        temps.at(i)
     }
 
     /// The kinematics at sample `i` of run `r`.
@@ -1095,7 +1161,7 @@ impl<'a> Evaluator<'a> {
             drate_eff_dps: rate2 * dripple,
             t_rel_s: s.t_s() - self.data.t0_s,
             t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
-            temp_c: f64::from(self.data.runs[r].temp_c[i]),
+            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
             mesh_rad,
             pose: rk.pose,
             d_earth,
@@ -1140,7 +1206,7 @@ impl<'a> Evaluator<'a> {
             drate_eff_dps: 0.0,
             t_rel_s: s.t_s() - self.data.t0_s,
             t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
-            temp_c: f64::from(self.data.runs[r].temp_c[i]),
+            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
             mesh_rad: th,
             pose: rk.pose,
             d_earth: [to_package(&earth_basis((0.0, 0.0), (se, ce))[0]), nan3, nan3],

@@ -11,7 +11,7 @@
 use super::error::CalError;
 use super::estimate::Estimate;
 use super::wire::{GearEstimateJson, IndexStatsJson};
-use crate::capture::{Run, RunSample, RunTemperature};
+use crate::capture::{Run, RunSample, RunTemperature, Samples};
 use crate::geometry::{omega2, Pose};
 use nalgebra::Matrix3;
 use protocol::{sample_status, Edge};
@@ -169,6 +169,13 @@ impl KinSamples {
         // The largest power of two not above `block`.
         let block_shift = usize::BITS - 1 - block.leading_zeros();
         Self { packed: Vec::new(), bases: Vec::new(), escapes: Vec::new(), block_shift, ref_counts, rad_per_count }
+    }
+
+    /// Sets θ2 = (count − `ref_counts`)·`rad_per_count` for every sample held and to come (the
+    /// reference is known only once every run's index is pooled, after the samples are packed).
+    pub fn set_theta2_reference(&mut self, ref_counts: f64, rad_per_count: f64) {
+        self.ref_counts = ref_counts;
+        self.rad_per_count = rad_per_count;
     }
 
     /// Room for `n` more samples.
@@ -496,20 +503,26 @@ fn line_fit(points: &[(f64, f64)], fallback_slope: f64) -> (f64, f64) {
 }
 
 /// Local straight-line slopes of encoder count against time, counts/s, over windows of 2h+1
-/// consecutive samples: `f(centre, slope)` for every sample with a full window. Sliding sums of
-/// offsets from the run's first sample, in i128 so that they stay exact for any run length: O(1)
-/// per sample. The centred combinations n·Σte − Σt·Σe and n·Σtt − (Σt)² are those of the window
-/// alone (≲ 1e13 for any sane window), so they pass through i64 on their way to f64.
-fn for_each_slope_cps(samples: &[RunSample], h: usize, mut f: impl FnMut(usize, f64)) {
+/// consecutive samples: `f(centre index, centre sample, slope)` for every sample with a full
+/// window. Sliding sums of offsets from the run's first sample, in i128 so that they stay exact
+/// for any run length: O(1) per sample, the samples read in one pass (three cursors: the one
+/// entering the window, the one leaving it, the centre). The centred combinations n·Σte − Σt·Σe
+/// and n·Σtt − (Σt)² are those of the window alone (≲ 1e13 for any sane window), so they pass
+/// through i64 on their way to f64.
+fn for_each_slope_cps(samples: &(impl Samples + ?Sized), h: usize, mut f: impl FnMut(usize, &RunSample, f64)) {
     let w = 2 * h + 1;
+    let Some(first) = samples.iter_from(0).next() else {
+        return;
+    };
     if samples.len() < w {
         return;
     }
-    let (t0, e0) = (samples[0].t_us, samples[0].encoder);
+    let (t0, e0) = (first.t_us, first.encoder);
     let te = |s: &RunSample| (i128::from(s.t_us - t0), i128::from(s.encoder - e0));
     let (mut st, mut stt, mut se, mut ste) = (0i128, 0i128, 0i128, 0i128);
-    for s in &samples[..w] {
-        let (t, e) = te(s);
+    let (mut entering, mut leaving, mut centres) = (samples.iter_from(0), samples.iter_from(0), samples.iter_from(h));
+    for s in entering.by_ref().take(w) {
+        let (t, e) = te(&s);
         st += t;
         stt += t * t;
         se += e;
@@ -518,25 +531,29 @@ fn for_each_slope_cps(samples: &[RunSample], h: usize, mut f: impl FnMut(usize, 
     let n = w as i128;
     for j in 0..=samples.len() - w {
         if j > 0 {
-            let (to, eo) = te(&samples[j - 1]);
-            let (ti, ei) = te(&samples[j + w - 1]);
+            let (Some(old), Some(new)) = (leaving.next(), entering.next()) else {
+                unreachable!("the cursors stay inside the samples");
+            };
+            let (to, eo) = te(&old);
+            let (ti, ei) = te(&new);
             st += ti - to;
             stt += ti * ti - to * to;
             se += ei - eo;
             ste += ti * ei - to * eo;
         }
+        let centre = centres.next().expect("the centre lags the entering sample");
         let num = (n * ste - st * se) as i64 as f64;
         let den = (n * stt - st * st) as i64 as f64;
-        f(j + h, num / den * 1e6);
+        f(j + h, &centre, num / den * 1e6);
     }
 }
 
 /// The same slope at one centre `i` (h ≤ i < len − h), directly: offsets from sample `i` are
 /// small enough for i64.
-fn slope_at_cps(samples: &[RunSample], i: usize, h: usize) -> f64 {
-    let c = &samples[i];
+fn slope_at_cps(samples: &(impl Samples + ?Sized), i: usize, h: usize) -> f64 {
+    let c = samples.iter_from(i).next().expect("the centre is a sample");
     let (mut st, mut stt, mut se, mut ste) = (0i64, 0i64, 0i64, 0i64);
-    for s in &samples[i - h..=i + h] {
+    for s in samples.iter_from(i - h).take(2 * h + 1) {
         let (t, e) = (s.t_us - c.t_us, s.encoder - c.encoder);
         st += t;
         stt += t * t;
@@ -556,7 +573,7 @@ fn strided_median(len: usize, f: impl Fn(usize) -> f64) -> f64 {
 }
 
 /// Temperature at `t_us` by linear interpolation, held at the ends; `cursor` walks forward.
-fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f32 {
+pub fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f32 {
     match temps.len() {
         0 => return f32::NAN,
         1 => return f32::from(temps[0].raw),
@@ -571,35 +588,77 @@ fn temperature_at(temps: &[RunTemperature], t_us: i64, cursor: &mut usize) -> f3
     (f64::from(a.raw) + w * f64::from(b.raw - a.raw)) as f32
 }
 
-/// Everything about a run that does not depend on the pooled gear ratio.
+/// The index line of a run (everything about its index that does not depend on the pooled
+/// gear ratio).
 struct RunPrep {
     number: usize,
     line: IndexLine,
     fit: (f64, f64, f64, f64, f64),
 }
 
-/// Reconstructs θ2, θ1', θ2' and temperature at every usable sample of every run.
-pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
-    let (preps, cpr, period, gear) = prepare(runs)?;
-    let out = preps
-        .into_iter()
-        .zip(runs)
-        .map(|(p, run)| run_kinematics(p, run, cpr, period, gear.ratio.value, opts))
-        .collect::<Result<_, _>>()?;
-    Ok(Kinematics { runs: out, gear })
+/// What a run's samples give before the pooled gear ratio and the index are known: its kept
+/// samples (θ2's reference still to set), the counts of the others, its rates. Made as each run
+/// is decoded in a long replay ([`Reconstruction`]), so only its kinematics outlive its samples.
+struct SampledRun {
+    samples: KinSamples,
+    total: usize,
+    windows: usize,
+    unsteady: usize,
+    stale: usize,
+    steady_rate_dps: f64,
+    sample_rate_hz: f64,
+    rate_window_samples: usize,
+    rate_quantisation_dps: f64,
 }
 
-/// [`reconstruct`] on runs it may consume: each run's raw samples are freed as soon as its own
-/// kinematics are made, so a long capture's raw samples and kinematics are held together for
-/// one run at most (issue 7's memory bar); the runs keep their index edges and temperatures.
-pub fn reconstruct_consuming(runs: &mut [Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
-    let (preps, cpr, period, gear) = prepare(runs)?;
-    let mut out = Vec::with_capacity(runs.len());
-    for (p, run) in preps.into_iter().zip(runs.iter_mut()) {
-        out.push(run_kinematics(p, run, cpr, period, gear.ratio.value, opts)?);
-        run.samples = Vec::new();
+/// Reconstructs θ2, θ1', θ2' and temperature at every usable sample of every run.
+pub fn reconstruct(runs: &[Run], opts: &KinOptions) -> Result<Kinematics, CalError> {
+    let mut rec = Reconstruction::new(*opts);
+    for run in runs {
+        rec.add(run, &run.samples[..]);
     }
-    Ok(Kinematics { runs: out, gear })
+    rec.finish(runs)
+}
+
+/// A reconstruction fed run by run: each run's samples are turned into its kept kinematics as it
+/// comes ([`Reconstruction::add`], while a replay decodes the next), and the runs' index lines,
+/// the pooled gear ratio and θ2's references follow once all are in
+/// ([`Reconstruction::finish`]), so a long capture's raw samples and kinematics are held together
+/// for one run at most (issue 7's memory bar). The result is [`reconstruct`]'s, bit for bit: it
+/// is the same code.
+pub struct Reconstruction {
+    opts: KinOptions,
+    /// Encoder counts per revolution, from the first run's `Hello`.
+    cpr: Option<f64>,
+    sampled: Vec<SampledRun>,
+}
+
+impl Reconstruction {
+    /// A reconstruction of no run yet.
+    pub fn new(opts: KinOptions) -> Self {
+        Self { opts, cpr: None, sampled: Vec::new() }
+    }
+
+    /// Turns the next run's samples into its kinematics; the run itself (index, temperatures,
+    /// settings) is given again to [`Reconstruction::finish`], its samples are no longer needed.
+    pub fn add(&mut self, run: &Run, samples: &(impl Samples + ?Sized)) {
+        let cpr = *self.cpr.get_or_insert(f64::from(run.hello.encoder_counts_per_rev));
+        self.sampled.push(sampled_run(run, samples, cpr, &self.opts));
+    }
+
+    /// The kinematics of `runs`, the runs given to [`Reconstruction::add`] in the same order.
+    pub fn finish(self, runs: &[Run]) -> Result<Kinematics, CalError> {
+        assert_eq!(runs.len(), self.sampled.len(), "every run's samples were added, in order");
+        let (preps, cpr, period, gear) = prepare(runs)?;
+        debug_assert_eq!(self.cpr.unwrap_or(cpr), cpr, "the first run's Hello gives the encoder resolution");
+        let out = preps
+            .into_iter()
+            .zip(self.sampled)
+            .zip(runs)
+            .map(|((p, sampled), run)| run_kinematics(p, sampled, run, cpr, period, gear.ratio.value))
+            .collect::<Result<_, _>>()?;
+        Ok(Kinematics { runs: out, gear })
+    }
 }
 
 /// The index lines of every run and the pooled gear ratio: (per-run preparations, encoder
@@ -641,13 +700,74 @@ fn prepare(runs: &[Run]) -> Result<(Vec<RunPrep>, f64, f64, GearEstimate), CalEr
     Ok((preps, cpr, period, gear))
 }
 
+/// A run's kept samples and rates from its samples alone (`cpr`: encoder counts per revolution).
+fn sampled_run(run: &Run, s: &(impl Samples + ?Sized), cpr: f64, opts: &KinOptions) -> SampledRun {
+    let total = s.len();
+    let spacing_us = |i: usize| {
+        let mut pair = s.iter_from(i);
+        let (a, b) = (pair.next().expect("a sample"), pair.next().expect("its successor"));
+        (b.t_us - a.t_us) as f64
+    };
+    let dt_s = strided_median(total.saturating_sub(1), spacing_us) * 1e-6;
+    let sample_rate_hz = 1.0 / dt_s;
+    let h = ((opts.rate_window_s * sample_rate_hz / 2.0).round() as usize).max(1);
+    let deg_per_count = 360.0 / cpr;
+    // Slope σ of a straight line through 2h+1 evenly spaced points: σ_q/√(Σ(t−t̄)²).
+    let stt = dt_s * dt_s * (h * (h + 1) * (2 * h + 1)) as f64 / 3.0;
+    let rate_quantisation_dps = UNIFORM_QUANTISATION_SIGMA * deg_per_count / stt.sqrt();
+    let windows = total.saturating_sub(2 * h);
+
+    // The steady speed is the median of the rates near the commanded one, so that a short run
+    // dominated by its ramps still finds its plateau; with none near, the median of all.
+    let commanded = run.commanded_rate_dps();
+    let near_band = opts.steady_tolerance * commanded.abs();
+    let rate_at = |j: usize| slope_at_cps(s, j + h, h) * deg_per_count;
+    let mut near: Vec<f64> = (0..windows)
+        .step_by(windows.div_ceil(MEDIAN_SUBSAMPLE).max(1))
+        .map(rate_at)
+        .filter(|r| (r - commanded).abs() <= near_band)
+        .collect();
+    let steady_rate_dps = if near.is_empty() { strided_median(windows, rate_at) } else { median(&mut near) };
+    let tol = opts.steady_tolerance * steady_rate_dps.abs();
+
+    // θ2's reference comes with the index, once every run is in (`run_kinematics`).
+    let mut samples = KinSamples::new(0.0, 0.0, dt_s);
+    samples.reserve(windows);
+    let (mut unsteady, mut stale) = (0, 0);
+    for_each_slope_cps(s, h, |_, smp, slope_cps| {
+        let rate = slope_cps * deg_per_count;
+        if smp.status & sample_status::STALE != 0 {
+            stale += 1;
+            return;
+        }
+        let steady = (rate - steady_rate_dps).abs() <= tol;
+        if !steady {
+            unsteady += 1;
+            return;
+        }
+        samples.push(smp.t_us, smp.encoder, rate, smp.rate_counts);
+    });
+    samples.shrink_to_fit();
+    SampledRun {
+        samples,
+        total,
+        windows,
+        unsteady,
+        stale,
+        steady_rate_dps,
+        sample_rate_hz,
+        rate_window_samples: 2 * h + 1,
+        rate_quantisation_dps,
+    }
+}
+
 fn run_kinematics(
     p: RunPrep,
+    sampled: SampledRun,
     run: &Run,
     cpr: f64,
     period: f64,
     ratio: f64,
-    opts: &KinOptions,
 ) -> Result<RunKinematics, CalError> {
     let centre_sigma = if p.line.points.len() > 2 {
         p.fit.2 * (p.line.points.len() as f64 / (p.line.points.len() as f64 - 2.0)).sqrt()
@@ -664,52 +784,10 @@ fn run_kinematics(
         plate_width_counts: p.line.width_counts,
         period_counts: Estimate::new(if p.fit.4.is_finite() { p.fit.1 } else { f64::NAN }, p.fit.4),
     };
-
-    let s = &run.samples;
-    let total = s.len();
-    let dt_s = strided_median(total.saturating_sub(1), |i| (s[i + 1].t_us - s[i].t_us) as f64) * 1e-6;
-    let sample_rate_hz = 1.0 / dt_s;
-    let h = ((opts.rate_window_s * sample_rate_hz / 2.0).round() as usize).max(1);
-    let deg_per_count = 360.0 / cpr;
-    // Slope σ of a straight line through 2h+1 evenly spaced points: σ_q/√(Σ(t−t̄)²).
-    let stt = dt_s * dt_s * (h * (h + 1) * (2 * h + 1)) as f64 / 3.0;
-    let rate_quantisation_dps = UNIFORM_QUANTISATION_SIGMA * deg_per_count / stt.sqrt();
+    let SampledRun { mut samples, total, windows, unsteady, stale, sample_rate_hz, .. } = sampled;
+    samples.set_theta2_reference(ref_counts, std::f64::consts::TAU / period);
     let label = run.label();
-    let windows = total.saturating_sub(2 * h);
-
-    // The steady speed is the median of the rates near the commanded one, so that a short run
-    // dominated by its ramps still finds its plateau; with none near, the median of all.
     let commanded = run.commanded_rate_dps();
-    let near_band = opts.steady_tolerance * commanded.abs();
-    let rate_at = |j: usize| slope_at_cps(s, j + h, h) * deg_per_count;
-    let mut near: Vec<f64> = (0..windows)
-        .step_by(windows.div_ceil(MEDIAN_SUBSAMPLE).max(1))
-        .map(rate_at)
-        .filter(|r| (r - commanded).abs() <= near_band)
-        .collect();
-    let steady_rate_dps = if near.is_empty() { strided_median(windows, rate_at) } else { median(&mut near) };
-    let tol = opts.steady_tolerance * steady_rate_dps.abs();
-
-    let two_pi_over_period = std::f64::consts::TAU / period;
-    let mut samples = KinSamples::new(ref_counts, two_pi_over_period, dt_s);
-    samples.reserve(windows);
-    let (mut unsteady, mut stale) = (0, 0);
-    let rot_t = run.pose.rotation().transpose();
-    for_each_slope_cps(s, h, |i, slope_cps| {
-        let smp = &s[i];
-        let rate = slope_cps * deg_per_count;
-        if smp.status & sample_status::STALE != 0 {
-            stale += 1;
-            return;
-        }
-        let steady = (rate - steady_rate_dps).abs() <= tol;
-        if !steady {
-            unsteady += 1;
-            return;
-        }
-        samples.push(smp.t_us, smp.encoder, rate, smp.rate_counts);
-    });
-    samples.shrink_to_fit();
 
     // One sensor-table revolution at the commanded speed: the paper's per-pose sinusoid fit needs
     // a whole period.
@@ -736,17 +814,17 @@ fn run_kinematics(
         pose: run.pose,
         label,
         commanded_rate_dps: run.commanded_rate_dps(),
-        rot_t,
+        rot_t: run.pose.rotation().transpose(),
         gear_ratio: ratio,
         samples,
         total,
         excluded_unsteady: unsteady,
         excluded_window_edge: total - windows,
         excluded_stale: stale,
-        steady_rate_dps,
+        steady_rate_dps: sampled.steady_rate_dps,
         sample_rate_hz,
-        rate_window_samples: 2 * h + 1,
-        rate_quantisation_dps,
+        rate_window_samples: sampled.rate_window_samples,
+        rate_quantisation_dps: sampled.rate_quantisation_dps,
         index,
         temperatures: run.temperatures.clone(),
     })
@@ -755,6 +833,26 @@ fn run_kinematics(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Runs whose samples were packed and added one by one, then dropped, reconstruct exactly as
+    /// the runs with their samples do.
+    #[test]
+    fn run_by_run_reconstruction_is_the_whole_one() {
+        let bytes = crate::sim::simulate(&crate::sim::SimConfig::standard(5, 6.0)).expect("simulates").bytes;
+        let runs = crate::capture::decode(&bytes).runs;
+        let opts = KinOptions::default();
+        let whole = reconstruct(&runs, &opts).expect("reconstructs");
+        let mut rec = Reconstruction::new(opts);
+        let mut bare = runs.clone();
+        for run in &mut bare {
+            let mut packed = crate::capture::PackedSamples::default();
+            run.samples.drain(..).for_each(|s| packed.push(s));
+            rec.add(run, &packed);
+        }
+        let by_run = rec.finish(&bare).expect("reconstructs");
+        assert_eq!(format!("{by_run:?}"), format!("{whole:?}"));
+        assert!(whole.runs.iter().all(|r| r.samples.len() > 1000));
+    }
 
     /// The decoded sample stays 24 bytes and the held one 14: every pass streams millions of
     /// them, and the loop holds them all (issue 7's memory bar).

@@ -464,3 +464,42 @@ fn a_random_walk_ends_in_the_free_drift_and_the_tilt_is_found_beside_it() {
     assert_within_3_sigma(&truth_of(last), "random walk and tilt");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
+
+/// The smoothed die temperature computed as the samples are visited is, bit for bit, the
+/// per-sample array the loop used to hold (the same running sums, written out here as they
+/// were), visited forward, from the middle, or going back.
+#[test]
+fn smoothed_temperatures_are_the_per_sample_ones() {
+    use super::extended::{RunTemperatures, TEMPERATURE_SMOOTHING_S};
+    let (runs, _) = capture_with(9, &[180.0], 30.0, &["offset_drift"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for rk in &data.kin.runs {
+        let n = rk.samples.len();
+        let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / (1.0 / rk.sample_rate_hz)).round() as usize;
+        let counts: Vec<f32> = rk.temperatures_counts().collect();
+        let mut prefix = vec![0.0f64; n + 1];
+        for (k, &t) in counts.iter().enumerate() {
+            prefix[k + 1] = prefix[k] + if t.is_finite() { f64::from(t) } else { data.temp_mean_counts };
+        }
+        let expected: Vec<f32> = (0..n)
+            .map(|i| {
+                let (a, b) = (i.saturating_sub(h), (i + h + 1).min(n));
+                (-((prefix[b] - prefix[a]) / (b - a) as f64 - data.temp_mean_counts)) as f32
+            })
+            .collect();
+        assert!(n > 2 * h + 1000, "{n} samples, half-window {h}");
+        let first = expected[0];
+        assert!(expected.iter().any(|&t| (t - first).abs() > 0.1), "the temperature changes");
+        let mut temps = RunTemperatures::new(rk, data.temp_mean_counts);
+        for (i, &want) in expected.iter().enumerate() {
+            assert_eq!(temps.at(i).to_bits(), want.to_bits(), "sample {i}");
+            lo = lo.min(f64::from(want));
+            hi = hi.max(f64::from(want));
+        }
+        for i in [n / 2, n / 2 + 1, 3 * n / 4, 10, 2 * h + 500, 2] {
+            assert_eq!(temps.at(i).to_bits(), expected[i].to_bits(), "sample {i}, out of order");
+        }
+    }
+    assert_eq!(data.temp_spread_c, hi - lo);
+}

@@ -40,7 +40,7 @@ mod tests;
 
 pub use apply::{Calibration, CalibrationFileError};
 pub use catalogue::Effect;
-pub use closure::{calibrate, close_loop, close_loop_owned, LoopOptions, LoopReport, Verdict};
+pub use closure::{calibrate, close_loop, close_loop_reconstructed, LoopOptions, LoopReport, Verdict};
 pub use error::CalError;
 pub use estimate::Estimate;
 pub use kinematics::KinOptions;

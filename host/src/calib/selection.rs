@@ -82,17 +82,6 @@ pub fn both_directions(data: &LoopData) -> bool {
     r.iter().any(|k| k.steady_rate_dps > 0.0) && r.iter().any(|k| k.steady_rate_dps < 0.0)
 }
 
-fn temperature_spread_c(data: &LoopData) -> f64 {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for r in &data.runs {
-        for &t in &r.temp_c {
-            lo = lo.min(f64::from(t));
-            hi = hi.max(f64::from(t));
-        }
-    }
-    hi - lo
-}
-
 /// Which effects the residual points to: an effect is tried only if the structure it makes was
 /// found (the loop traces the residual to effects; an effect too weak to show in any run's
 /// diagnostics cannot bias the calibration beyond its noise either). Broadband structure alone
@@ -177,7 +166,7 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
             });
         }
         out.push(plain(Effect::DriftPolynomial));
-        if temperature_spread_c(data) >= MIN_TEMPERATURE_SPREAD_C {
+        if data.temp_spread_c >= MIN_TEMPERATURE_SPREAD_C {
             out.push(plain(Effect::DriftTemperature));
         }
         for t in DRIFT_KNOT_SPACINGS_S {
