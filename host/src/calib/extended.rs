@@ -1159,9 +1159,6 @@ impl<'a> Evaluator<'a> {
             rate2_eff_dps: rate2_eff,
             dtheta_eff: ripple,
             drate_eff_dps: rate2 * dripple,
-            t_rel_s: s.t_s() - self.data.t0_s,
-            t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
-            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
             mesh_rad,
             pose: rk.pose,
             d_earth,
@@ -1171,12 +1168,42 @@ impl<'a> Evaluator<'a> {
             cos_tilt,
             theta1_rate_rad_s,
             theta1_rate_dps: rate1,
+            ..self.when(r, i, s.t_s())
+        }
+    }
+
+    /// A point with only where the sample lies in time set (its run, times, temperature and
+    /// place on the knot grids), every kinematic field NaN: what every point shares.
+    fn when(&self, r: usize, i: usize, t_s: f64) -> Point {
+        let nan3 = [f64::NAN; 3];
+        let stretch = self.data.layout.run_stretch[r];
+        Point {
+            omega: nan3,
+            d_theta2: nan3,
+            d_rate2: nan3,
+            theta2_rad: f64::NAN,
+            rate2_dps: f64::NAN,
+            rate2_eff_dps: f64::NAN,
+            dtheta_eff: f64::NAN,
+            drate_eff_dps: f64::NAN,
+            t_rel_s: t_s - self.data.t0_s,
+            t_scaled: (t_s - self.data.t_mid_s) / self.data.t_half_s,
+            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
+            mesh_rad: f64::NAN,
+            pose: self.data.kin.runs[r].pose,
+            d_earth: [nan3; 3],
+            d_filter: nan3,
+            d_fixture: [nan3; 3],
+            d_tilt: nan3,
+            cos_tilt: f64::NAN,
+            theta1_rate_rad_s: f64::NAN,
+            theta1_rate_dps: f64::NAN,
             run: r,
-            t_s: s.t_s(),
-            stretch: self.data.layout.run_stretch[r],
+            t_s,
+            stretch,
             knot_x: std::array::from_fn(|k| {
-                let (t0, per_s) = self.knot_grid[self.data.layout.run_stretch[r]][k];
-                (s.t_s() - t0) * per_s
+                let (t0, per_s) = self.knot_grid[stretch][k];
+                (t_s - t0) * per_s
             }),
         }
     }
@@ -1197,32 +1224,18 @@ impl<'a> Evaluator<'a> {
         let nan3 = [f64::NAN; 3];
         Point {
             omega: to_package(&protocol::exciter::table_rate(rate1, (se, ce), rate2)),
-            d_theta2: nan3,
-            d_rate2: nan3,
             theta2_rad: th,
             rate2_dps: rate2,
             rate2_eff_dps: rate2,
             dtheta_eff: 1.0,
             drate_eff_dps: 0.0,
-            t_rel_s: s.t_s() - self.data.t0_s,
-            t_scaled: (s.t_s() - self.data.t_mid_s) / self.data.t_half_s,
-            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
             mesh_rad: th,
             pose: rk.pose,
             d_earth: [to_package(&earth_basis((0.0, 0.0), (se, ce))[0]), nan3, nan3],
-            d_filter: nan3,
-            d_fixture: [nan3; 3],
-            d_tilt: nan3,
             cos_tilt: 1.0,
             theta1_rate_rad_s: rate1.to_radians(),
             theta1_rate_dps: rate1,
-            run: r,
-            t_s: s.t_s(),
-            stretch: self.data.layout.run_stretch[r],
-            knot_x: std::array::from_fn(|k| {
-                let (t0, per_s) = self.knot_grid[self.data.layout.run_stretch[r]][k];
-                (s.t_s() - t0) * per_s
-            }),
+            ..self.when(r, i, s.t_s())
         }
     }
 
