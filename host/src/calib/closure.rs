@@ -5,13 +5,11 @@
 //! their σ, a held-out prediction and, on simulated data, the error against the truth.
 
 use super::axes::AXES;
-use super::catalogue::Effect;
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics, Finding};
+use super::effects::Effect;
 use super::estimate::Estimate;
-use super::extended::{
-    effect_columns, fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
-};
+use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
 use super::paper::{paper_check, PaperCheck};
 use super::report::RunSummary;
 use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
@@ -585,20 +583,6 @@ impl Context<'_> {
     }
 }
 
-/// Whether a linear column is part of the offset (the constant or a drift term).
-fn is_offset_column(c: LinCol) -> bool {
-    matches!(
-        c,
-        LinCol::One
-            | LinCol::DriftExp
-            | LinCol::DriftExpFixed(_)
-            | LinCol::DriftT1
-            | LinCol::DriftT2
-            | LinCol::DriftTemp
-            | LinCol::DriftKnot { .. }
-    )
-}
-
 /// The offset the model's drift gives through every run, every [`DRIFT_TABLE_STEP_S`] (empty
 /// without a drift model), for export with the calibration.
 fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
@@ -629,7 +613,7 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
                     m.lin
                         .iter()
                         .zip(&m.beta[a])
-                        .filter(|(c, _)| is_offset_column(**c))
+                        .filter(|(c, _)| c.is_offset())
                         .map(|(&c, b)| b * ev.lin_value(c, &p, a))
                         .sum(),
                 );
@@ -649,7 +633,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<Note> {
         .effects
         .iter()
         .copied()
-        .find(|e| matches!(e, Effect::DriftKnots(_)))
+        .find(|e| e.is_free_drift())
         .or_else(|| m.effects.iter().copied().find(|e| e.is_drift()))?;
     drift.offset_reference()?;
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
@@ -657,12 +641,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<Note> {
     let ev = super::extended::Evaluator::new(data, m);
     let p = ev.point(r, i);
     let at_start_counts: [f64; 3] = std::array::from_fn(|a| {
-        m.lin
-            .iter()
-            .zip(&m.beta[a])
-            .filter(|(c, _)| is_offset_column(**c))
-            .map(|(&c, b)| b * ev.lin_value(c, &p, a))
-            .sum()
+        m.lin.iter().zip(&m.beta[a]).filter(|(c, _)| c.is_offset()).map(|(&c, b)| b * ev.lin_value(c, &p, a)).sum()
     });
     Some(Note::OffsetReference {
         drift,
@@ -677,6 +656,13 @@ fn shared_estimate(f: &Fitted, p: SharedPar) -> Option<Estimate> {
     f.shared_index(p).map(|i| Estimate::new(f.model.theta_of(p).unwrap_or(0.0), f.sigma(i)))
 }
 
+/// Earth's rate component `k` (0 vertical, 1 and 2 horizontal: `effects::earth`) with its σ,
+/// °/s, in whichever form of Earth's rotation the model holds (None when not fitted).
+fn earth_estimate(f: &Fitted, k: u8) -> Option<Estimate> {
+    let p = f.model.shared.iter().copied().find(|p| p.effect.is_earth() && p.k == k)?;
+    shared_estimate(f, p)
+}
+
 /// Earth's rate, °/s (IERS Conventions 2010: 7.292115e-5 rad/s).
 fn earth_rate_dps() -> f64 {
     crate::sim::effects::EARTH_RATE_RAD_S.to_degrees()
@@ -686,7 +672,7 @@ fn earth_rate_dps() -> f64 {
 /// with a latitude, the horizontal part against Ω·cos(latitude)), or, when it is not modelled,
 /// nothing (a note about the runs it needs comes from the identifiability checks).
 fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<Note> {
-    let (n, w) = (shared_estimate(f, SharedPar::EarthNorthAtZero)?, shared_estimate(f, SharedPar::EarthWestAtZero)?);
+    let (n, w) = (earth_estimate(f, 1)?, earth_estimate(f, 2)?);
     let h = (n.value * n.value + w.value * w.value).sqrt();
     // σ of the magnitude from the two components (first order).
     let h_sigma = if h > 0.0 {
@@ -696,7 +682,7 @@ fn earth_note(f: &Fitted, latitude_deg: Option<f64>) -> Option<Note> {
     };
     let per_hour = 3600.0;
     let horizontal_dph = Estimate::new(h, h_sigma).scaled(per_hour);
-    Some(match (latitude_deg, shared_estimate(f, SharedPar::EarthVertical)) {
+    Some(match (latitude_deg, earth_estimate(f, 0)) {
         (Some(latitude_deg), _) => Note::EarthAtLatitude {
             latitude_deg,
             vertical_dph: earth_rate_dps() * latitude_deg.to_radians().sin() * per_hour,
@@ -734,9 +720,9 @@ pub struct EarthExcess {
 /// an impossible value means the model holds a real effect in the wrong term, and the
 /// calibration must not be called good.
 fn earth_implausible(f: &Fitted) -> Option<EarthExcess> {
-    let v = shared_estimate(f, SharedPar::EarthVertical)?;
-    let n = shared_estimate(f, SharedPar::EarthNorthAtZero)?;
-    let w = shared_estimate(f, SharedPar::EarthWestAtZero)?;
+    let v = earth_estimate(f, 0)?;
+    let n = earth_estimate(f, 1)?;
+    let w = earth_estimate(f, 2)?;
     let total = (v.value * v.value + n.value * n.value + w.value * w.value).sqrt();
     if total <= 0.0 {
         return None;
@@ -861,7 +847,7 @@ fn loop_on(
         } else {
             Effect::EarthRotation
         };
-        let dof = effect_columns(earth, &data.layout).1.len();
+        let dof = earth.params(&data.layout).1.len();
         let start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
         let before = state.fitted.model.clone();
         match (fit(&data, start, weights), fit(&data, before, weights)) {

@@ -13,7 +13,7 @@ use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
 
 /// Highest harmonic of the table rate examined sample by sample (the catalogue's).
-pub const MAX_ORDER: usize = super::catalogue::MAX_HARMONIC_ORDER;
+pub const MAX_ORDER: usize = super::effects::MAX_HARMONIC_ORDER;
 
 /// θ2 bins of the plotted residual: 1° each.
 pub const THETA2_BINS: usize = 360;

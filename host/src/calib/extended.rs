@@ -1,8 +1,9 @@
-//! The linear model extended by catalogue effects, fitted jointly over the three axes.
+//! The engine: the linear model extended by catalogue effects ([`super::effects`]), fitted
+//! jointly over the three axes.
 //!
 //! Each effect adds per-axis linear columns (drift, rate-dependent scale) and/or parameters shared
 //! by all axes that move the kinematics (delay, index offset, table-speed ripple, the warm-up time
-//! constant). The shared ones make the model non-linear; it is fitted by Gauss-Newton on all
+//! constant); the engine knows them only through [`super::effects::Behaviour`]. The shared ones make the model non-linear; it is fitted by Gauss-Newton on all
 //! parameters at once, each iteration one pass over the cached kinematics that accumulates, per
 //! run and axis, the Gram matrix of [linear columns | Jacobian columns of the shared parameters]
 //! against the current residual. The covariance of the converged fit is the inverse of the joint
@@ -17,16 +18,16 @@
 //! the linear algebra is nalgebra's.
 
 use super::axes::{is_clipped, AXES};
-use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S, HARMONIC_ORDERS, MAX_HARMONIC_ORDER};
+use super::effects::terms::{decay, dot, AxisTerms, Ctx, Needs, Own, Shifts};
+use super::effects::{Effect, MAX_DELAY_S, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{temperature_at, KinSamples, Kinematics, RunKinematics};
+use super::layout::Layout;
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
-/// Longest delay (either sign) the model represents, s: 50 ms is 6× the slowest L3G4200D filter
-/// delay (7.5 ms at 30 Hz cut-off, `sim::FilterDelay`). Samples within it of a run's ends or of a
-/// gap are left out of every fit, so that all models see the same samples.
-pub const MAX_DELAY_S: f64 = 0.05;
+pub use super::effects::terms::{Bound, Col, LinCol, Point, Reported, SharedPar};
+pub use super::effects::DRIFT_KNOT_SPACINGS_S;
 
 /// Span of the moving average that smooths OUT_TEMP, s. The register counts whole °C; during
 /// warm-up it steps every few seconds, so 20 s turns the steps into a ramp, and it is 10× the
@@ -47,372 +48,6 @@ const MAX_ITERATIONS: usize = 12;
 /// A Gauss-Newton step smaller than this many σ in every parameter ends the iteration: the
 /// remaining error is then 1 % of the statistical one.
 const CONVERGED_SIGMAS: f64 = 0.01;
-
-/// Bounds of the warm-up time constant, s: 1 s is shorter than any board's thermal time constant,
-/// 1e5 s (a day) is a constant offset over any capture.
-const DRIFT_TAU_RANGE_S: (f64, f64) = (1.0, 1e5);
-
-/// A per-axis linear column (every axis has the same kinds, each its own coefficient).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum LinCol {
-    /// Component k of ω_s = R_qᵀ ω2, °/s.
-    Omega(usize),
-    /// 1 (offset).
-    One,
-    /// exp(−t/T) with the model's T (warm-up), t from the first sample.
-    DriftExp,
-    /// exp(−t/T) with a fixed T, s (candidate warm-up time constants).
-    DriftExpFixed(f64),
-    /// Time scaled to [−1, 1] over the capture.
-    DriftT1,
-    /// Its second Legendre polynomial, (3t̃² − 1)/2.
-    DriftT2,
-    /// Smoothed die temperature from the capture mean, °C.
-    DriftTemp,
-    /// |r|, r the rate along the axis, °/s.
-    RateAbs,
-    /// r·|r|, (°/s)².
-    RateSq,
-    /// Component k of the specific force from gravity in the package frame, g: gravity holds
-    /// the lab's −z1, so a table at rest feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2.
-    Gravity(usize),
-    /// The hat function of knot `knot` of stretch `stretch` (index into `Layout::stretches`) on
-    /// the grid of `Effect::DriftKnots(spacing_s)`: 1 at the knot, falling linearly to 0 at its
-    /// neighbours, 0 in every other stretch (`Layout::knots`).
-    DriftKnot {
-        /// Stretch index.
-        stretch: u16,
-        /// Knot index within the stretch, from 0 at its first used sample.
-        knot: u16,
-        /// Nominal knot spacing, s.
-        spacing_s: u16,
-    },
-}
-
-/// Intervals between knots over `span_s` at nominal spacing `spacing_s`: the span divided
-/// evenly, at least one.
-fn knot_intervals(span_s: (f64, f64), spacing_s: u16) -> usize {
-    (((span_s.1 - span_s.0) / f64::from(spacing_s.max(1))).round() as usize).max(1)
-}
-
-/// Longest gap between two runs of one pose that the free drift bridges, s: the gyro stays
-/// powered and mounted between them, so its offset is continuous, and a random walk of
-/// 0.005 °/s/√s (the top of issue 10's range) strays from the straight line across the gap by
-/// K·√(T/6) ≈ 0.011 °/s, what the 40-s knots allow within a run. Runs further apart, or in
-/// another pose (a remount handles the package), start a stretch of their own.
-pub const MAX_BRIDGED_GAP_S: f64 = 30.0;
-
-/// Runs one after another in one pose and on one clock, whose offset the free drift follows as
-/// one continuous curve.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Stretch {
-    /// The runs (indices into the data's runs), in time order.
-    pub runs: std::ops::Range<usize>,
-    /// Time of the first and last used sample of the stretch, s.
-    pub span_s: (f64, f64),
-    /// Longest gap between its runs, s (0 for one run).
-    pub max_gap_s: f64,
-}
-
-/// What of the data an effect's columns depend on: the poses present (a parameter set per
-/// pose) and the stretches of runs the free drift follows continuously.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Layout {
-    /// Poses, in order of first appearance.
-    pub poses: Vec<Pose>,
-    /// Consecutive runs of one pose on one clock, each gap at most [`MAX_BRIDGED_GAP_S`].
-    pub stretches: Vec<Stretch>,
-    /// Per run, its stretch.
-    pub run_stretch: Vec<usize>,
-    /// Per run, the first and last used sample's time, s.
-    pub run_spans_s: Vec<(f64, f64)>,
-}
-
-impl Layout {
-    /// The layout of runs in pose `poses_of_runs[r]` whose used samples span `spans_s[r]` (each
-    /// capture's clock starts at 0, so a run starting before the previous one ended is on
-    /// another clock).
-    pub fn new(poses: Vec<Pose>, poses_of_runs: &[Pose], spans_s: &[(f64, f64)]) -> Self {
-        let mut stretches: Vec<Stretch> = Vec::new();
-        let mut run_stretch = Vec::with_capacity(spans_s.len());
-        for (r, &(a, b)) in spans_s.iter().enumerate() {
-            match stretches.last_mut() {
-                Some(s)
-                    if poses_of_runs[r - 1] == poses_of_runs[r]
-                        && a > s.span_s.1
-                        && a - s.span_s.1 <= MAX_BRIDGED_GAP_S =>
-                {
-                    s.runs.end = r + 1;
-                    s.max_gap_s = s.max_gap_s.max(a - s.span_s.1);
-                    s.span_s.1 = b;
-                }
-                _ => stretches.push(Stretch { runs: r..r + 1, span_s: (a, b), max_gap_s: 0.0 }),
-            }
-            run_stretch.push(stretches.len() - 1);
-        }
-        Self { poses, stretches, run_stretch, run_spans_s: spans_s.to_vec() }
-    }
-
-    /// Whether knot column `c` has support in run `r` only: the level of that run alone, which
-    /// no other run can tell.
-    pub fn knot_only_in_run(&self, c: LinCol, r: usize) -> bool {
-        let LinCol::DriftKnot { stretch, knot, spacing_s } = c else {
-            return false;
-        };
-        let s = usize::from(stretch);
-        if self.run_stretch.get(r) != Some(&s) {
-            return false;
-        }
-        let (lo, hi) = self.knot_support_s(s, knot, spacing_s);
-        self.stretches[s].runs.clone().filter(|&q| q != r).all(|q| {
-            let (a, b) = self.run_spans_s[q];
-            b <= lo || a >= hi
-        })
-    }
-
-    /// Intervals between knots of stretch `s` at nominal spacing `spacing_s`: the span divided
-    /// evenly, at least one, and longer than the longest gap between its runs. Two knots then
-    /// never sit on a gap's two edges (which would leave the levels either side free, a level
-    /// per run again): a gap lies inside an interval, held by samples on both sides, or around
-    /// a knot that both sides share.
-    pub fn intervals(&self, s: usize, spacing_s: u16) -> usize {
-        let st = &self.stretches[s];
-        let n = knot_intervals(st.span_s, spacing_s);
-        if st.max_gap_s > 0.0 {
-            let longer_than_gap = ((st.span_s.1 - st.span_s.0) / st.max_gap_s).ceil() as usize;
-            n.min(longer_than_gap.saturating_sub(1)).max(1)
-        } else {
-            n
-        }
-    }
-
-    /// The knot grid of stretch `s` at nominal spacing `spacing_s`: its first knot's time, s,
-    /// and knots per second.
-    pub fn knot_grid(&self, s: usize, spacing_s: u16) -> (f64, f64) {
-        let (a, b) = self.stretches[s].span_s;
-        (a, self.intervals(s, spacing_s) as f64 / (b - a).max(1e-9))
-    }
-
-    /// Where knot `knot` of stretch `s` is non-zero, s.
-    pub fn knot_support_s(&self, s: usize, knot: u16, spacing_s: u16) -> (f64, f64) {
-        let (t0, per_s) = self.knot_grid(s, spacing_s);
-        let t = t0 + f64::from(knot) / per_s;
-        (t - 1.0 / per_s, t + 1.0 / per_s)
-    }
-
-    /// Whether some stretch holds runs at different base-table rates: the free drift's level is
-    /// then shared by runs whose constant rate terms (θ2'·M R_qᵀ e_z2, a table tilt's) differ,
-    /// so it does not hold those terms.
-    pub fn shares_levels_across_rates(&self, rates_dps: &[f64]) -> bool {
-        self.stretches.iter().any(|s| s.runs.clone().any(|r| (rates_dps[r] - rates_dps[s.runs.start]).abs() > 1e-9))
-    }
-
-    /// The knot columns of `Effect::DriftKnots(spacing_s)`: every knot of every stretch but the
-    /// first stretch's first, whose level is the offset column's (the hats of a stretch sum to
-    /// 1, so one knot overall must go for the offset to stay identifiable). The reported offset
-    /// is therefore the level at the first used sample of the first run.
-    pub fn knots(&self, spacing_s: u16) -> Vec<LinCol> {
-        (0..self.stretches.len())
-            .flat_map(|s| {
-                (0..=self.intervals(s, spacing_s)).filter(move |&k| s > 0 || k > 0).map(move |k| LinCol::DriftKnot {
-                    stretch: s as u16,
-                    knot: k as u16,
-                    spacing_s,
-                })
-            })
-            .collect()
-    }
-}
-
-/// A parameter shared by all axes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SharedPar {
-    /// Index offset δ, rad.
-    IndexOffset,
-    /// Delay τ, s.
-    Delay,
-    /// Combined phase, rad (same maths as the index offset).
-    Phase,
-    /// Warm-up time constant T, s.
-    DriftTau,
-    /// Tilt ε of the sensor-table axis from perpendicular to the base axis, rad.
-    TableTilt,
-    /// Lag of the sensor table behind the base per unit of speed, s: the transmission error's
-    /// argument is θ1 + θ1'·c (`Effect::GearLag`).
-    GearLag,
-    /// The filter's curvature κ, s²: output = M(ω + κ·ω̈) at the delayed time.
-    FilterCurvature,
-    /// Rotation of the pose-2 fixture against pose 1 about the pose-2 table axis x2, y2 or z2
-    /// (0, 1, 2), rad: R2 → (I + [e]×)·R2.
-    Fixture(usize),
-    /// Earth's rate along the base axis z1 (vertical), °/s.
-    EarthVertical,
-    /// Earth's horizontal rate, the component along the direction the base points to when the
-    /// index reads θ2 = 0, °/s.
-    EarthNorthAtZero,
-    /// The horizontal component 90° further on, °/s.
-    EarthWestAtZero,
-    /// Relative table-speed ripple at `order`× θ2 in one pose: θ2' → θ2'(1 + a·cos nθ2 + b·sin nθ2),
-    /// with the matching angle ripple; `quadrature` selects b. The ripple is tied to the gear mesh,
-    /// whose phase against the index holds while the table stays engaged; a remount can re-seat it,
-    /// so each pose has its own pair (`Effect::TableHarmonic`).
-    Harmonic {
-        /// n.
-        order: u32,
-        /// false: a (cosine in speed), true: b (sine in speed).
-        quadrature: bool,
-        /// The pose (mount) the pair holds for.
-        pose: Pose,
-    },
-}
-
-/// A range a fitted parameter is held in, beyond which the model stops describing the rig.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Bound {
-    /// Lowest value, in the parameter's unit.
-    pub lo: f64,
-    /// Highest value.
-    pub hi: f64,
-    /// What the parameter is, as an error message says it.
-    pub what: &'static str,
-    /// Its unit.
-    pub unit: &'static str,
-}
-
-/// How a parameter is reported: its name, the factor from its fitted unit to the reported one,
-/// and the reported unit.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Reported {
-    /// Name.
-    pub name: String,
-    /// Reported value per fitted value.
-    pub scale: f64,
-    /// Reported unit.
-    pub unit: &'static str,
-}
-
-impl Reported {
-    fn new(name: impl Into<String>, scale: f64, unit: &'static str) -> Self {
-        Self { name: name.into(), scale, unit }
-    }
-}
-
-impl SharedPar {
-    /// The range the fit holds it in, if any (the others are small angles and rates that the
-    /// data bounds by itself).
-    pub fn bound(self) -> Option<Bound> {
-        match self {
-            SharedPar::Delay => Some(Bound { lo: -MAX_DELAY_S, hi: MAX_DELAY_S, what: "delay", unit: "s" }),
-            SharedPar::DriftTau => Some(Bound {
-                lo: DRIFT_TAU_RANGE_S.0,
-                hi: DRIFT_TAU_RANGE_S.1,
-                what: "warm-up time constant",
-                unit: "s",
-            }),
-            SharedPar::IndexOffset
-            | SharedPar::Phase
-            | SharedPar::TableTilt
-            | SharedPar::GearLag
-            | SharedPar::FilterCurvature
-            | SharedPar::Fixture(_)
-            | SharedPar::EarthVertical
-            | SharedPar::EarthNorthAtZero
-            | SharedPar::EarthWestAtZero
-            | SharedPar::Harmonic { .. } => None,
-        }
-    }
-
-    /// Its name and reported unit.
-    pub fn reported(self) -> Reported {
-        let deg = 180.0 / std::f64::consts::PI;
-        match self {
-            SharedPar::Delay => Reported::new("delay τ", 1e3, "ms"),
-            SharedPar::IndexOffset => Reported::new("index offset δ", deg, "°"),
-            SharedPar::Phase => Reported::new("phase δ − θ2'·τ", deg, "°"),
-            SharedPar::DriftTau => Reported::new("warm-up time constant T", 1.0, "s"),
-            SharedPar::GearLag => Reported::new("gear lag per unit of speed", 1e3, "ms"),
-            SharedPar::TableTilt => Reported::new("sensor-table axis tilt ε", deg, "°"),
-            SharedPar::FilterCurvature => Reported::new("filter curvature κ (gain 1 − κω²)", 1e6, "ms²"),
-            SharedPar::Fixture(k) => {
-                Reported::new(format!("pose-2 fixture rotation about {}2", ['x', 'y', 'z'][k]), deg, "°")
-            }
-            SharedPar::EarthVertical => Reported::new("Earth rate, vertical", 3600.0, "°/h"),
-            SharedPar::EarthNorthAtZero => Reported::new("Earth rate, horizontal at θ2 = 0", 3600.0, "°/h"),
-            SharedPar::EarthWestAtZero => Reported::new("Earth rate, horizontal 90° on", 3600.0, "°/h"),
-            SharedPar::Harmonic { order, quadrature, pose } => Reported::new(
-                format!("table-speed ripple {order}× {}, {pose}", if quadrature { "sin" } else { "cos" }),
-                1e6,
-                "ppm of θ2'",
-            ),
-        }
-    }
-}
-
-impl LinCol {
-    /// Its name and reported unit per °/s of the axis's sensitivity (the coefficient is fitted
-    /// in counts), for the columns an effect adds; None for the base model's (reported as M and
-    /// the offsets), the free drift's knots (reported as the drift table) and the candidate
-    /// warm-ups' fixed time constants (never in a fitted model). `full_scale_dps` is the gyro's
-    /// range, the natural unit of a non-linearity.
-    pub fn reported(self, full_scale_dps: f64) -> Option<Reported> {
-        match self {
-            LinCol::DriftExp => Some(Reported::new("warm-up drift at the first sample", 1.0, "°/s")),
-            LinCol::DriftT1 => Some(Reported::new("drift, linear term (over the half-span)", 1.0, "°/s")),
-            LinCol::DriftT2 => Some(Reported::new("drift, quadratic term", 1.0, "°/s")),
-            LinCol::DriftTemp => Some(Reported::new("offset vs temperature", 1.0, "°/s per °C")),
-            LinCol::RateAbs => Some(Reported::new("scale asymmetry (|r| term)", 1e6, "ppm of |r|")),
-            LinCol::RateSq => {
-                Some(Reported::new("odd quadratic (r·|r|) at full scale", 100.0 * full_scale_dps, "% of full scale"))
-            }
-            LinCol::Gravity(k) => {
-                Some(Reported::new(format!("g-sensitivity along package {}", AXES[k]), 1.0, "°/s per g"))
-            }
-            LinCol::Omega(_) | LinCol::One | LinCol::DriftExpFixed(_) | LinCol::DriftKnot { .. } => None,
-        }
-    }
-}
-
-/// Any column of the accumulation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Col {
-    /// Per-axis linear.
-    Lin(LinCol),
-    /// Jacobian of a shared parameter.
-    Shared(SharedPar),
-}
-
-/// The columns an effect adds, for data laid out as `layout`.
-pub fn effect_columns(e: Effect, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
-    let poses = &layout.poses;
-    match e {
-        Effect::DriftKnots(spacing_s) => (layout.knots(spacing_s), vec![]),
-        Effect::Delay => (vec![], vec![SharedPar::Delay]),
-        Effect::IndexOffset => (vec![], vec![SharedPar::IndexOffset]),
-        Effect::Phase => (vec![], vec![SharedPar::Phase]),
-        Effect::DriftWarmUp => (vec![LinCol::DriftExp], vec![SharedPar::DriftTau]),
-        Effect::DriftPolynomial => (vec![LinCol::DriftT1, LinCol::DriftT2], vec![]),
-        Effect::DriftTemperature => (vec![LinCol::DriftTemp], vec![]),
-        Effect::RateScale => (vec![LinCol::RateAbs, LinCol::RateSq], vec![]),
-        Effect::GSensitivity => (vec![LinCol::Gravity(0), LinCol::Gravity(1), LinCol::Gravity(2)], vec![]),
-        Effect::TableTilt => (vec![], vec![SharedPar::TableTilt]),
-        Effect::PoseFixture => (vec![], vec![SharedPar::Fixture(2)]),
-        Effect::FilterGain => (vec![], vec![SharedPar::FilterCurvature]),
-        Effect::GearLag => (vec![], vec![SharedPar::GearLag]),
-        Effect::EarthRotation => {
-            (vec![], vec![SharedPar::EarthVertical, SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
-        }
-        Effect::EarthRotationAtLatitude | Effect::EarthRotationHorizontal => {
-            (vec![], vec![SharedPar::EarthNorthAtZero, SharedPar::EarthWestAtZero])
-        }
-        Effect::TableHarmonic(order) => (
-            vec![],
-            poses
-                .iter()
-                .flat_map(|&pose| [false, true].map(|quadrature| SharedPar::Harmonic { order, quadrature, pose }))
-                .collect(),
-        ),
-    }
-}
 
 /// Which kinematic samples of a run the loop uses: those clear of the run's ends and gaps by
 /// [`MAX_DELAY_S`], i.e. one index range per stretch between gaps (a handful per run), held as
@@ -694,7 +329,7 @@ impl Model {
     /// The model with `effect` added, its linear coefficients and shared parameters set from
     /// `init_lin` (per axis, one per new linear column) and `init_shared`.
     pub fn with(&self, effect: Effect, init_lin: [Vec<f64>; 3], init_shared: Vec<f64>) -> Self {
-        let (lin, shared) = effect_columns(effect, &self.layout);
+        let (lin, shared) = effect.params(&self.layout);
         let mut m = self.clone();
         m.effects.push(effect);
         m.lin.extend(lin);
@@ -708,7 +343,7 @@ impl Model {
 
     /// The model with `effect` taken out (its columns and parameters), the rest as fitted.
     pub fn without(&self, effect: Effect) -> Self {
-        let (lin, shared) = effect_columns(effect, &self.layout);
+        let (lin, shared) = effect.params(&self.layout);
         let mut m = self.clone();
         m.effects.retain(|&e| e != effect);
         let keep_lin: Vec<bool> = self.lin.iter().map(|c| !lin.contains(c)).collect();
@@ -724,6 +359,19 @@ impl Model {
         m
     }
 
+    /// Whether shared parameter `p` only shapes its effect's linear columns and these are all 0
+    /// (a warm-up's time constant while its amplitude is 0): its Jacobian is then 0, and the
+    /// effect is absent whatever its value.
+    pub fn shapes_only_zero_columns(&self, p: SharedPar) -> bool {
+        let mut own = self.lin.iter().enumerate().filter(|(_, c)| matches!(c, LinCol::Of(e, _) if *e == p.effect));
+        let mut any = false;
+        let all_zero = own.all(|(i, _)| {
+            any = true;
+            (0..3).all(|a| self.beta[a][i] == 0.0)
+        });
+        any && all_zero
+    }
+
     fn update_directions(&mut self) {
         let m = self.m();
         for a in 0..3 {
@@ -735,121 +383,13 @@ impl Model {
     }
 }
 
-/// Kinematics at one sample under a model's shared parameters.
-#[derive(Debug, Clone, Copy)]
-pub struct Point {
-    /// ω_s, °/s.
-    pub omega: [f64; 3],
-    /// ∂ω_s/∂θ2, °/s per rad.
-    pub d_theta2: [f64; 3],
-    /// ∂ω_s/∂θ2' = R_qᵀ e_z2.
-    pub d_rate2: [f64; 3],
-    /// θ2 before the table-speed ripple, rad (index offset, phase and delay applied).
-    pub theta2_rad: f64,
-    /// θ2' before ripple, °/s.
-    pub rate2_dps: f64,
-    /// θ2' with ripple, °/s.
-    pub rate2_eff_dps: f64,
-    /// ∂θ2_eff/∂θ2 through the ripple's angle term (1 without ripple).
-    pub dtheta_eff: f64,
-    /// ∂θ2'_eff/∂θ2 through the ripple's speed term, °/s per rad.
-    pub drate_eff_dps: f64,
-    /// Time from the capture's first sample, s.
-    pub t_rel_s: f64,
-    /// Time scaled to [−1, 1].
-    pub t_scaled: f64,
-    /// Smoothed temperature from the capture mean, °C (NaN unless a column needs it, or the
-    /// evaluator is [`Evaluator::new`]'s).
-    pub temp_c: f64,
-    /// The gear mesh's angle, rad: the transmission error's argument (index-referenced θ2 with
-    /// the gear lag).
-    pub mesh_rad: f64,
-    /// The run's pose (the transmission error has a parameter set per pose).
-    pub pose: Pose,
-    /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame.
-    /// Horizontal parts NaN unless the evaluator's columns need them (`Evaluator::for_columns`).
-    pub d_earth: [[f64; 3]; 3],
-    /// ω̈ in the package frame, °/s³ (∂ω_s/∂κ).
-    pub d_filter: [f64; 3],
-    /// ∂ω_s/∂(pose-2 fixture rotation about x2, y2, z2), °/s per rad (zero outside pose 2).
-    /// NaN unless the evaluator's columns need it.
-    pub d_fixture: [[f64; 3]; 3],
-    /// ∂ω_s/∂ε through the in-plane part's cos ε, °/s per rad.
-    pub d_tilt: [f64; 3],
-    /// cos ε of the table tilt.
-    pub cos_tilt: f64,
-    /// θ1', rad/s.
-    pub theta1_rate_rad_s: f64,
-    /// θ1', °/s.
-    pub theta1_rate_dps: f64,
-    /// The run's index in the data.
-    pub run: usize,
-    /// The sample's time on its capture's clock, s.
-    pub t_s: f64,
-    /// The run's stretch (`Layout::stretches`).
-    pub stretch: usize,
-    /// Where the sample lies on the free drift's knot grid of each of
-    /// [`DRIFT_KNOT_SPACINGS_S`] in its stretch, in intervals from the first knot (computed once
-    /// per sample: the knots are dozens of columns).
-    pub knot_x: [f64; DRIFT_KNOT_SPACINGS_S.len()],
-}
-
-/// Values derived from a model once per pass.
-#[derive(Debug, Clone)]
-struct Shifts {
-    delay_s: f64,
-    theta2_offset_rad: f64,
-    drift_tau_s: f64,
-    /// Earth's rate: vertical, and the two horizontal components, °/s.
-    earth_dps: [f64; 3],
-    /// Filter curvature κ, s².
-    filter_s2: f64,
-    /// Gear lag c, s.
-    gear_lag_s: f64,
-    /// sin and cos of the table tilt ε (once per evaluator, not per sample).
-    tilt_sin_cos: (f64, f64),
-    /// Pose-2 fixture rotation, rad.
-    fixture_rad: [f64; 3],
-    /// (n, pose, a, b) of each ripple harmonic.
-    ripple: Vec<(u32, Pose, f64, f64)>,
-}
-
-impl Shifts {
-    fn of(m: &Model) -> Self {
-        let mut ripple: Vec<(u32, Pose, f64, f64)> = Vec::new();
-        for (&p, &v) in m.shared.iter().zip(&m.theta) {
-            if let SharedPar::Harmonic { order, quadrature, pose } = p {
-                let i = match ripple.iter().position(|h| h.0 == order && h.1 == pose) {
-                    Some(i) => i,
-                    None => {
-                        ripple.push((order, pose, 0.0, 0.0));
-                        ripple.len() - 1
-                    }
-                };
-                if quadrature {
-                    ripple[i].3 = v;
-                } else {
-                    ripple[i].2 = v;
-                }
-            }
-        }
-        Self {
-            delay_s: m.theta_of(SharedPar::Delay).unwrap_or(0.0),
-            theta2_offset_rad: m.theta_of(SharedPar::IndexOffset).unwrap_or(0.0)
-                + m.theta_of(SharedPar::Phase).unwrap_or(0.0),
-            drift_tau_s: m.theta_of(SharedPar::DriftTau).unwrap_or(1.0),
-            filter_s2: m.theta_of(SharedPar::FilterCurvature).unwrap_or(0.0),
-            gear_lag_s: m.theta_of(SharedPar::GearLag).unwrap_or(0.0),
-            tilt_sin_cos: m.theta_of(SharedPar::TableTilt).unwrap_or(0.0).sin_cos(),
-            fixture_rad: std::array::from_fn(|k| m.theta_of(SharedPar::Fixture(k)).unwrap_or(0.0)),
-            earth_dps: [
-                m.theta_of(SharedPar::EarthVertical).unwrap_or(m.earth_vertical_known_dps),
-                m.theta_of(SharedPar::EarthNorthAtZero).unwrap_or(0.0),
-                m.theta_of(SharedPar::EarthWestAtZero).unwrap_or(0.0),
-            ],
-            ripple,
-        }
+/// The kinematic chain's inputs at a model's values: each shared parameter's effect sets its own.
+fn shifts_of(m: &Model) -> Shifts {
+    let mut s = Shifts::nominal(m.earth_vertical_known_dps);
+    for (&p, &v) in m.shared.iter().zip(&m.theta) {
+        p.effect.behaviour(|b| b.shift(p.k, v, &mut s));
     }
+    s
 }
 
 /// θ2 and θ1' at `t_i − delay` by linear interpolation between the neighbouring samples (the
@@ -918,7 +458,7 @@ impl ColPlan {
             let Col::Lin(LinCol::DriftKnot { stretch, knot, spacing_s }) = c else {
                 plan.has_shared |= matches!(c, Col::Shared(_));
                 plan.dense.push((j, c));
-                plan.common.push(matches!(c, Col::Lin(l) if !matches!(l, LinCol::RateAbs | LinCol::RateSq)));
+                plan.common.push(matches!(c, Col::Lin(l) if l.is_common()));
                 continue;
             };
             let stretch = usize::from(stretch);
@@ -945,23 +485,6 @@ impl ColPlan {
     }
 }
 
-/// What a column's value on one axis is made of, per sample (`Evaluator::axis_terms`).
-struct AxisTerms {
-    /// ∂(output)/∂ω_s, counts per °/s.
-    u: [f64; 3],
-    /// ∂(output)/∂θ2, counts per rad.
-    e2: f64,
-    /// ∂(output)/∂θ2', counts per °/s.
-    ez: f64,
-    /// Moving θ2 (before ripple) moves the rippled angle and speed too.
-    d_shift: f64,
-}
-
-impl AxisTerms {
-    /// For a plan with no shared column, which reads none of them.
-    const UNUSED: AxisTerms = AxisTerms { u: [f64::NAN; 3], e2: f64::NAN, ez: f64::NAN, d_shift: f64::NAN };
-}
-
 /// Evaluates columns and predictions at samples for one model.
 pub struct Evaluator<'a> {
     data: &'a LoopData,
@@ -972,11 +495,10 @@ pub struct Evaluator<'a> {
     rot_t: Vec<[[f64; 3]; 3]>,
     /// Axis directions for the rate-scale columns.
     s_hat: [[f64; 3]; 3],
-    /// ∂f/∂ω_s pieces per axis: the row of M, and the rate-scale coefficients.
+    /// ∂f/∂ω_s pieces per axis: the row of M, and the model's columns that depend on the axis's
+    /// own rate with their coefficients (their slope adds to it along the axis).
     m_rows: [[f64; 3]; 3],
-    c_abs: [f64; 3],
-    c_sq: [f64; 3],
-    c_exp: [f64; 3],
+    rate_cols: Vec<(Effect, u16, [f64; 3])>,
     /// Per stretch and knot spacing of [`DRIFT_KNOT_SPACINGS_S`]: the first knot's time, s, and
     /// knots per second.
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
@@ -1011,22 +533,25 @@ impl<'a> Evaluator<'a> {
     /// own columns): what no column needs, a point leaves out (NaN), so a pass pays only for
     /// the Jacobians it uses.
     pub fn for_columns(data: &'a LoopData, model: &'a Model, cols: &[Col]) -> Self {
-        let wants = |f: &dyn Fn(SharedPar) -> bool| {
-            model.shared.iter().any(|&p| f(p)) || cols.iter().any(|c| matches!(c, Col::Shared(p) if f(*p)))
-        };
-        let needs_heading = wants(&|p| matches!(p, SharedPar::EarthNorthAtZero | SharedPar::EarthWestAtZero));
-        let needs_fixture = wants(&|p| matches!(p, SharedPar::Fixture(_)));
+        let needs = model.cols().iter().chain(cols).fold(Needs::NONE, |n, c| n.or(c.needs()));
         let plain = model.shared.is_empty()
             && model.earth_vertical_known_dps == 0.0
             && !cols.iter().any(|c| matches!(c, Col::Shared(_)));
-        let needs_temperature =
-            model.lin.contains(&LinCol::DriftTemp) || cols.iter().any(|c| matches!(c, Col::Lin(LinCol::DriftTemp)));
         let m = model.m();
-        let coef = |c: LinCol| std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0));
+        let rate_cols = model
+            .lin
+            .iter()
+            .filter_map(|&c| match c {
+                LinCol::Of(e, k) if !c.is_common() => {
+                    Some((e, k, std::array::from_fn(|a| model.beta_of(a, c).unwrap_or(0.0))))
+                }
+                _ => None,
+            })
+            .collect();
         Self {
             data,
             model,
-            shifts: Shifts::of(model),
+            shifts: shifts_of(model),
             rot_t: data
                 .kin
                 .runs
@@ -1035,17 +560,15 @@ impl<'a> Evaluator<'a> {
                 .collect(),
             s_hat: model.s_hat.map(|v| [v[0], v[1], v[2]]),
             m_rows: std::array::from_fn(|a| [m[(a, 0)], m[(a, 1)], m[(a, 2)]]),
-            c_abs: coef(LinCol::RateAbs),
-            c_sq: coef(LinCol::RateSq),
-            c_exp: coef(LinCol::DriftExp),
+            rate_cols,
             knot_grid: (0..data.layout.stretches.len())
                 .map(|st| std::array::from_fn(|k| data.layout.knot_grid(st, DRIFT_KNOT_SPACINGS_S[k])))
                 .collect(),
             lin_plan: ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c))),
-            needs_heading,
-            needs_fixture,
+            needs_heading: needs.heading,
+            needs_fixture: needs.fixture,
             plain,
-            needs_temperature,
+            needs_temperature: needs.temperature,
             temperatures: Default::default(),
         }
     }
@@ -1251,24 +774,20 @@ impl<'a> Evaluator<'a> {
         dot(&self.s_hat[a], &p.omega)
     }
 
+    /// What of the model an effect's column reads.
+    #[inline]
+    fn cx(&self) -> Ctx<'_> {
+        Ctx { shifts: &self.shifts, s_hat: &self.s_hat, lin: &self.model.lin, beta: &self.model.beta }
+    }
+
     /// A linear column's value on axis `a`.
     #[inline]
     pub fn lin_value(&self, c: LinCol, p: &Point, a: usize) -> f64 {
         match c {
             LinCol::Omega(k) => p.omega[k],
             LinCol::One => 1.0,
-            LinCol::DriftExp => decay(p.t_rel_s, self.shifts.drift_tau_s),
+            LinCol::Of(e, k) => e.behaviour(|b| b.value(Own::Lin(k), p, a, &AxisTerms::UNUSED, &self.cx())),
             LinCol::DriftExpFixed(t) => decay(p.t_rel_s, t),
-            LinCol::DriftT1 => p.t_scaled,
-            LinCol::DriftT2 => 0.5 * (3.0 * p.t_scaled * p.t_scaled - 1.0),
-            LinCol::DriftTemp => p.temp_c,
-            LinCol::RateAbs => self.axis_rate(p, a).abs(),
-            LinCol::RateSq => {
-                let r = self.axis_rate(p, a);
-                r * r.abs()
-            }
-            // z1 in the package frame is the vertical column of Earth's basis.
-            LinCol::Gravity(k) => p.d_earth[0][k],
             LinCol::DriftKnot { stretch, knot, spacing_s } => {
                 if p.stretch != usize::from(stretch) {
                     return 0.0;
@@ -1357,7 +876,10 @@ impl<'a> Evaluator<'a> {
     #[inline]
     fn gradient(&self, p: &Point, a: usize) -> [f64; 3] {
         let r = self.axis_rate(p, a);
-        let g = self.c_abs[a] * r.signum() + 2.0 * self.c_sq[a] * r.abs();
+        let mut g = 0.0;
+        for &(e, k, beta) in &self.rate_cols {
+            g += beta[a] * e.behaviour(|b| b.rate_slope(k, r)).unwrap_or(0.0);
+        }
         std::array::from_fn(|i| self.m_rows[a][i] + self.s_hat[a][i] * g)
     }
 
@@ -1372,36 +894,9 @@ impl<'a> Evaluator<'a> {
     /// A column's value on axis `a` at `p`; knots are evaluated through [`ColPlan`].
     #[inline]
     fn column_value(&self, c: Col, p: &Point, a: usize, t: &AxisTerms) -> f64 {
-        let AxisTerms { u, e2, ez, d_shift } = *t;
         match c {
             Col::Lin(lc) => self.lin_value(lc, p, a),
-            // The index offset moves θ2 but not the gear mesh's angle (the ripple).
-            Col::Shared(SharedPar::IndexOffset) => e2,
-            Col::Shared(SharedPar::Phase) => d_shift,
-            Col::Shared(SharedPar::FilterCurvature) => dot(&u, &p.d_filter),
-            Col::Shared(SharedPar::TableTilt) => ez * p.theta1_rate_dps * p.cos_tilt + dot(&u, &p.d_tilt),
-            // Moving the gear angle moves the rippled angle by (ripple − 1) and the
-            // rippled speed by θ2'·∂ripple/∂θ.
-            Col::Shared(SharedPar::GearLag) => p.theta1_rate_rad_s * (e2 * (p.dtheta_eff - 1.0) + ez * p.drate_eff_dps),
-            Col::Shared(SharedPar::Fixture(k)) => dot(&u, &p.d_fixture[k]),
-            Col::Shared(SharedPar::EarthVertical) => dot(&u, &p.d_earth[0]),
-            Col::Shared(SharedPar::EarthNorthAtZero) => dot(&u, &p.d_earth[1]),
-            Col::Shared(SharedPar::EarthWestAtZero) => dot(&u, &p.d_earth[2]),
-            Col::Shared(SharedPar::Delay) => -p.rate2_dps.to_radians() * d_shift,
-            Col::Shared(SharedPar::DriftTau) => {
-                let t = self.shifts.drift_tau_s;
-                self.c_exp[a] * decay(p.t_rel_s, t) * p.t_rel_s / (t * t)
-            }
-            Col::Shared(SharedPar::Harmonic { pose, .. }) if pose != p.pose => 0.0,
-            Col::Shared(SharedPar::Harmonic { order, quadrature, .. }) => {
-                let n = f64::from(order);
-                let (sn, cn) = (n * p.mesh_rad).sin_cos();
-                if quadrature {
-                    -e2 * cn / n + ez * p.rate2_dps * sn
-                } else {
-                    e2 * sn / n + ez * p.rate2_dps * cn
-                }
-            }
+            Col::Shared(sp) => sp.effect.behaviour(|b| b.value(Own::Shared(sp.k), p, a, t, &self.cx())),
         }
     }
 
@@ -1457,19 +952,6 @@ fn earth_basis((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> [[f64; 3]; 3] {
     [[s2, c2, 0.0], [-s1 * c2, s1 * s2, c1], [c1 * c2, -c1 * s2, s1]]
 }
 
-/// exp(−t/τ), 0 beyond 700 time constants: exp would return 1e-304 or a subnormal there, and
-/// glibc takes a slow path for the underflow (6 % of a 1-h calibration, from the warm-up
-/// candidates' short τ late in a long capture).
-#[inline]
-fn decay(t_s: f64, tau_s: f64) -> f64 {
-    let x = t_s / tau_s;
-    if x > 700.0 {
-        0.0
-    } else {
-        (-x).exp()
-    }
-}
-
 /// a × b.
 #[inline]
 fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
@@ -1500,11 +982,6 @@ pub fn harmonics_of(theta_rad: f64) -> [(f64, f64); MAX_HARMONIC_ORDER + 1] {
         h[n] = (sp * c4 + cp * s4, cp * c4 - sp * s4);
     }
     h
-}
-
-#[inline]
-fn dot(x: &[f64; 3], y: &[f64; 3]) -> f64 {
-    x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 }
 
 /// Sums of one run (or several) for columns `l`: per axis the Gram matrix, Xᵀe, eᵀe and the
@@ -1869,15 +1346,11 @@ pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, C
     let mut model = start;
     let cols = model.cols();
     let nl = model.lin.len();
-    let linear_only = model.shared.is_empty() && !model.lin.contains(&LinCol::RateAbs);
+    let linear_only = model.shared.is_empty() && model.lin.iter().all(|c| c.is_common());
     for pass in 1..=MAX_ITERATIONS {
         let per_run = accumulate(data, &model, &cols);
         let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
-        let frozen: Vec<bool> = model
-            .shared
-            .iter()
-            .map(|&p| p == SharedPar::DriftTau && (0..3).all(|a| model.beta_of(a, LinCol::DriftExp) == Some(0.0)))
-            .collect();
+        let frozen: Vec<bool> = model.shared.iter().map(|&p| model.shapes_only_zero_columns(p)).collect();
         let sel = Selection {
             lin: (0..nl).collect(),
             shared: (0..model.shared.len()).filter(|&k| !frozen[k]).map(|k| nl + k).collect(),
@@ -1921,17 +1394,9 @@ fn singular(model: &Model, total: &Gram, data: &LoopData) -> CalError {
     CalError::Unidentifiable { effects: model.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ") }
 }
 
-/// The harmonics in the catalogue, as effects.
-pub fn harmonic_effects() -> impl Iterator<Item = Effect> {
-    HARMONIC_ORDERS.map(Effect::TableHarmonic)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    const SPANS: [(f64, f64); 5] = [(1.5, 111.5), (123.5, 233.5), (245.5, 355.5), (367.5, 477.5), (2.0, 100.0)];
-    const POSES: [Pose; 5] = [Pose::One, Pose::One, Pose::Two, Pose::Two, Pose::Two];
 
     #[test]
     fn a_step_past_a_bound_stops_at_it() {
@@ -1941,79 +1406,41 @@ mod tests {
             std::array::from_fn(|_| vec![0.0]),
             vec![600.0],
         );
+        let delay = SharedPar { effect: Effect::Delay, k: 0 };
+        let tau = SharedPar { effect: Effect::DriftWarmUp, k: 0 };
+        let tau_range = tau.bound().map(|b| (b.lo, b.hi)).unwrap();
+        assert_eq!(tau_range, (1.0, 1e5));
         let nl = m.lin.len();
-        for (step, delay_s, tau_s) in
-            [(1.0, MAX_DELAY_S, DRIFT_TAU_RANGE_S.1), (-1.0, -MAX_DELAY_S, DRIFT_TAU_RANGE_S.0)]
-        {
+        for (step, delay_s, tau_s) in [(1.0, MAX_DELAY_S, tau_range.1), (-1.0, -MAX_DELAY_S, tau_range.0)] {
             let mut moved = m.clone();
             let mut delta = DVector::zeros(3 * nl + 2);
             delta[3 * nl] = step;
             delta[3 * nl + 1] = step * 1e9;
             apply_step(&mut moved, nl, &delta, &[false, false]);
-            assert_eq!(moved.theta_of(SharedPar::Delay), Some(delay_s));
-            assert_eq!(moved.theta_of(SharedPar::DriftTau), Some(tau_s));
+            assert_eq!(moved.theta_of(delay), Some(delay_s));
+            assert_eq!(moved.theta_of(tau), Some(tau_s));
         }
         // The angles and rates are bounded by the data alone.
-        assert_eq!(SharedPar::IndexOffset.bound(), None);
-        assert_eq!(SharedPar::Delay.bound().map(|b| (b.what, b.unit)), Some(("delay", "s")));
+        assert_eq!(SharedPar { effect: Effect::IndexOffset, k: 0 }.bound(), None);
+        assert_eq!(delay.bound().map(|b| (b.what, b.unit)), Some(("delay", "s")));
     }
 
     #[test]
     fn effect_parameters_are_reported_in_their_units() {
-        let r = SharedPar::Delay.reported();
+        let r = SharedPar { effect: Effect::Delay, k: 0 }.reported();
         assert_eq!((r.name.as_str(), r.scale, r.unit), ("delay τ", 1e3, "ms"));
-        let r = SharedPar::Harmonic { order: 12, quadrature: true, pose: Pose::Two }.reported();
+        // Parameter 3 of a harmonic is pose 2's sine.
+        let r = SharedPar { effect: Effect::TableHarmonic(12), k: 3 }.reported();
         assert_eq!(r.name, "table-speed ripple 12× sin, pose 2");
         // r·|r| per (°/s)² at 500 °/s full scale is 5e4 % of full scale per unit.
-        let r = LinCol::RateSq.reported(500.0).unwrap();
+        let r = LinCol::Of(Effect::RateScale, 1).reported(500.0).unwrap();
         assert_eq!((r.scale, r.unit), (5e4, "% of full scale"));
-        assert_eq!(LinCol::Gravity(1).reported(500.0).unwrap().name, "g-sensitivity along package y");
+        let r = LinCol::Of(Effect::GSensitivity, 1).reported(500.0).unwrap();
+        assert_eq!(r.name, "g-sensitivity along package y");
         // The base columns are M and the offsets, the knots the drift table: not effect parameters.
         for c in [LinCol::Omega(0), LinCol::One, LinCol::DriftKnot { stretch: 0, knot: 1, spacing_s: 40 }] {
             assert_eq!(c.reported(500.0), None);
         }
-    }
-
-    #[test]
-    fn a_stretch_is_the_runs_of_one_pose_on_one_clock_close_in_time() {
-        let l = Layout::new(vec![Pose::One, Pose::Two], &POSES, &SPANS);
-        // Runs 1-2 (pose 1, 12 s apart) and 3-4 (pose 2) join; run 5 restarts the clock.
-        assert_eq!(l.run_stretch, [0, 0, 1, 1, 2]);
-        assert_eq!(l.stretches[0], Stretch { runs: 0..2, span_s: (1.5, 233.5), max_gap_s: 12.0 });
-        assert_eq!(l.stretches[2], Stretch { runs: 4..5, span_s: (2.0, 100.0), max_gap_s: 0.0 });
-        // A gap beyond MAX_BRIDGED_GAP_S splits.
-        let far = [(0.0, 100.0), (100.0 + MAX_BRIDGED_GAP_S + 1.0, 200.0)];
-        assert_eq!(Layout::new(vec![Pose::One], &[Pose::One; 2], &far).run_stretch, [0, 1]);
-        // Every knot of every stretch but the very first: 232 s at 40 s is 6 intervals, 7 knots.
-        assert_eq!(l.intervals(0, 40), 6);
-        assert_eq!(l.knots(40).len(), 6 + 7 + (1 + 2));
-    }
-
-    #[test]
-    fn knots_are_further_apart_than_a_gap_they_bridge() {
-        let l = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (125.0, 225.0)]);
-        // 225 s at 10 s would be 22 intervals; the 25-s gap caps them at 8 (28.125 s each).
-        assert_eq!(l.intervals(0, 10), 8);
-        assert_eq!(l.knot_grid(0, 10), (0.0, 8.0 / 225.0));
-        let knot = |k: u16| LinCol::DriftKnot { stretch: 0, knot: k, spacing_s: 10 };
-        // Knot 3 (84.4 s) is the first run's alone, knot 5 (140.6 s) the second's; knot 4
-        // (112.5 s, in the gap) reaches both, and ties their levels.
-        assert!(l.knot_only_in_run(knot(3), 0));
-        assert!(l.knot_only_in_run(knot(5), 1));
-        assert!(!l.knot_only_in_run(knot(4), 0) && !l.knot_only_in_run(knot(4), 1));
-        assert!(!l.knot_only_in_run(knot(1), 1));
-        // A gap of exactly two intervals' worth still gets intervals longer than itself.
-        let l = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (125.0, 250.0)]);
-        assert_eq!(l.intervals(0, 10), 9);
-    }
-
-    #[test]
-    fn levels_are_shared_across_rates_only_when_a_stretch_holds_two() {
-        let l = Layout::new(vec![Pose::One, Pose::Two], &POSES, &SPANS);
-        assert!(l.shares_levels_across_rates(&[180.0, -180.0, 180.0, -180.0, 90.0]));
-        assert!(!l.shares_levels_across_rates(&[180.0, 180.0, 90.0, 90.0, 90.0]));
-        let apart = Layout::new(vec![Pose::One], &[Pose::One; 2], &[(0.0, 100.0), (0.0, 100.0)]);
-        assert!(!apart.shares_levels_across_rates(&[180.0, -180.0]));
     }
 
     /// The ranges mark exactly the samples the per-sample rule marks (clear of both ends and of

@@ -281,7 +281,7 @@ fn shared_parameter_jacobians_match_finite_differences() {
     // The fixture's tilts about x2 and y2 are not an effect of their own (catalogue), but their
     // Jacobian is the same code: check it too.
     let mut model = model;
-    model.shared.extend([SharedPar::Fixture(0), SharedPar::Fixture(1)]);
+    model.shared.extend([0, 1].map(|k| SharedPar { effect: Effect::PoseFixture, k }));
     model.theta.extend([0.002, -0.001]);
     let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
     let ev = Evaluator::new(&data, &model);
@@ -290,9 +290,9 @@ fn shared_parameter_jacobians_match_finite_differences() {
         let p = ev.point(r, i);
         ev.fill(&p, &cols, &mut jac);
         for (k, &par) in model.shared.iter().enumerate() {
-            let h = match par {
-                SharedPar::Delay => 1e-5,
-                SharedPar::DriftTau => 1e-3,
+            let h = match par.effect {
+                Effect::Delay => 1e-5,
+                Effect::DriftWarmUp => 1e-3,
                 _ => 1e-6,
             };
             let shifted = |d: f64| {
@@ -309,7 +309,7 @@ fn shared_parameter_jacobians_match_finite_differences() {
                 // The delay's Jacobian leaves out θ1''·τ (the fit evaluates the delayed
                 // kinematics exactly; only its convergence rate depends on the Jacobian); speed
                 // ripple and the encoder's quantisation in θ1' put θ1'' into the difference.
-                let tol = if par == SharedPar::Delay { 0.15 } else { 1e-4 };
+                let tol = if par.effect == Effect::Delay { 0.15 } else { 1e-4 };
                 assert!(
                     (numeric - analytic).abs() <= tol * numeric.abs().max(1e-3),
                     "{par:?} axis {a} sample {r}/{i}: {analytic} vs {numeric}"
@@ -432,8 +432,8 @@ fn an_effect_taken_out_leaves_the_model_it_was_added_to() {
     assert_eq!(back.beta, base.beta);
     assert_eq!(back.theta, base.theta);
     let tilt_only = both.without(Effect::GSensitivity);
-    assert_eq!(tilt_only.theta_of(SharedPar::TableTilt), Some(0.005));
-    assert_eq!(tilt_only.theta_of(SharedPar::Delay), Some(0.004));
+    assert_eq!(tilt_only.theta_of(SharedPar { effect: Effect::TableTilt, k: 0 }), Some(0.005));
+    assert_eq!(tilt_only.theta_of(SharedPar { effect: Effect::Delay, k: 0 }), Some(0.004));
 }
 
 /// A warm-up with a rate random walk on top and a table tilted 0.3°, in both directions: the

@@ -12,14 +12,15 @@
 pub mod apply;
 pub mod axes;
 pub mod blocking;
-pub mod catalogue;
 pub mod closure;
 pub mod derived;
 pub mod diagnostics;
+pub mod effects;
 pub mod error;
 pub mod estimate;
 pub mod extended;
 pub mod kinematics;
+pub mod layout;
 pub mod paper;
 pub mod present;
 pub mod report;
@@ -39,8 +40,8 @@ mod testgen;
 mod tests;
 
 pub use apply::{Calibration, CalibrationFileError};
-pub use catalogue::Effect;
 pub use closure::{calibrate, close_loop, close_loop_reconstructed, LoopOptions, LoopReport, Verdict};
+pub use effects::Effect;
 pub use error::CalError;
 pub use estimate::Estimate;
 pub use kinematics::KinOptions;

@@ -13,25 +13,17 @@
 //! one-parameter effect with a drop of 18 a nine-parameter g-sensitivity with a drop of 114
 //! (p ≈ 1e-19): with 10⁶ samples ln n charges each parameter 14.
 
-use super::catalogue::{Effect, DRIFT_KNOT_SPACINGS_S};
 use super::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
+use super::effects::terms::{Evidence, Situation};
+use super::effects::Effect;
 use super::error::CalError;
 use super::extended::{
-    accumulate, apply_step, effect_columns, fit, full_selection, harmonic_effects, residual_after, solve_joint, Col,
-    Fitted, Gram, LinCol, LoopData, Selection, SharedPar,
+    accumulate, apply_step, fit, full_selection, residual_after, solve_joint, Col, Fitted, Gram, LinCol, LoopData,
+    Selection,
 };
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-
-/// Candidate warm-up time constants, s, spaced by 2×: the exponential's shape changes slowly
-/// with T, so the best of them starts Gauss-Newton inside its basin; 15 s to 16 min covers a
-/// board's thermal time constants.
-const WARM_UP_GRID_S: [f64; 7] = [15.0, 30.0, 60.0, 120.0, 240.0, 480.0, 960.0];
-
-/// Smallest spread of the smoothed temperature over the capture for the temperature drift to be a
-/// candidate, °C: below it the column is a constant and only duplicates the offset.
-const MIN_TEMPERATURE_SPREAD_C: f64 = 0.5;
 
 /// Two runs' θ2' differ enough to separate a delay from an index offset if they differ by this
 /// fraction (5 %: their phases then differ by 5 % of the delay's).
@@ -44,8 +36,9 @@ pub struct Candidate {
     pub effect: Effect,
     /// Its columns in the accumulation.
     pub cols: Vec<Col>,
-    /// For the warm-up: the grid time constant this variant uses, s.
-    pub drift_tau_s: Option<f64>,
+    /// For an effect tried at grid values of its one shared parameter (the warm-up's time
+    /// constant, s), this trial's value, held for the first pass.
+    pub held_at: Option<f64>,
 }
 
 /// A candidate's score at one step.
@@ -82,135 +75,57 @@ pub fn both_directions(data: &LoopData) -> bool {
     r.iter().any(|k| k.steady_rate_dps > 0.0) && r.iter().any(|k| k.steady_rate_dps < 0.0)
 }
 
-/// Which effects the residual points to: an effect is tried only if the structure it makes was
-/// found (the loop traces the residual to effects; an effect too weak to show in any run's
-/// diagnostics cannot bias the calibration beyond its noise either). Broadband structure alone
-/// (not white, RMS excess) points to every effect.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Evidence {
-    /// 1× harmonic in some run: phase (delay, index offset).
-    pub phase: bool,
-    /// Run offsets, drift in time, or temperature dependence.
-    pub drift: bool,
-    /// Harmonics 2× and up, or dependence on the rate magnitude.
-    pub rate_scale: bool,
-    /// Per harmonic order 0..=8, whether it was significant somewhere.
-    pub orders: [bool; MAX_ORDER + 1],
-}
-
-impl Evidence {
-    /// Reads the findings of a fit's diagnostics.
-    pub fn of(d: &Diagnostics) -> Self {
-        let mut e = Self { phase: false, drift: false, rate_scale: false, orders: [false; MAX_ORDER + 1] };
-        let mut broadband = false;
-        for f in &d.findings {
-            match f.kind {
-                FindingKind::Harmonic(n) => {
-                    e.orders[n as usize] = true;
-                    if n == 1 {
-                        e.phase = true;
-                    } else {
-                        e.rate_scale = true;
-                    }
+/// Which effects the residual points to ([`Evidence`]), read from the findings of a fit's
+/// diagnostics.
+pub fn evidence(d: &Diagnostics) -> Evidence {
+    let mut e = Evidence { phase: false, drift: false, rate_scale: false, orders: [false; MAX_ORDER + 1] };
+    let mut broadband = false;
+    for f in &d.findings {
+        match f.kind {
+            FindingKind::Harmonic(n) => {
+                e.orders[n as usize] = true;
+                if n == 1 {
+                    e.phase = true;
+                } else {
+                    e.rate_scale = true;
                 }
-                FindingKind::RunOffset | FindingKind::TimeDrift | FindingKind::Temperature => e.drift = true,
-                FindingKind::RateDependence => e.rate_scale = true,
-                FindingKind::NotWhite | FindingKind::RmsExcess | FindingKind::SpeedRipple => broadband = true,
             }
+            FindingKind::RunOffset | FindingKind::TimeDrift | FindingKind::Temperature => e.drift = true,
+            FindingKind::RateDependence => e.rate_scale = true,
+            FindingKind::NotWhite | FindingKind::RmsExcess | FindingKind::SpeedRipple => broadband = true,
         }
-        if broadband && !(e.phase || e.drift || e.rate_scale) {
-            e.phase = true;
-            e.drift = true;
-            e.rate_scale = true;
-            e.orders = [true; MAX_ORDER + 1];
-        }
-        e
     }
+    if broadband && !(e.phase || e.drift || e.rate_scale) {
+        e.phase = true;
+        e.drift = true;
+        e.rate_scale = true;
+        e.orders = [true; MAX_ORDER + 1];
+    }
+    e
 }
 
-/// The candidates applicable to a model, among those the evidence points to.
+/// The candidates applicable to a model, among those the evidence points to: every effect of
+/// the catalogue whose rule says so (`Behaviour::candidate`), in each form it is tried in.
 pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> Vec<Candidate> {
-    let has = |e: Effect| current.contains(&e);
-    let plain = |effect: Effect| {
-        let (lin, shared) = effect_columns(effect, &data.layout);
-        Candidate {
-            effect,
-            cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
-            drift_tau_s: None,
-        }
+    let situation = Situation {
+        current,
+        evidence: *evidence,
+        separates_delay_and_index: separates_delay_and_index(data),
+        free_drift_keeps_constant_rates: free_drift_keeps_constant_rates(data),
+        poses: data.poses.len(),
+        temp_spread_c: data.temp_spread_c,
     };
-    let mut out = Vec::new();
-    if evidence.phase && separates_delay_and_index(data) {
-        for e in [Effect::Delay, Effect::IndexOffset] {
-            if !has(e) && !has(Effect::Phase) {
-                out.push(plain(e));
-            }
-        }
-    } else if evidence.phase && !has(Effect::Phase) && !has(Effect::Delay) && !has(Effect::IndexOffset) {
-        out.push(plain(Effect::Phase));
-    }
-    let has_free_drift = current.iter().any(|e| matches!(e, Effect::DriftKnots(_)));
-    if evidence.drift && current.iter().any(|e| e.is_drift()) && !has_free_drift {
-        // A drift curve is in and the residual still drifts (a random walk, a warm-up that lags
-        // the die): the free drift goes on top, and the curve, then redundant, is dropped.
-        for t in DRIFT_KNOT_SPACINGS_S {
-            out.push(plain(Effect::DriftKnots(t)));
-        }
-    }
-    if evidence.drift && !current.iter().any(|e| e.is_drift()) {
-        for t in WARM_UP_GRID_S {
-            out.push(Candidate {
-                effect: Effect::DriftWarmUp,
-                cols: vec![Col::Lin(LinCol::DriftExpFixed(t))],
-                drift_tau_s: Some(t),
-            });
-        }
-        out.push(plain(Effect::DriftPolynomial));
-        if data.temp_spread_c >= MIN_TEMPERATURE_SPREAD_C {
-            out.push(plain(Effect::DriftTemperature));
-        }
-        for t in DRIFT_KNOT_SPACINGS_S {
-            out.push(plain(Effect::DriftKnots(t)));
-        }
-    }
-    let has_transmission = current.iter().any(|e| matches!(e, Effect::TableHarmonic(_)));
-    if has_transmission && !has(Effect::GearLag) && separates_delay_and_index(data) {
-        out.push(plain(Effect::GearLag));
-    }
-    if has(Effect::Delay) && !has(Effect::FilterGain) && separates_delay_and_index(data) {
-        out.push(plain(Effect::FilterGain));
-    }
-    // Effects of the rig and the sensor's mount that act at the table's own frequency change the
-    // 1× signal or the offsets in proportion to the speed or against it, so M absorbs them run by
-    // run and the residual of any one fit shows nothing: only the runs' different speeds reveal
-    // them, through the nested-model test itself. They are therefore tried whenever the runs
-    // separate them, whatever the diagnostics found. With nine parameters g-sensitivity could
-    // also soak up a phase error, so it comes after the phase effects, which are more common and
-    // far cheaper, have had their turn. Earth's rotation is not a candidate: it is known physics,
-    // added once the loop ends (see `closure`).
-    if separates_delay_and_index(data) {
-        let phase_modelled = has(Effect::Delay) || has(Effect::IndexOffset) || has(Effect::Phase);
-        if !has(Effect::TableTilt) && (!has_free_drift || free_drift_keeps_constant_rates(data)) {
-            out.push(plain(Effect::TableTilt));
-        }
-        if phase_modelled && !has(Effect::PoseFixture) && data.poses.len() == 2 {
-            out.push(plain(Effect::PoseFixture));
-        }
-        if !has(Effect::GSensitivity) && (phase_modelled || !evidence.phase) {
-            out.push(plain(Effect::GSensitivity));
-        }
-    }
-    if evidence.rate_scale && !has(Effect::RateScale) {
-        out.push(plain(Effect::RateScale));
-    }
-    for e in harmonic_effects() {
-        if let Effect::TableHarmonic(n) = e {
-            if evidence.orders[n as usize] && !has(e) {
-                out.push(plain(e));
-            }
-        }
-    }
-    out
+    Effect::catalogue()
+        .into_iter()
+        .filter(|e| e.behaviour(|b| b.candidate(&situation)))
+        .flat_map(|effect| {
+            effect.behaviour(|b| b.trials(&data.layout)).into_iter().map(move |t| Candidate {
+                effect,
+                cols: t.cols,
+                held_at: t.held_at,
+            })
+        })
+        .collect()
 }
 
 /// A candidate that passed the test on its linearised fit but could not be fitted to the end.
@@ -250,14 +165,13 @@ pub struct DriftChoice {
 /// warm-up's time constant is not in that solution (its grid value stands).
 fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
     let ns = state.model.shared.len();
-    let (lin, shared) = effect_columns(c.effect, &state.model.layout);
+    let (lin, shared) = c.effect.params(&state.model.layout);
     let mut model = state.model.with(
         c.effect,
         std::array::from_fn(|_| vec![0.0; lin.len()]),
-        shared.iter().map(|&p| if p == SharedPar::DriftTau { c.drift_tau_s.unwrap_or(1.0) } else { 0.0 }).collect(),
+        shared.iter().map(|_| c.held_at.unwrap_or(0.0)).collect(),
     );
-    let frozen: Vec<bool> =
-        model.shared.iter().enumerate().map(|(k, &p)| k >= ns && p == SharedPar::DriftTau).collect();
+    let frozen: Vec<bool> = (0..model.shared.len()).map(|k| k >= ns && c.held_at.is_some()).collect();
     let nl = model.lin.len();
     apply_step(&mut model, nl, &sol.delta, &frozen);
     model
@@ -266,7 +180,7 @@ fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSoluti
 /// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level.
 pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> Result<StepOutcome, CalError> {
     let weights = diag.weights();
-    let cands = candidates(data, &state.model.effects, &Evidence::of(diag));
+    let cands = candidates(data, &state.model.effects, &evidence(diag));
     if cands.is_empty() {
         return Ok(StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() });
     }
@@ -311,7 +225,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         scores.push((
             Score {
                 effect: c.effect,
-                drift_tau_s: c.drift_tau_s,
+                drift_tau_s: c.held_at,
                 delta_chi2,
                 dof,
                 threshold,
@@ -336,7 +250,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         let (_, ci, sol) = &scores[i];
         let sol = sol.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
         let mut start = start_model(state, &cands[*ci], sol);
-        if matches!(cands[*ci].effect, Effect::DriftKnots(_)) {
+        if cands[*ci].effect.is_free_drift() {
             // The free drift replaces what it holds: a drift curve already in (with both, the
             // knots hold the curve's shape and its parameters run off) and, when each run has
             // a level of its own, a table tilt, whose only trace is a constant rate in each run
@@ -373,7 +287,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 match fit_of(i) {
                     Ok(f) => {
                         seen.push(sc.effect);
-                        let (lin, shared) = effect_columns(sc.effect, &data.layout);
+                        let (lin, shared) = sc.effect.params(&data.layout);
                         let k = 3 * lin.len() + shared.len();
                         let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
                         choices.push((i, f, bic));
@@ -445,12 +359,15 @@ pub struct Dropped {
 pub fn least_needed(fitted: &Fitted, alpha: f64, keep: Effect) -> Option<(Effect, f64, f64)> {
     let mut worst: Option<(Effect, f64, f64, f64)> = None;
     for &e in &fitted.model.effects {
-        if e == keep || matches!(e, Effect::DriftKnots(_)) || e.is_earth() {
+        if e == keep || e.is_free_drift() || e.is_earth() {
             continue;
         }
-        let (lin, mut shared) = effect_columns(e, &fitted.model.layout);
-        // A warm-up of amplitude 0 is absent whatever its time constant.
-        shared.retain(|&p| p != SharedPar::DriftTau);
+        let (lin, mut shared) = e.params(&fitted.model.layout);
+        // A shared parameter that only shapes the effect's columns (a warm-up's time constant)
+        // does not say whether it is there: an amplitude of 0 is absent whatever its shape.
+        if !lin.is_empty() {
+            shared.clear();
+        }
         let mut idx: Vec<usize> = Vec::new();
         let mut val: Vec<f64> = Vec::new();
         for c in &lin {
@@ -533,7 +450,12 @@ pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses
         // The free drift's knots that only the held-out run sees are its own level, which no
         // other run can predict: they are left out of the fit to the others and fitted to the
         // run itself. A knot it shares with a run beside it in its stretch is predicted.
-        let own = |c: usize| fitted.model.layout.knot_only_in_run(fitted.model.lin[c], r);
+        let own = |c: usize| match fitted.model.lin[c] {
+            LinCol::DriftKnot { stretch, knot, spacing_s } => {
+                fitted.model.layout.knot_only_in_run(usize::from(stretch), knot, spacing_s, r)
+            }
+            _ => false,
+        };
         let others_sel =
             Selection { lin: sel.lin.iter().copied().filter(|&c| !own(c)).collect(), shared: sel.shared.clone() };
         let Some(sol) = solve_joint(&others, &others_sel, weights) else {

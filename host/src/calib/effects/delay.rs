@@ -1,0 +1,60 @@
+//! The gyro's output lags the encoder.
+
+use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::{Behaviour, Effect, Layout};
+
+/// Longest delay (either sign) the model represents, s: 50 ms is 6× the slowest L3G4200D filter
+/// delay (7.5 ms at 30 Hz cut-off, `sim::FilterDelay`). Samples within it of a run's ends or of a
+/// gap are left out of every fit, so that all models see the same samples.
+pub const MAX_DELAY_S: f64 = 0.05;
+
+/// The gyro output lags the encoder by τ: v(t) = f(kinematics at t − τ). Shifts θ2 by −θ2'·τ,
+/// so it differs from an index offset only between runs at different θ2'. One parameter, τ (s).
+pub struct Delay;
+
+impl Behaviour for Delay {
+    fn name(&self) -> String {
+        "delay between gyro and encoder".into()
+    }
+
+    fn key(&self) -> String {
+        "delay".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "the gyro's low-pass filter delays its output (≈√2/(2π·f_c): 2 ms at 110 Hz, 7.5 ms at 30 Hz)"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "runs at two speeds or in both directions (the delay's phase scales with θ2', the index offset's does not)"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        (vec![], vec![SharedPar { effect: Effect::Delay, k: 0 }])
+    }
+
+    fn reported(&self, _: Own, _: f64) -> Option<Reported> {
+        Some(Reported::new("delay τ", 1e3, "ms"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        Some(Bound { lo: -MAX_DELAY_S, hi: MAX_DELAY_S, what: "delay", unit: "s" })
+    }
+
+    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
+        s.delay_s = value;
+    }
+
+    /// Delaying by τ moves θ2 by −θ2'·τ (and the angles after it with it).
+    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+        -p.rate2_dps.to_radians() * t.d_shift
+    }
+
+    fn candidate(&self, s: &Situation) -> bool {
+        s.evidence.phase && s.separates_delay_and_index && !s.has(Effect::Delay) && !s.has(Effect::Phase)
+    }
+}

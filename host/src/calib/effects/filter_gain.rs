@@ -1,0 +1,56 @@
+//! The gyro's low-pass filter's gain at the table frequency.
+
+use super::terms::{dot, AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::{Behaviour, Effect, Layout};
+
+/// The gyro's low-pass filter beyond its delay: H(jω) ≈ e^{−jωτ}(1 − κω²), output = M(ω + κ·ω̈)
+/// at the delayed time, the gain lost at the table frequency (1st order: κ = τ²/2; 2nd-order
+/// Butterworth: κ ≈ 0). One parameter, κ (s²).
+pub struct FilterGain;
+
+impl Behaviour for FilterGain {
+    fn name(&self) -> String {
+        "gyro low-pass gain at the table frequency".into()
+    }
+
+    fn key(&self) -> String {
+        "filter_gain".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "the gyro's low-pass filter attenuates the table-rate sinusoid as well as delaying it (a 1st-order filter with 5 ms of delay loses 120 ppm at 0.5 Hz)"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "runs at two speeds: the loss grows with the square of the frequency, a sensitivity does not"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        (vec![], vec![SharedPar { effect: Effect::FilterGain, k: 0 }])
+    }
+
+    fn reported(&self, _: Own, _: f64) -> Option<Reported> {
+        Some(Reported::new("filter curvature κ (gain 1 − κω²)", 1e6, "ms²"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        None
+    }
+
+    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
+        s.filter_s2 = value;
+    }
+
+    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+        dot(&t.u, &p.d_filter)
+    }
+
+    /// Once a delay is in (the filter's phase), when the runs have two speeds.
+    fn candidate(&self, s: &Situation) -> bool {
+        s.has(Effect::Delay) && !s.has(Effect::FilterGain) && s.separates_delay_and_index
+    }
+}

@@ -1,0 +1,61 @@
+//! A rate bias in proportion to gravity.
+
+use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::{Behaviour, Effect, Layout};
+use crate::calib::axes::AXES;
+
+/// g-sensitivity: a bias in proportion to the specific force, here gravity, which turns in the
+/// sensor frame with θ2 at the table's own frequency (so it bends directions): three
+/// coefficients per axis, °/s per g, of gravity's components in the package frame. Gravity
+/// holds the lab's −z1, so a table at rest feels +1 g along z1 = (sin θ2, cos θ2, 0) in O2.
+pub struct GSensitivity;
+
+impl Behaviour for GSensitivity {
+    fn name(&self) -> String {
+        "g-sensitivity (bias from gravity)".into()
+    }
+
+    fn key(&self) -> String {
+        "g_sensitivity".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "the MEMS proof masses feel gravity as a rate bias (typically 0.02-0.1 °/s/g); gravity turns with θ2 in the sensor frame"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "runs at two speeds: the bias does not scale with θ1', a direction or sensitivity does"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        ((0..3).map(|k| LinCol::Of(Effect::GSensitivity, k)).collect(), vec![])
+    }
+
+    fn reported(&self, own: Own, _: f64) -> Option<Reported> {
+        let Own::Lin(k) = own else { return None };
+        Some(Reported::new(format!("g-sensitivity along package {}", AXES[usize::from(k)]), 1.0, "°/s per g"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        None
+    }
+
+    fn shift(&self, _: u8, _: f64, _: &mut Shifts) {}
+
+    /// z1 in the package frame is the vertical column of Earth's basis.
+    fn value(&self, own: Own, p: &Point, _: usize, _: &AxisTerms, _: &Ctx) -> f64 {
+        let Own::Lin(k) = own else { return 0.0 };
+        p.d_earth[0][usize::from(k)]
+    }
+
+    /// Tried whenever two speeds separate it (it acts at the table's own frequency, so one fit's
+    /// residual cannot show it); with nine parameters it could soak up a phase error, so it comes
+    /// once the phase is modelled, or when there is none.
+    fn candidate(&self, s: &Situation) -> bool {
+        s.separates_delay_and_index && !s.has(Effect::GSensitivity) && (s.phase_modelled() || !s.evidence.phase)
+    }
+}

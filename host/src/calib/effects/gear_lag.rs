@@ -1,0 +1,60 @@
+//! The sensor table trailing the base by an angle that grows with speed.
+
+use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::{Behaviour, Effect, Layout};
+
+/// The sensor table lags the base by an angle proportional to speed (the magnetic gears'
+/// compliance under drag): the transmission error's argument is θ1 + θ1'·c, while θ2 itself is
+/// what the index says. Only the transmission error's phase tells it from a gyro delay. One
+/// parameter, c (s).
+pub struct GearLag;
+
+impl Behaviour for GearLag {
+    fn name(&self) -> String {
+        "magnetic-gear lag growing with speed".into()
+    }
+
+    fn key(&self) -> String {
+        "gear_lag".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "the sensor table trails the base by an angle that grows with speed, so the gears' pole-pass error reaches it later than the base angle says"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "a transmission error seen at two speeds: its phase against the base angle shifts with speed, the gyro delay's does not"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        (vec![], vec![SharedPar { effect: Effect::GearLag, k: 0 }])
+    }
+
+    fn reported(&self, _: Own, _: f64) -> Option<Reported> {
+        Some(Reported::new("gear lag per unit of speed", 1e3, "ms"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        None
+    }
+
+    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
+        s.gear_lag_s = value;
+    }
+
+    /// Moving the gear angle moves the rippled angle by (ripple − 1) and the rippled speed by
+    /// θ2'·∂ripple/∂θ.
+    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+        p.theta1_rate_rad_s * (t.e2 * (p.dtheta_eff - 1.0) + t.ez * p.drate_eff_dps)
+    }
+
+    /// Once a transmission error is in, when the runs have two speeds.
+    fn candidate(&self, s: &Situation) -> bool {
+        let has_transmission = s.current.iter().any(|e| matches!(e, Effect::TableHarmonic(_)));
+        has_transmission && !s.has(Effect::GearLag) && s.separates_delay_and_index
+    }
+}

@@ -1,0 +1,284 @@
+//! The effects the closed loop may add to the linear model `v = M R_qᵀ ω2 + v_off`, one type per
+//! effect, each in its own file behind [`Behaviour`]: what it means physically and what makes it
+//! identifiable, its parameters (names, units, bounds), its contribution to the output and its
+//! Jacobian per sample, where its shared parameters enter the exciter's kinematics, and when the
+//! loop tries it. The engine ([`super::extended`]) and the selection ([`super::selection`]) know
+//! effects only through this trait.
+//!
+//! Adding an effect is a file here and a line in the `registry!` below (with its `mod` line): the
+//! registry makes the [`Effect`] enum and its dispatch, and the trait has no default for
+//! anything an effect must say, so the compiler names what a new one forgot. An effect whose
+//! shared parameters move the kinematics uses the chain's inputs ([`terms::Shifts`]: a time
+//! shift, an angle shift, a gear lag, a ripple, a tilt, a lab-fixed rate, a filter curvature, a
+//! fixture rotation); one that needs a new kind of input to eq. 1 adds it there and in the chain.
+
+pub mod terms;
+
+mod delay;
+mod drift_knots;
+mod drift_polynomial;
+mod drift_temperature;
+mod drift_warm_up;
+mod earth;
+mod filter_gain;
+mod g_sensitivity;
+mod gear_lag;
+mod index_offset;
+mod phase;
+mod pose_fixture;
+mod rate_scale;
+mod table_harmonic;
+mod table_tilt;
+
+pub use delay::MAX_DELAY_S;
+pub use table_harmonic::{GEAR_POLE_PASS_ORDER, HARMONIC_ORDERS};
+pub use terms::DRIFT_KNOT_SPACINGS_S;
+
+use super::layout::Layout;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use terms::{AxisTerms, Col, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts, Situation, Trial};
+
+/// Highest harmonic of the sensor-table rate fitted sample by sample (diagnostics and the
+/// transmission-error model): the 12-pole magnetic gears (EXCITER.md, "Mechanism") pass a pole
+/// pair 12 times a turn, so their transmission error sits at 12× and its overtone at 24×; 32
+/// leaves margin above both. 32× at 0.5 Hz is 16 Hz, inside every L3G4200D bandwidth (≥ 12.5 Hz
+/// only at 100 Hz ODR). Harmonics above it are searched in the residual spectrum up to what the
+/// sample rate resolves (`diagnostics`).
+pub const MAX_HARMONIC_ORDER: usize = 32;
+
+/// One effect's physics and maths.
+pub trait Behaviour {
+    /// Short name as printed.
+    fn name(&self) -> String;
+
+    /// A short machine-friendly key (JSON, tests).
+    fn key(&self) -> String;
+
+    /// What it means physically, as the report says it.
+    fn meaning(&self) -> &'static str;
+
+    /// What separates it from the rest of the model (the runs it needs).
+    fn identified_by(&self) -> &'static str;
+
+    /// Its family.
+    fn kind(&self) -> Kind;
+
+    /// Its per-axis linear columns and its shared parameters, for data laid out as `layout`.
+    fn params(&self, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar>);
+
+    /// How parameter `p` is reported (None for columns reported otherwise, such as the free
+    /// drift's knots); `full_scale_dps` is the gyro's range.
+    fn reported(&self, p: Own, full_scale_dps: f64) -> Option<Reported>;
+
+    /// The range shared parameter `k` is held in, if any.
+    fn bound(&self, k: u8) -> Option<Bound>;
+
+    /// Sets the kinematic chain's input that shared parameter `k` is, at `value`.
+    fn shift(&self, k: u8, value: f64, s: &mut Shifts);
+
+    /// The value at `p` on axis `a` of linear column `Own::Lin(k)`, or of shared parameter
+    /// `Own::Shared(k)`'s Jacobian, ∂(output)/∂θ_k, given the axis's chain-rule factors `t`
+    /// (unused, NaN, for a linear column).
+    fn value(&self, own: Own, p: &Point, a: usize, t: &AxisTerms, cx: &Ctx) -> f64;
+
+    /// Whether the loop tries it now.
+    fn candidate(&self, s: &Situation) -> bool;
+
+    /// What of a point parameter `own` needs beyond eq. 1-2.
+    fn needs(&self, own: Own) -> Needs {
+        let _ = own;
+        Needs::NONE
+    }
+
+    /// For a linear column that depends on the axis's own rate r (°/s), ∂(column)/∂r at `r`
+    /// (the output's gradient in ω_s then has a part along the axis); None for the others.
+    fn rate_slope(&self, k: u16, r_dps: f64) -> Option<f64> {
+        let _ = (k, r_dps);
+        None
+    }
+
+    /// The forms it is tried in: by default its own columns, once.
+    fn trials(&self, layout: &Layout) -> Vec<Trial> {
+        let (lin, shared) = self.params(layout);
+        vec![Trial {
+            cols: lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect(),
+            held_at: None,
+        }]
+    }
+}
+
+pub use terms::Bound;
+
+/// Declares the catalogue: one line per effect, `Variant => constructor` or, for an effect with
+/// a parameter, `Variant(x: type in values) => constructor using x`, where `values` are those
+/// the loop tries. The order is the order candidates are listed in.
+macro_rules! registry {
+    ($( $(#[$m:meta])* $v:ident $(($x:ident : $t:ident in $vals:expr))? => $ctor:expr ),* $(,)?) => {
+        /// One catalogued effect (its physics: the type the registry maps it to).
+        #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum Effect {
+            $( $(#[$m])* $v $(($t))? ),*
+        }
+
+        impl Effect {
+            /// Calls `f` with the effect's behaviour.
+            #[inline]
+            pub fn behaviour<R>(self, f: impl FnOnce(&dyn Behaviour) -> R) -> R {
+                match self {
+                    $( Effect::$v $(($x))? => f(&$ctor) ),*
+                }
+            }
+
+            /// Every effect the loop may try, in the order candidates are listed.
+            pub fn catalogue() -> Vec<Effect> {
+                let mut out = Vec::new();
+                $( out.extend(registry!(@each $v $(, $vals)?)); )*
+                out
+            }
+        }
+    };
+    (@each $v:ident) => { [Effect::$v] };
+    (@each $v:ident, $vals:expr) => { $vals.into_iter().map(Effect::$v) };
+}
+
+registry! {
+    /// [`delay::Delay`].
+    Delay => delay::Delay,
+    /// [`index_offset::IndexOffset`].
+    IndexOffset => index_offset::IndexOffset,
+    /// [`phase::Phase`].
+    Phase => phase::Phase,
+    /// [`drift_warm_up::DriftWarmUp`].
+    DriftWarmUp => drift_warm_up::DriftWarmUp,
+    /// [`drift_polynomial::DriftPolynomial`].
+    DriftPolynomial => drift_polynomial::DriftPolynomial,
+    /// [`drift_temperature::DriftTemperature`].
+    DriftTemperature => drift_temperature::DriftTemperature,
+    /// [`drift_knots::DriftKnots`], knots this many seconds apart.
+    DriftKnots(spacing_s: u16 in DRIFT_KNOT_SPACINGS_S) => drift_knots::DriftKnots(spacing_s),
+    /// [`gear_lag::GearLag`].
+    GearLag => gear_lag::GearLag,
+    /// [`filter_gain::FilterGain`].
+    FilterGain => filter_gain::FilterGain,
+    /// [`table_tilt::TableTilt`].
+    TableTilt => table_tilt::TableTilt,
+    /// [`pose_fixture::PoseFixture`].
+    PoseFixture => pose_fixture::PoseFixture,
+    /// [`g_sensitivity::GSensitivity`].
+    GSensitivity => g_sensitivity::GSensitivity,
+    /// [`rate_scale::RateScale`].
+    RateScale => rate_scale::RateScale,
+    /// [`table_harmonic::TableHarmonic`] at this multiple of θ2.
+    TableHarmonic(order: u32 in HARMONIC_ORDERS) => table_harmonic::TableHarmonic(order),
+    /// [`earth::Earth`], all three components fitted.
+    EarthRotation => earth::Earth(earth::Form::Fitted),
+    /// [`earth::Earth`], the vertical part from the latitude the user gave.
+    EarthRotationAtLatitude => earth::Earth(earth::Form::AtLatitude),
+    /// [`earth::Earth`], the vertical part held by the g-sensitivity.
+    EarthRotationHorizontal => earth::Earth(earth::Form::Horizontal),
+}
+
+impl Effect {
+    /// Short name as printed.
+    pub fn name(self) -> String {
+        self.behaviour(|b| b.name())
+    }
+
+    /// A short machine-friendly key (JSON, tests).
+    pub fn key(self) -> String {
+        self.behaviour(|b| b.key())
+    }
+
+    /// What it means physically, as the report says it.
+    pub fn meaning(self) -> &'static str {
+        self.behaviour(|b| b.meaning())
+    }
+
+    /// What separates it from the rest of the model.
+    pub fn identified_by(self) -> &'static str {
+        self.behaviour(|b| b.identified_by())
+    }
+
+    /// Its family.
+    pub fn kind(self) -> Kind {
+        self.behaviour(|b| b.kind())
+    }
+
+    /// Whether it is one of the mutually exclusive offset-drift models.
+    pub fn is_drift(self) -> bool {
+        matches!(self.kind(), Kind::Drift { .. })
+    }
+
+    /// Whether it is the free drift.
+    pub fn is_free_drift(self) -> bool {
+        matches!(self.kind(), Kind::Drift { free: true, .. })
+    }
+
+    /// Whether it is one of the forms of Earth's rotation (at most one is in a model).
+    pub fn is_earth(self) -> bool {
+        self.kind() == Kind::Earth
+    }
+
+    /// For a drift model, the time or temperature its fitted offset (the constant column's
+    /// coefficient) holds at; None for the effects that leave the offset constant.
+    pub fn offset_reference(self) -> Option<&'static str> {
+        match self.kind() {
+            Kind::Drift { offset_reference, .. } => Some(offset_reference),
+            Kind::Earth | Kind::Other => None,
+        }
+    }
+
+    /// Its columns for data laid out as `layout`.
+    pub fn params(self, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        self.behaviour(|b| b.params(layout))
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose;
+
+    fn layout() -> Layout {
+        Layout::new(vec![Pose::One, Pose::Two], &[Pose::One, Pose::Two], &[(0.0, 100.0), (0.0, 100.0)])
+    }
+
+    /// Every effect's parameters belong to it, every shared one has a name and unit, and keys
+    /// are unique (they name effects in loop.json).
+    #[test]
+    fn every_effect_owns_and_names_its_parameters() {
+        let all = Effect::catalogue();
+        let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
+        assert_eq!(all.len(), 12 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
+        keys.sort();
+        keys.dedup();
+        assert_eq!(keys.len(), all.len());
+        for e in all {
+            let (lin, shared) = e.params(&layout());
+            assert!(!lin.is_empty() || !shared.is_empty(), "{e:?} has no parameter");
+            for p in shared {
+                assert_eq!(p.effect, e);
+                let r = p.reported();
+                assert!(!r.unit.is_empty() && !r.name.contains("parameter"), "{e:?}: {r:?}");
+            }
+            for c in lin {
+                match c {
+                    LinCol::Of(owner, _) => {
+                        assert_eq!(owner, e);
+                        assert!(c.reported(500.0).is_some(), "{e:?}: {c:?}");
+                    }
+                    LinCol::DriftKnot { .. } => assert!(e.is_free_drift()),
+                    LinCol::Omega(_) | LinCol::One | LinCol::DriftExpFixed(_) => panic!("{e:?} owns a base column"),
+                }
+            }
+        }
+    }
+}

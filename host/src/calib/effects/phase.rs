@@ -1,0 +1,54 @@
+//! A delay and an index offset that the runs cannot tell apart.
+
+use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::{Behaviour, Effect, Layout};
+
+/// A delay and an index offset together when the runs share one θ2' and cannot tell them
+/// apart: one phase δ − θ2'·τ (rad), the same maths as the index offset, moving the mesh angle too.
+pub struct Phase;
+
+impl Behaviour for Phase {
+    fn name(&self) -> String {
+        "phase (delay and index offset combined)".into()
+    }
+
+    fn key(&self) -> String {
+        "phase".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "a delay, an index offset, or both"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "nothing more: a second speed or direction is needed to split it"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        (vec![], vec![SharedPar { effect: Effect::Phase, k: 0 }])
+    }
+
+    fn reported(&self, _: Own, _: f64) -> Option<Reported> {
+        Some(Reported::new("phase δ − θ2'·τ", 180.0 / std::f64::consts::PI, "°"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        None
+    }
+
+    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
+        s.theta2_offset_rad += value;
+    }
+
+    fn value(&self, _: Own, _: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+        t.d_shift
+    }
+
+    fn candidate(&self, s: &Situation) -> bool {
+        s.evidence.phase && !s.separates_delay_and_index && !s.has(Effect::Phase) && !s.phase_modelled()
+    }
+}
