@@ -319,6 +319,69 @@ fn shared_parameter_jacobians_match_finite_differences() {
     }
 }
 
+/// Every registered effect on its own (the catalogue, so a new effect is checked without
+/// touching this test): each shared parameter's analytic Jacobian matches a central difference
+/// of the prediction, at a value of one reported unit (1 ms, 1°, 1 ppm, 1 °/h; the middle of its
+/// range when that is at a bound), with the effect's linear columns at 10 counts. The delay's
+/// to 15 % as above; every other to 1e-4.
+#[test]
+fn every_registered_effects_jacobian_matches_finite_differences() {
+    let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
+    let kin = kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics");
+    let data = LoopData::new(kin);
+    let mut base = Model::for_data(&data);
+    for (a, row) in [[57.0, 0.9, -0.4, 12.0], [-0.5, 56.5, 1.1, -20.0], [0.3, -0.8, 58.0, 5.0]].iter().enumerate() {
+        base.beta[a] = row.to_vec();
+    }
+    let mut checked = 0;
+    for e in Effect::catalogue() {
+        let (lin, shared) = e.params(&data.layout);
+        if shared.is_empty() {
+            continue;
+        }
+        let value = |p: SharedPar| {
+            let unit = 1.0 / p.reported().scale;
+            match p.bound() {
+                Some(b) if unit <= b.lo || unit >= b.hi => (b.lo * b.hi).abs().sqrt(),
+                _ => unit,
+            }
+        };
+        let model =
+            base.with(e, std::array::from_fn(|_| vec![10.0; lin.len()]), shared.iter().map(|&p| value(p)).collect());
+        let ns = model.shared.len();
+        let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
+        let ev = Evaluator::new(&data, &model);
+        let mut jac = vec![0.0; 3 * ns];
+        for (r, i) in [(0usize, 2000usize), (1, 1500), (2, 1800), (3, 2600)] {
+            let p = ev.point(r, i);
+            ev.fill(&p, &cols, &mut jac);
+            for (k, &par) in model.shared.iter().enumerate() {
+                let h = (1e-3 * model.theta[k].abs()).max(1e-6);
+                let shifted = |d: f64| {
+                    let mut m = model.clone();
+                    m.theta[k] += d;
+                    let e = Evaluator::new(&data, &m);
+                    let q = e.point(r, i);
+                    [0, 1, 2].map(|a| e.predict(&q, a))
+                };
+                let (up, down) = (shifted(h), shifted(-h));
+                for a in 0..3 {
+                    let numeric = (up[a] - down[a]) / (2.0 * h);
+                    let analytic = jac[a * ns + k];
+                    let tol = if e == Effect::Delay { 0.15 } else { 1e-4 };
+                    assert!(
+                        (numeric - analytic).abs() <= tol * numeric.abs().max(1e-3),
+                        "{e:?} {par:?} axis {a} sample {r}/{i}: {analytic} vs {numeric}"
+                    );
+                }
+            }
+        }
+        checked += 1;
+    }
+    // Every effect with a shared parameter: 11 besides the 32 harmonics.
+    assert_eq!(checked, 11 + crate::calib::effects::MAX_HARMONIC_ORDER);
+}
+
 #[test]
 #[ignore = "prints the summary of one bar capture; run with -- --ignored --nocapture"]
 fn print_bar_summary() {
