@@ -786,7 +786,7 @@ impl<'a> Evaluator<'a> {
         match c {
             LinCol::Omega(k) => p.omega[k],
             LinCol::One => 1.0,
-            LinCol::Of(e, k) => e.behaviour(|b| b.value(Own::Lin(k), p, a, &AxisTerms::UNUSED, &self.cx())),
+            LinCol::Of(e, k) => self.effect_value(e, Own::Lin(k), p, a, &AxisTerms::UNUSED),
             LinCol::DriftExpFixed(t) => decay(p.t_rel_s, t),
             LinCol::DriftKnot { stretch, knot, spacing_s } => {
                 if p.stretch != usize::from(stretch) {
@@ -896,8 +896,16 @@ impl<'a> Evaluator<'a> {
     fn column_value(&self, c: Col, p: &Point, a: usize, t: &AxisTerms) -> f64 {
         match c {
             Col::Lin(lc) => self.lin_value(lc, p, a),
-            Col::Shared(sp) => sp.effect.behaviour(|b| b.value(Own::Shared(sp.k), p, a, t, &self.cx())),
+            Col::Shared(sp) => self.effect_value(sp.effect, Own::Shared(sp.k), p, a, t),
         }
+    }
+
+    /// An effect's column at `p` on axis `a` (`Behaviour::value`). Kept out of line: the
+    /// dispatch over every effect would stop the base columns' arms of [`Evaluator::lin_value`]
+    /// from being inlined into the passes.
+    #[inline(never)]
+    fn effect_value(&self, e: Effect, own: Own, p: &Point, a: usize, t: &AxisTerms) -> f64 {
+        e.behaviour(|b| b.value(own, p, a, t, &self.cx()))
     }
 
     /// Fills `out[a * cols.len() + j]` with column j on axis a.
