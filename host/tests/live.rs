@@ -15,10 +15,48 @@ fn host(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("host-live-{}-{name}", std::process::id()));
+/// A test's scratch directory under the temp dir, with the files named after it beside it (its
+/// records database, the lockstep clock's socket): removed when the test passes, kept for
+/// inspection when it fails (the guard drops while the test panics).
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if thread::panicking() {
+            return;
+        }
+        let _ = std::fs::remove_dir_all(&self.0);
+        let (Some(parent), Some(name)) = (self.0.parent(), self.0.file_name()) else { return };
+        let beside = format!("{}.", name.to_string_lossy());
+        for entry in std::fs::read_dir(parent).into_iter().flatten().flatten() {
+            if entry.file_name().to_string_lossy().starts_with(&beside) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+}
+
+fn scratch_path(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("host-live-{}-{name}", std::process::id()))
+}
+
+fn scratch(name: &str) -> Scratch {
+    let d = scratch_path(name);
     let _ = std::fs::remove_dir_all(&d);
-    d
+    Scratch(d)
 }
 
 fn decode(path: &Path) -> capture::Capture {
@@ -352,7 +390,7 @@ impl LockstepBench {
                 sink.lock().unwrap().push(line);
             }
         });
-        let socket = scratch(name).with_extension("clock.sock");
+        let socket = scratch_path(name).with_extension("clock.sock");
         let _ = std::fs::remove_file(&socket);
         let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
         Self { rig, control_in, control_out, path: path.trim().to_string(), log, socket, listener }
@@ -581,7 +619,7 @@ enum When {
 /// Ctrl-C or SIGTERM sent to `host calibrate --port` (lockstep: see [`LockstepBench`]); returns
 /// the bench, the output directory, the host's standard error, and the simulated and wall time
 /// from the signal to the host's exit. The operator answers every prompt at once.
-fn signal_the_session(sig: &str, when: When) -> (LockstepBench, PathBuf, String, f64, Duration) {
+fn signal_the_session(sig: &str, when: When) -> (LockstepBench, Scratch, String, f64, Duration) {
     use std::io::Write;
     let name = format!("sig-{sig}-{when:?}");
     let mut bench = LockstepBench::start(&name, &[]);
