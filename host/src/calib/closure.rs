@@ -880,10 +880,7 @@ fn loop_on(
         notes.push(note);
     }
     // The free drift gives each run its own level, so it never leans on the offset being shared.
-    if effects.iter().any(|e| e.is_drift())
-        && !effects.iter().any(|e| matches!(e, Effect::DriftKnots(_)))
-        && !both_directions(&data)
-    {
+    if effects.iter().any(|e| e.is_drift()) && !effects.iter().any(|e| e.is_free_drift()) && !both_directions(&data) {
         asks.push(Ask::BothDirectionsForDrift);
     }
     if effects.contains(&Effect::GSensitivity) && !both_directions(&data) {
