@@ -256,7 +256,7 @@ fn loop_report_serialises_and_feeds_apply() {
 }
 
 /// The analytic Jacobian of every shared parameter matches a central difference of the model's
-/// prediction (the delay's to 15 %: it leaves out the angular acceleration, see below).
+/// prediction (the delay's to 15 %: [`assert_jacobians_match`]).
 #[test]
 fn shared_parameter_jacobians_match_finite_differences() {
     let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
@@ -283,22 +283,32 @@ fn shared_parameter_jacobians_match_finite_differences() {
     let mut model = model;
     model.shared.extend([0, 1].map(|k| SharedPar { effect: Effect::PoseFixture, k }));
     model.theta.extend([0.002, -0.001]);
+    let at = [(0usize, 2000usize), (1, 1500), (0, 3333), (2, 1800), (3, 2600)];
+    assert_jacobians_match(&data, &model, &at, |p, _| match p.effect {
+        Effect::Delay => 1e-5,
+        Effect::DriftWarmUp => 1e-3,
+        _ => 1e-6,
+    });
+}
+
+/// Asserts that at samples `at` (run, index) every shared parameter's analytic Jacobian matches a
+/// central difference of the model's prediction with step `h(parameter, value)`: to 1e-4, the
+/// delay's to 15 % (its Jacobian leaves out θ1''·τ: the fit evaluates the delayed kinematics
+/// exactly, only its convergence rate depends on the Jacobian; speed ripple and the encoder's
+/// quantisation in θ1' put θ1'' into the difference).
+fn assert_jacobians_match(data: &LoopData, model: &Model, at: &[(usize, usize)], h: impl Fn(SharedPar, f64) -> f64) {
     let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
-    let ev = Evaluator::new(&data, &model);
+    let ev = Evaluator::new(data, model);
     let mut jac = vec![0.0; 3 * cols.len()];
-    for (r, i) in [(0usize, 2000usize), (1, 1500), (0, 3333), (2, 1800), (3, 2600)] {
+    for &(r, i) in at {
         let p = ev.point(r, i);
         ev.fill(&p, &cols, &mut jac);
         for (k, &par) in model.shared.iter().enumerate() {
-            let h = match par.effect {
-                Effect::Delay => 1e-5,
-                Effect::DriftWarmUp => 1e-3,
-                _ => 1e-6,
-            };
+            let h = h(par, model.theta[k]);
             let shifted = |d: f64| {
                 let mut m = model.clone();
                 m.theta[k] += d;
-                let e = Evaluator::new(&data, &m);
+                let e = Evaluator::new(data, &m);
                 let q = e.point(r, i);
                 [0, 1, 2].map(|a| e.predict(&q, a))
             };
@@ -306,9 +316,6 @@ fn shared_parameter_jacobians_match_finite_differences() {
             for a in 0..3 {
                 let numeric = (up[a] - down[a]) / (2.0 * h);
                 let analytic = jac[a * cols.len() + k];
-                // The delay's Jacobian leaves out θ1''·τ (the fit evaluates the delayed
-                // kinematics exactly; only its convergence rate depends on the Jacobian); speed
-                // ripple and the encoder's quantisation in θ1' put θ1'' into the difference.
                 let tol = if par.effect == Effect::Delay { 0.15 } else { 1e-4 };
                 assert!(
                     (numeric - analytic).abs() <= tol * numeric.abs().max(1e-3),
@@ -322,8 +329,8 @@ fn shared_parameter_jacobians_match_finite_differences() {
 /// Every registered effect on its own (the catalogue, so a new effect is checked without
 /// touching this test): each shared parameter's analytic Jacobian matches a central difference
 /// of the prediction, at a value of one reported unit (1 ms, 1°, 1 ppm, 1 °/h; the middle of its
-/// range when that is at a bound), with the effect's linear columns at 10 counts. The delay's
-/// to 15 % as above; every other to 1e-4.
+/// range when that is at a bound), with the effect's linear columns at 10 counts
+/// ([`assert_jacobians_match`]).
 #[test]
 fn every_registered_effects_jacobian_matches_finite_differences() {
     let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
@@ -348,34 +355,8 @@ fn every_registered_effects_jacobian_matches_finite_differences() {
         };
         let model =
             base.with(e, std::array::from_fn(|_| vec![10.0; lin.len()]), shared.iter().map(|&p| value(p)).collect());
-        let ns = model.shared.len();
-        let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
-        let ev = Evaluator::new(&data, &model);
-        let mut jac = vec![0.0; 3 * ns];
-        for (r, i) in [(0usize, 2000usize), (1, 1500), (2, 1800), (3, 2600)] {
-            let p = ev.point(r, i);
-            ev.fill(&p, &cols, &mut jac);
-            for (k, &par) in model.shared.iter().enumerate() {
-                let h = (1e-3 * model.theta[k].abs()).max(1e-6);
-                let shifted = |d: f64| {
-                    let mut m = model.clone();
-                    m.theta[k] += d;
-                    let e = Evaluator::new(&data, &m);
-                    let q = e.point(r, i);
-                    [0, 1, 2].map(|a| e.predict(&q, a))
-                };
-                let (up, down) = (shifted(h), shifted(-h));
-                for a in 0..3 {
-                    let numeric = (up[a] - down[a]) / (2.0 * h);
-                    let analytic = jac[a * ns + k];
-                    let tol = if e == Effect::Delay { 0.15 } else { 1e-4 };
-                    assert!(
-                        (numeric - analytic).abs() <= tol * numeric.abs().max(1e-3),
-                        "{e:?} {par:?} axis {a} sample {r}/{i}: {analytic} vs {numeric}"
-                    );
-                }
-            }
-        }
+        let at = [(0usize, 2000usize), (1, 1500), (2, 1800), (3, 2600)];
+        assert_jacobians_match(&data, &model, &at, |_, value| (1e-3 * value.abs()).max(1e-6));
         checked += 1;
     }
     // Every effect with a shared parameter: 11 besides the 32 harmonics.
