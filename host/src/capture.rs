@@ -228,8 +228,9 @@ impl Run {
     /// [`Run::fingerprint`] with the run's samples held elsewhere (packed, in a replay that
     /// decodes run by run): the same digest of the same samples.
     pub fn fingerprint_with(&self, samples: &(impl Samples + ?Sized)) -> u64 {
-        use std::hash::{Hash, Hasher};
-        let mut h = std::collections::hash_map::DefaultHasher::new();
+        use std::hash::{BuildHasher, Hash, Hasher};
+        // Only compared within one process (never stored), so any fixed seed does.
+        let mut h = foldhash::fast::FixedState::with_seed(0).build_hasher();
         (self.pose.number(), self.rate_mdps, self.direction.sign(), samples.len()).hash(&mut h);
         for s in samples.iter_from(0) {
             (s.t_us, s.encoder, s.rate_counts, s.status).hash(&mut h);

@@ -145,8 +145,9 @@ pub struct LoopData {
     /// Mean die temperature over every sample, OUT_TEMP counts: the smoothed temperature is
     /// reckoned from it ([`RunTemperatures`]).
     pub temp_mean_counts: f64,
-    /// Spread of the smoothed die temperature over every sample, °C.
-    pub temp_spread_c: f64,
+    /// Spread of the smoothed die temperature over every sample, °C, once asked for
+    /// ([`LoopData::temp_spread_c`]).
+    temp_spread_c: std::sync::OnceLock<f64>,
 }
 
 /// The smoothed die temperature at one run's samples, °C from the capture mean: the moving
@@ -217,7 +218,6 @@ impl LoopData {
             }
         }
         let temp_mean = if temp_n > 0 { temp_sum / temp_n as f64 } else { 0.0 };
-        let (mut temp_lo, mut temp_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for r in &kin.runs {
             let s = &r.samples;
             let dt = 1.0 / r.sample_rate_hz;
@@ -226,12 +226,6 @@ impl LoopData {
             let gap = 1.5 * dt;
             let valid = ValidSamples::of(s.len(), |i| s.get(i).t_s(), gap, guard);
             let n_valid = valid.len();
-            let mut temps = RunTemperatures::new(r, temp_mean);
-            for i in 0..s.len() {
-                let t = f64::from(temps.at(i));
-                temp_lo = temp_lo.min(t);
-                temp_hi = temp_hi.max(t);
-            }
             let first = valid.first().map_or(0.0, |i| s.get(i).t_s());
             let last = valid.last().map_or(first, |i| s.get(i).t_s());
             runs.push(RunData { valid, n_valid, span_s: (first, last) });
@@ -254,8 +248,26 @@ impl LoopData {
             poses,
             layout,
             temp_mean_counts: temp_mean,
-            temp_spread_c: temp_hi - temp_lo,
+            temp_spread_c: std::sync::OnceLock::new(),
         }
+    }
+
+    /// Spread of the smoothed die temperature over every sample, °C: a sweep over every
+    /// sample, made the first time a candidate rule asks (only the temperature drift's does,
+    /// and only once the residual drifts), not for every calibration.
+    pub fn temp_spread_c(&self) -> f64 {
+        *self.temp_spread_c.get_or_init(|| {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for r in &self.kin.runs {
+                let mut temps = RunTemperatures::new(r, self.temp_mean_counts);
+                for i in 0..r.samples.len() {
+                    let t = f64::from(temps.at(i));
+                    lo = lo.min(t);
+                    hi = hi.max(t);
+                }
+            }
+            hi - lo
+        })
     }
 }
 
@@ -435,6 +447,36 @@ struct KnotGroup {
     at: Vec<Option<usize>>,
 }
 
+/// How a pass evaluates a dense column, resolved once per column list: the base model's
+/// columns are direct reads of the point, and a column with one value for all three axes (a
+/// linear column that does not depend on the axis's own rate) is evaluated once per sample, not
+/// once per axis. Matching on the `LinCol` itself at every sample read its payload back across
+/// two stores (a store-forwarding stall): a fifth of a plain fit's pass and a tenth of the
+/// diagnostics'.
+#[derive(Debug, Clone, Copy)]
+enum Kernel {
+    /// Component k of ω_s.
+    Omega(usize),
+    /// The constant.
+    One,
+    /// Another axis-independent linear column.
+    Common(LinCol),
+    /// A column whose value differs between axes (a shared parameter's Jacobian or a column
+    /// that depends on the axis's own rate).
+    PerAxis(Col),
+}
+
+impl Kernel {
+    fn of(c: Col) -> Self {
+        match c {
+            Col::Lin(LinCol::Omega(k)) => Kernel::Omega(k),
+            Col::Lin(LinCol::One) => Kernel::One,
+            Col::Lin(l) if l.is_common() => Kernel::Common(l),
+            c => Kernel::PerAxis(c),
+        }
+    }
+}
+
 /// A column list split for evaluation sample by sample: the columns every sample has, and the
 /// free drift's knots. A sample lies under at most two knots of a grid, so a pass evaluates those
 /// two, not the dozens a long capture has: evaluating every knot at every sample made the
@@ -443,12 +485,14 @@ struct KnotGroup {
 struct ColPlan {
     /// (position in the list, column) of every column but the knots.
     dense: Vec<(usize, Col)>,
-    /// Whether each of `dense` has one value for all three axes (a linear column that does not
-    /// depend on the axis's own rate): it is evaluated once per sample, not once per axis.
-    common: Vec<bool>,
+    /// How each of `dense` is evaluated.
+    kernels: Vec<Kernel>,
     knots: Vec<KnotGroup>,
     /// Whether `dense` holds a shared parameter's column.
     has_shared: bool,
+    /// Whether every column has one value for all three axes (no knot, no per-axis column):
+    /// the plain linear model's passes.
+    all_common: bool,
 }
 
 impl ColPlan {
@@ -458,7 +502,7 @@ impl ColPlan {
             let Col::Lin(LinCol::DriftKnot { stretch, knot, spacing_s }) = c else {
                 plan.has_shared |= matches!(c, Col::Shared(_));
                 plan.dense.push((j, c));
-                plan.common.push(matches!(c, Col::Lin(l) if l.is_common()));
+                plan.kernels.push(Kernel::of(c));
                 continue;
             };
             let stretch = usize::from(stretch);
@@ -481,6 +525,7 @@ impl ColPlan {
             }
             at[k] = Some(j);
         }
+        plan.all_common = plan.knots.is_empty() && !plan.kernels.iter().any(|k| matches!(k, Kernel::PerAxis(_)));
         plan
     }
 }
@@ -504,6 +549,8 @@ pub struct Evaluator<'a> {
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
     /// The model's linear columns, split for [`Evaluator::predict`].
     lin_plan: ColPlan,
+    /// The coefficients of `lin_plan.dense` on the three axes.
+    lin_beta: Vec<[f64; 3]>,
     /// Whether the points need the base's heading θ1 (a sine and cosine per sample): only Earth's
     /// horizontal components turn with it.
     needs_heading: bool,
@@ -516,6 +563,8 @@ pub struct Evaluator<'a> {
     /// Whether the points need the die temperature: only the temperature drift's column uses it,
     /// and computing it for every point of every pass made the 1-h replay ~9 % slower.
     needs_temperature: bool,
+    /// Whether a column is a free-drift knot: only those read a point's place on the knot grids.
+    needs_knots: bool,
     /// The smoothed temperatures of the run the last point was in (every pass visits a run's
     /// samples forward, and each run after the other).
     temperatures: std::cell::RefCell<Option<RunTemperatures<'a>>>,
@@ -548,6 +597,8 @@ impl<'a> Evaluator<'a> {
                 _ => None,
             })
             .collect();
+        let lin_plan = ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c)));
+        let lin_beta = lin_plan.dense.iter().map(|&(j, _)| model.beta.each_ref().map(|b| b[j])).collect();
         Self {
             data,
             model,
@@ -564,11 +615,18 @@ impl<'a> Evaluator<'a> {
             knot_grid: (0..data.layout.stretches.len())
                 .map(|st| std::array::from_fn(|k| data.layout.knot_grid(st, DRIFT_KNOT_SPACINGS_S[k])))
                 .collect(),
-            lin_plan: ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c))),
+            lin_plan,
+            lin_beta,
             needs_heading: needs.heading,
             needs_fixture: needs.fixture,
             plain,
             needs_temperature: needs.temperature,
+            needs_knots: model
+                .lin
+                .iter()
+                .map(|&c| Col::Lin(c))
+                .chain(cols.iter().copied())
+                .any(|c| matches!(c, Col::Lin(LinCol::DriftKnot { .. }))),
             temperatures: Default::default(),
         }
     }
@@ -724,10 +782,14 @@ impl<'a> Evaluator<'a> {
             run: r,
             t_s,
             stretch,
-            knot_x: std::array::from_fn(|k| {
-                let (t0, per_s) = self.knot_grid[stretch][k];
-                (t_s - t0) * per_s
-            }),
+            knot_x: if self.needs_knots {
+                std::array::from_fn(|k| {
+                    let (t0, per_s) = self.knot_grid[stretch][k];
+                    (t_s - t0) * per_s
+                })
+            } else {
+                [f64::NAN; DRIFT_KNOT_SPACINGS_S.len()]
+            },
         }
     }
 
@@ -808,8 +870,7 @@ impl<'a> Evaluator<'a> {
     #[inline]
     pub fn predict(&self, p: &Point, a: usize) -> f64 {
         let mut common = Vec::new();
-        self.common_values(p, &self.lin_plan, &mut common);
-        self.predict_with(p, a, &common)
+        self.predict3(p, &mut common)[a]
     }
 
     /// The model's output on every axis, counts (the axis-independent columns once; `common`
@@ -817,22 +878,46 @@ impl<'a> Evaluator<'a> {
     #[inline]
     pub fn predict3(&self, p: &Point, common: &mut Vec<f64>) -> [f64; 3] {
         self.common_values(p, &self.lin_plan, common);
-        std::array::from_fn(|a| self.predict_with(p, a, common))
+        self.predict3_with(p, common)
     }
 
-    /// [`Evaluator::predict`] with the model's axis-independent column values at `p` given
-    /// (`common_values` of `lin_plan`).
+    /// [`Evaluator::predict3`] with the model's axis-independent column values at `p` given
+    /// (`common_values` of `lin_plan`). The three axes side by side: each axis's terms are
+    /// added in the column order, as one axis at a time did, but the plan is walked once.
     #[inline]
-    fn predict_with(&self, p: &Point, a: usize, common: &[f64]) -> f64 {
-        let beta = &self.model.beta[a];
-        let mut sum = 0.0;
-        for (k, &(j, c)) in self.lin_plan.dense.iter().enumerate() {
-            if let Col::Lin(lc) = c {
-                let v = if self.lin_plan.common[k] { common[k] } else { self.lin_value(lc, p, a) };
-                sum += beta[j] * v;
+    fn predict3_with(&self, p: &Point, common: &[f64]) -> [f64; 3] {
+        let mut sum = [0.0; 3];
+        if self.lin_plan.all_common {
+            for (beta, &v) in self.lin_beta.iter().zip(common) {
+                for (s, b) in sum.iter_mut().zip(beta) {
+                    *s += b * v;
+                }
+            }
+            return sum;
+        }
+        for ((kernel, beta), &v) in self.lin_plan.kernels.iter().zip(&self.lin_beta).zip(common) {
+            match *kernel {
+                Kernel::PerAxis(Col::Lin(lc)) => {
+                    for (a, s) in sum.iter_mut().enumerate() {
+                        *s += beta[a] * self.lin_value(lc, p, a);
+                    }
+                }
+                Kernel::PerAxis(Col::Shared(_)) => {}
+                _ => {
+                    for (s, b) in sum.iter_mut().zip(beta) {
+                        *s += b * v;
+                    }
+                }
             }
         }
-        self.for_each_knot(&self.lin_plan, p, |j, w| sum += beta[j] * w);
+        if !self.lin_plan.knots.is_empty() {
+            let beta = &self.model.beta;
+            self.for_each_knot(&self.lin_plan, p, |j, w| {
+                for (s, b) in sum.iter_mut().zip(beta) {
+                    *s += b[j] * w;
+                }
+            });
+        }
         sum
     }
 
@@ -841,9 +926,11 @@ impl<'a> Evaluator<'a> {
     #[inline]
     fn common_values(&self, p: &Point, plan: &ColPlan, out: &mut Vec<f64>) {
         out.clear();
-        out.extend(plan.dense.iter().zip(&plan.common).map(|(&(_, c), &common)| match c {
-            Col::Lin(lc) if common => self.lin_value(lc, p, 0),
-            _ => 0.0,
+        out.extend(plan.kernels.iter().map(|k| match *k {
+            Kernel::Omega(k) => p.omega[k],
+            Kernel::One => 1.0,
+            Kernel::Common(lc) => self.lin_value(lc, p, 0),
+            Kernel::PerAxis(_) => 0.0,
         }));
     }
 
@@ -923,8 +1010,11 @@ impl<'a> Evaluator<'a> {
     /// [`Evaluator::fill`] gives. `common` as for [`Evaluator::fill_nonzero`].
     fn fill_dense(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut [f64]) {
         let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
-        for (((&(_, c), &is_common), &v), x) in plan.dense.iter().zip(&plan.common).zip(common).zip(out.iter_mut()) {
-            *x = if is_common { v } else { self.column_value(c, p, a, &t) };
+        for ((kernel, &v), x) in plan.kernels.iter().zip(common).zip(out.iter_mut()) {
+            *x = match *kernel {
+                Kernel::PerAxis(c) => self.column_value(c, p, a, &t),
+                _ => v,
+            };
         }
     }
 
@@ -938,9 +1028,12 @@ impl<'a> Evaluator<'a> {
         out.extend(
             plan.dense
                 .iter()
-                .zip(&plan.common)
+                .zip(&plan.kernels)
                 .zip(common)
-                .map(|((&(j, c), &is_common), &v)| (j, if is_common { v } else { self.column_value(c, p, a, &t) }))
+                .map(|((&(j, _), kernel), &v)| match *kernel {
+                    Kernel::PerAxis(c) => (j, self.column_value(c, p, a, &t)),
+                    _ => (j, v),
+                })
                 .filter(|&(_, v)| v != 0.0),
         );
         self.for_each_knot(plan, p, |j, w| out.push((j, w)));
@@ -1069,6 +1162,74 @@ impl Gram {
     }
 }
 
+/// Rows of one axis's columns and residuals, held until a block is full and then added to the
+/// sums column pair by column pair: each sum still takes its rows one after the other, as a
+/// per-row update did (the same sums bit for bit but for the sign of an exact zero), but from
+/// registers, four columns side by side, rather than through memory, whose store-to-load
+/// chain per entry was a third of a plain fit's pass.
+struct RowBlock {
+    l: usize,
+    x: Vec<f64>,
+    e: Vec<f64>,
+}
+
+impl RowBlock {
+    /// Rows held before they are summed (32 KiB of a 32-column list: the block stays in cache).
+    const ROWS: usize = 128;
+
+    fn new(l: usize) -> Self {
+        Self { l, x: Vec::with_capacity(l * Self::ROWS), e: Vec::with_capacity(Self::ROWS) }
+    }
+
+    /// A new row with residual `e`: its `l` column values to fill.
+    fn push(&mut self, e: f64) -> &mut [f64] {
+        self.e.push(e);
+        let at = self.x.len();
+        self.x.resize(at + self.l, 0.0);
+        &mut self.x[at..]
+    }
+
+    fn is_full(&self) -> bool {
+        self.e.len() == Self::ROWS
+    }
+
+    /// Adds the rows to axis `a` of `g` (upper triangle) and empties the block.
+    fn add_to(&mut self, g: &mut Gram, a: usize) {
+        let l = self.l;
+        if self.e.is_empty() {
+            return;
+        }
+        let (xtx, xte) = (&mut g.xtx[a], &mut g.xte[a]);
+        for ii in 0..l {
+            let mut jj = ii;
+            while jj < l {
+                let w = (l - jj).min(4);
+                let mut acc = [0.0f64; 4];
+                acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
+                for row in self.x.chunks_exact(l) {
+                    let xi = row[ii];
+                    for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
+                        *s += xi * xj;
+                    }
+                }
+                xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
+                jj += w;
+            }
+            let mut s = xte[ii];
+            for (row, &e) in self.x.chunks_exact(l).zip(&self.e) {
+                s += row[ii] * e;
+            }
+            xte[ii] = s;
+        }
+        for &e in &self.e {
+            g.ete[a] += e * e;
+        }
+        g.n[a] += self.e.len() as u64;
+        self.x.clear();
+        self.e.clear();
+    }
+}
+
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
 /// their axis).
 pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
@@ -1080,7 +1241,11 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
     // Without knots every column is in `plan.dense`, in column order.
     let dense = plan.knots.is_empty();
     debug_assert!(!dense || plan.dense.iter().enumerate().all(|(k, d)| d.0 == k));
-    let mut x = vec![0.0; l];
+    let mut block: [RowBlock; 3] = std::array::from_fn(|_| RowBlock::new(l));
+    // A fit's pass and a step's lead with the model's own columns: their axis-independent values
+    // are then the plan's first ones, computed once per sample rather than twice.
+    let model_leads = ev.lin_plan.dense.len() <= plan.dense.len()
+        && ev.lin_plan.dense.iter().zip(&plan.dense).all(|(m, c)| m.1 == c.1);
     data.kin
         .runs
         .iter()
@@ -1096,34 +1261,29 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                 for i in valid.indices_in(start, end) {
                     let p = ev.point(r, i);
                     ev.common_values(&p, &plan, &mut common);
-                    ev.common_values(&p, &ev.lin_plan, &mut model_common);
+                    let model_common = if model_leads {
+                        &common[..ev.lin_plan.dense.len()]
+                    } else {
+                        ev.common_values(&p, &ev.lin_plan, &mut model_common);
+                        &model_common[..]
+                    };
+                    let pred = ev.predict3_with(&p, model_common);
                     for (a, &count) in rk.samples.get(i).rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
                         }
-                        let e = f64::from(count) - ev.predict_with(&p, a, &model_common);
+                        let e = f64::from(count) - pred[a];
                         // Only the non-zero columns: the free drift's knots are 2 of dozens
                         // per sample, so the Gram update costs what the dense part does. Each
                         // pair goes to the upper triangle (`symmetrise` fills the rest).
                         if dense {
                             // Every column at every sample, in column order: the same sums as
-                            // the sparse update below (a skipped zero adds nothing), without
-                            // its bookkeeping, which was most of a plain pass.
-                            ev.fill_dense(&p, &plan, a, &common, &mut x);
-                            let g = &mut local.xtx[a];
-                            for (ii, &xi) in x.iter().enumerate() {
-                                if xi == 0.0 {
-                                    continue;
-                                }
-                                local.xte[a][ii] += xi * e;
-                                for (gij, &xj) in g[ii * l + ii..(ii + 1) * l].iter_mut().zip(&x[ii..]) {
-                                    if xj != 0.0 {
-                                        *gij += xi * xj;
-                                    }
-                                }
+                            // the sparse update below, without its bookkeeping, which was most
+                            // of a plain pass; the rows are summed a block at a time.
+                            ev.fill_dense(&p, &plan, a, &common, block[a].push(e));
+                            if block[a].is_full() {
+                                block[a].add_to(&mut local, a);
                             }
-                            local.ete[a] += e * e;
-                            local.n[a] += 1;
                             continue;
                         }
                         ev.fill_nonzero(&p, &plan, a, &common, &mut nz);
@@ -1141,6 +1301,9 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                         local.ete[a] += e * e;
                         local.n[a] += 1;
                     }
+                }
+                for (a, b) in block.iter_mut().enumerate() {
+                    b.add_to(&mut local, a);
                 }
                 total.drain_rows(&mut local, if dense { &all_rows } else { &rows });
                 rows.drain(..).for_each(|ii| touched[ii] = false);

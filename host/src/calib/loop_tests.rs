@@ -545,5 +545,5 @@ fn smoothed_temperatures_are_the_per_sample_ones() {
             assert_eq!(temps.at(i).to_bits(), expected[i].to_bits(), "sample {i}, out of order");
         }
     }
-    assert_eq!(data.temp_spread_c, hi - lo);
+    assert_eq!(data.temp_spread_c(), hi - lo);
 }

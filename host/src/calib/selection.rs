@@ -113,7 +113,7 @@ pub fn candidates(data: &LoopData, current: &[Effect], evidence: &Evidence) -> V
         separates_delay_and_index: separates_delay_and_index(data),
         free_drift_keeps_constant_rates: free_drift_keeps_constant_rates(data),
         poses: data.poses.len(),
-        temp_spread_c: data.temp_spread_c,
+        temp_spread_c: &|| data.temp_spread_c(),
     };
     Effect::catalogue()
         .into_iter()

@@ -51,7 +51,7 @@ impl Behaviour for DriftTemperature {
     }
 
     fn candidate(&self, s: &Situation) -> bool {
-        s.evidence.drift && !s.has_drift() && s.temp_spread_c >= MIN_TEMPERATURE_SPREAD_C
+        s.evidence.drift && !s.has_drift() && (s.temp_spread_c)() >= MIN_TEMPERATURE_SPREAD_C
     }
 
     fn needs(&self, _: Own) -> Needs {

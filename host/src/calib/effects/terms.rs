@@ -366,7 +366,7 @@ pub struct Evidence {
 }
 
 /// What the loop knows when it chooses the candidates of a step.
-#[derive(Debug, Clone, Copy)]
+#[derive(Clone, Copy)]
 pub struct Situation<'a> {
     /// The effects in the model.
     pub current: &'a [Effect],
@@ -379,8 +379,9 @@ pub struct Situation<'a> {
     pub free_drift_keeps_constant_rates: bool,
     /// Poses in the data.
     pub poses: usize,
-    /// Spread of the smoothed die temperature over the capture, °C.
-    pub temp_spread_c: f64,
+    /// Spread of the smoothed die temperature over the capture, °C: a sweep over every sample,
+    /// so asked for only by the rule that needs it.
+    pub temp_spread_c: &'a dyn Fn() -> f64,
 }
 
 impl Situation<'_> {
