@@ -13,7 +13,7 @@ fn show<M: serde::Serialize + core::fmt::Debug>(seq: u16, m: &M) {
         "{m:?}\n  seq {seq}\n  postcard {} ({} B)\n  crc {:08x}\n  frame {} ({} B)",
         hex(&raw),
         raw.len(),
-        frame::CRC32C.checksum(&raw),
+        frame::crc32c(&raw),
         hex(&buf[..n]),
         n
     );

@@ -126,6 +126,16 @@ fn command_vectors() -> Vec<(u16, Command, &'static str)> {
 #[test]
 fn crc_is_crc32c() {
     assert_eq!(frame::CRC32C.checksum(b"123456789"), 0xE306_9283);
+    assert_eq!(frame::crc32c(b"123456789"), 0xE306_9283);
+}
+
+proptest::proptest! {
+    /// The host's CRC (the CPU's instruction) and the firmware's (the byte table) agree on
+    /// every frame length and content.
+    #[test]
+    fn host_and_firmware_crcs_agree(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..80)) {
+        proptest::prop_assert_eq!(frame::crc32c(&bytes), frame::CRC32C.checksum(&bytes));
+    }
 }
 
 #[test]

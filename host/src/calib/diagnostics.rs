@@ -451,11 +451,10 @@ fn angle_bin_centres() -> Vec<(f64, f64)> {
     (0..ANGLE_BINS).map(|b| ((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64).sin_cos()).collect()
 }
 
-/// The bin of [`ANGLE_BINS`] that holds θ (any real angle, rad).
+/// The bin of [`ANGLE_BINS`] that holds θ, reduced to [0, 2π).
 #[inline]
-fn angle_bin(theta_rad: f64) -> usize {
-    let th = theta_rad.rem_euclid(std::f64::consts::TAU);
-    ((th / std::f64::consts::TAU * ANGLE_BINS as f64) as usize).min(ANGLE_BINS - 1)
+fn angle_bin(th_rad: f64) -> usize {
+    ((th_rad / std::f64::consts::TAU * ANGLE_BINS as f64) as usize).min(ANGLE_BINS - 1)
 }
 
 /// One run's sums per θ2 bin for the harmonic fits of the residual and of the speed deviation d
@@ -695,7 +694,8 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         for i in rd.valid.indices() {
             let s = rk.samples.get(i);
-            let p = ev.point(r, i);
+            let p = ev.point_with(r, i, s);
+            // θ2 in [0, 2π) once: both its bins below need it (fmod is a libm call).
             let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
             let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);
             let tb = (((s.t_s() - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
@@ -703,7 +703,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
-            let hb = angle_bin(p.theta2_rad);
+            let hb = angle_bin(th);
             angle.add_sample(hb, dev_pct);
             let preds = ev.predict3(&p, &mut scratch);
             for a in 0..3 {

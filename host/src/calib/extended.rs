@@ -21,7 +21,7 @@ use super::axes::{is_clipped, AXES};
 use super::effects::terms::{decay, dot, AxisTerms, Ctx, Needs, Own, Shifts};
 use super::effects::{Effect, MAX_DELAY_S, MAX_HARMONIC_ORDER};
 use super::error::CalError;
-use super::kinematics::{temperature_at, KinSamples, Kinematics, RunKinematics};
+use super::kinematics::{temperature_at, KinSample, KinSamples, Kinematics, RunKinematics};
 use super::layout::Layout;
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -643,12 +643,26 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The kinematics at sample `i` of run `r`.
+    #[inline]
     pub fn point(&self, r: usize, i: usize) -> Point {
+        self.point_with(r, i, self.data.kin.runs[r].samples.get(i))
+    }
+
+    /// [`Evaluator::point`] of sample `s`, sample `i` of run `r` (a pass reads its counts too).
+    #[inline]
+    pub fn point_with(&self, r: usize, i: usize, s: KinSample) -> Point {
         if self.plain {
-            return self.plain_point(r, i);
+            self.plain_point(r, i, s)
+        } else {
+            self.full_point(r, i, s)
         }
+    }
+
+    /// [`Evaluator::point`] of a model that moves angles or rates, or of a pass that wants the
+    /// shared parameters' Jacobians.
+    #[inline(never)]
+    fn full_point(&self, r: usize, i: usize, s: KinSample) -> Point {
         let rk = &self.data.kin.runs[r];
-        let s = rk.samples.get(i);
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
         let th = theta2 + sh.theta2_offset_rad;
@@ -755,6 +769,7 @@ impl<'a> Evaluator<'a> {
 
     /// A point with only where the sample lies in time set (its run, times, temperature and
     /// place on the knot grids), every kinematic field NaN: what every point shares.
+    #[inline]
     fn when(&self, r: usize, i: usize, t_s: f64) -> Point {
         let nan3 = [f64::NAN; 3];
         let stretch = self.data.layout.run_stretch[r];
@@ -797,9 +812,9 @@ impl<'a> Evaluator<'a> {
     /// wanted: ω_s of eq. 1-2 and gravity's direction, each the same number the full point
     /// gives (every shift it would add is an exact zero); the Jacobians of the shared
     /// parameters are NaN. A third of a plain pass's time was spent on them.
-    fn plain_point(&self, r: usize, i: usize) -> Point {
+    #[inline]
+    fn plain_point(&self, r: usize, i: usize, s: KinSample) -> Point {
         let rk = &self.data.kin.runs[r];
-        let s = rk.samples.get(i);
         let (th, rate1) = (s.theta2_rad(), s.theta1_rate_dps());
         let rate2 = rk.gear_ratio * rate1;
         let (se, ce) = th.sin_cos();
@@ -1259,7 +1274,8 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
                 for i in valid.indices_in(start, end) {
-                    let p = ev.point(r, i);
+                    let s = rk.samples.get(i);
+                    let p = ev.point_with(r, i, s);
                     ev.common_values(&p, &plan, &mut common);
                     let model_common = if model_leads {
                         &common[..ev.lin_plan.dense.len()]
@@ -1268,7 +1284,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                         &model_common[..]
                     };
                     let pred = ev.predict3_with(&p, model_common);
-                    for (a, &count) in rk.samples.get(i).rate_counts.iter().enumerate() {
+                    for (a, &count) in s.rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
                         }
