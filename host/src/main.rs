@@ -535,13 +535,17 @@ fn read_capture(path: &Path) -> Result<Capture> {
 }
 
 /// Reads and decodes a capture file run by run: `on_run` gets each run with its samples (packed)
-/// as soon as it is decoded, and returns the run the capture keeps.
+/// as soon as it is decoded, and returns the run the capture keeps. The file's digest is taken
+/// from the same bytes, as they are read.
 fn read_capture_by_run(
     path: &Path,
     on_run: impl FnMut(capture::Run, capture::PackedSamples) -> capture::Run,
-) -> Result<Capture> {
+) -> Result<(Capture, provenance::CaptureDigest)> {
     let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
-    capture::decode_reader_by_run(file, on_run).with_context(|| format!("cannot read capture {}", path.display()))
+    let mut reader = provenance::DigestReader::new(file);
+    let cap = capture::decode_reader_by_run(&mut reader, on_run)
+        .with_context(|| format!("cannot read capture {}", path.display()))?;
+    Ok((cap, reader.digest(path)))
 }
 
 /// Ctrl-C, SIGTERM and SIGHUP set a flag that the session loops check, so the motor is stopped
@@ -633,7 +637,7 @@ fn calibrate(
     let mut kinematics = calib::kinematics::Reconstruction::new(opts.cal.kinematics);
     for f in files {
         let mut fingerprints = Vec::new();
-        let cap = read_capture_by_run(f, |mut run, samples| {
+        let (cap, digest) = read_capture_by_run(f, |mut run, samples| {
             fingerprints.push((!samples.is_empty()).then(|| run.fingerprint_with(&samples)));
             // Static runs (0 °/s) give the noise figures, from their samples.
             if run.rate_mdps == 0 {
@@ -691,10 +695,10 @@ fn calibrate(
                 *t as f64 * 1e-6
             );
         }
-        caps.push((f.clone(), cap));
+        caps.push((digest, cap));
     }
-    let refs: Vec<(PathBuf, &Capture)> = caps.iter().map(|(f, c)| (f.clone(), c)).collect();
-    let prov = Provenance::gather(identity, session_started, &refs)?;
+    let refs: Vec<(provenance::CaptureDigest, &Capture)> = caps.iter().map(|(d, c)| (d.clone(), c)).collect();
+    let prov = Provenance::gather(identity, session_started, &refs);
     // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
     let mut runs = Vec::new();
     for (_, cap) in &mut caps {

@@ -606,15 +606,19 @@ fn high_pass_variance(e: &[f32], w: usize) -> f64 {
     let (mut sum, mut nans) = (0.0f64, 0u32);
     let inv = 1.0 / width as f64;
     let (mut power, mut used) = (0.0, 0usize);
+    // k % ring_len, stepped rather than divided (two divisions per sample and axis otherwise);
+    // k − width ≡ k + 1 (mod ring_len), the slot after it.
+    let mut slot = 0;
     for (k, &v) in (1..=n).zip(e) {
+        slot = if slot + 1 == ring_len { 0 } else { slot + 1 };
         let v = f64::from(v);
         sum += if v.is_nan() { 0.0 } else { v };
         nans += u32::from(v.is_nan());
-        prefix[k % ring_len] = sum;
-        nan_prefix[k % ring_len] = nans;
+        prefix[slot] = sum;
+        nan_prefix[slot] = nans;
         // The window centred on i = k − w − 1 spans prefix[i − w .. i + w + 1] = [k − width, k].
         if k >= width {
-            let lo = (k - width) % ring_len;
+            let lo = if slot + 1 == ring_len { 0 } else { slot + 1 };
             if nan_prefix[lo] != nans {
                 continue;
             }

@@ -166,6 +166,9 @@ pub struct RunTemperatures<'a> {
     prefix: Vec<f64>,
     /// Readings summed so far.
     filled: usize,
+    /// `filled % prefix.len()`, stepped rather than divided (three divisions per sample
+    /// otherwise).
+    slot: usize,
     sum: f64,
     /// Where `temperature_at` stands in the run's readings.
     cursor: usize,
@@ -176,7 +179,7 @@ impl<'a> RunTemperatures<'a> {
     pub fn new(run: &'a RunKinematics, temp_mean_counts: f64) -> Self {
         let dt = 1.0 / run.sample_rate_hz;
         let h = ((TEMPERATURE_SMOOTHING_S / 2.0) / dt).round() as usize;
-        Self { run, temp_mean_counts, h, prefix: vec![0.0; 2 * h + 2], filled: 0, sum: 0.0, cursor: 0 }
+        Self { run, temp_mean_counts, h, prefix: vec![0.0; 2 * h + 2], filled: 0, slot: 0, sum: 0.0, cursor: 0 }
     }
 
     /// At kept sample `i`, °C from the capture mean.
@@ -186,15 +189,21 @@ impl<'a> RunTemperatures<'a> {
         if a + ring_len <= self.filled {
             *self = Self::new(self.run, self.temp_mean_counts);
         }
+        let next = |slot: usize| if slot + 1 == ring_len { 0 } else { slot + 1 };
         while self.filled < b {
             let t_us = self.run.samples.get(self.filled).t_us();
             let t = temperature_at(&self.run.temperatures, t_us, &mut self.cursor);
             self.sum += if t.is_finite() { f64::from(t) } else { self.temp_mean_counts };
             self.filled += 1;
-            self.prefix[self.filled % ring_len] = self.sum;
+            self.slot = next(self.slot);
+            self.prefix[self.slot] = self.sum;
         }
+        // Visited forward, b is the last reading summed and, a whole window away, a is the slot
+        // after it (b − a = 2h + 1 = ring_len − 1).
+        let b_slot = if b == self.filled { self.slot } else { b % ring_len };
+        let a_slot = if b - a + 1 == ring_len { next(b_slot) } else { a % ring_len };
         // OUT_TEMP falls 1 count per °C (datasheet Table 5).
-        let mean = (self.prefix[b % ring_len] - self.prefix[a % ring_len]) / (b - a) as f64;
+        let mean = (self.prefix[b_slot] - self.prefix[a_slot]) / (b - a) as f64;
         (-(mean - self.temp_mean_counts)) as f32
     }
 }
@@ -817,7 +826,7 @@ impl<'a> Evaluator<'a> {
         let rk = &self.data.kin.runs[r];
         let (th, rate1) = (s.theta2_rad(), s.theta1_rate_dps());
         let rate2 = rk.gear_ratio * rate1;
-        let (se, ce) = th.sin_cos();
+        let (se, ce) = libm::sincos(th);
         let rt = &self.rot_t[r];
         let to_package =
             |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
