@@ -1254,6 +1254,107 @@ impl RowBlock {
     }
 }
 
+/// The rows of a plan whose every column is axis-independent ([`ColPlan::all_common`], such as
+/// the linear model's): one row of column values per sample for the three axes, each with its
+/// own residual. While no clipped sample has entered the sums since they were last drained, the
+/// three axes' XᵀX are the same numbers, so they are summed once and copied (they were three
+/// quarters of a plain fit's Gram time); otherwise each axis sums the rows it uses, in order, as
+/// [`RowBlock`] does.
+struct SharedRows {
+    l: usize,
+    x: Vec<f64>,
+    e: Vec<[f64; 3]>,
+    /// Per row, the axes it counts for (a clipped axis leaves it out).
+    used: Vec<[bool; 3]>,
+    /// Whether a row leaves an axis out.
+    clipped: bool,
+}
+
+impl SharedRows {
+    fn new(l: usize) -> Self {
+        let rows = RowBlock::ROWS;
+        Self {
+            l,
+            x: Vec::with_capacity(l * rows),
+            e: Vec::with_capacity(rows),
+            used: Vec::with_capacity(rows),
+            clipped: false,
+        }
+    }
+
+    /// A row of column values `x` with the residual `e[a]` on each axis with `used[a]`.
+    fn push(&mut self, x: &[f64], e: [f64; 3], used: [bool; 3]) {
+        self.x.extend_from_slice(&x[..self.l]);
+        self.e.push(e);
+        self.used.push(used);
+        self.clipped |= used.contains(&false);
+    }
+
+    fn is_full(&self) -> bool {
+        self.e.len() == RowBlock::ROWS
+    }
+
+    /// Adds the rows to `g` (upper triangles) and empties the block. `same`: whether `g`'s
+    /// three XᵀX are equal; it stays so unless a row left an axis out.
+    fn add_to(&mut self, g: &mut Gram, same: &mut bool) {
+        let l = self.l;
+        if self.e.is_empty() {
+            return;
+        }
+        *same &= !self.clipped;
+        let axes = if *same { 1 } else { 3 };
+        for a in 0..axes {
+            let xtx = &mut g.xtx[a];
+            for ii in 0..l {
+                let mut jj = ii;
+                while jj < l {
+                    let w = (l - jj).min(4);
+                    let mut acc = [0.0f64; 4];
+                    acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
+                    for (row, used) in self.x.chunks_exact(l).zip(&self.used) {
+                        if !used[a] {
+                            continue;
+                        }
+                        let xi = row[ii];
+                        for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
+                            *s += xi * xj;
+                        }
+                    }
+                    xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
+                    jj += w;
+                }
+            }
+        }
+        if *same {
+            let [x0, x1, x2] = &mut g.xtx;
+            x1.copy_from_slice(x0);
+            x2.copy_from_slice(x0);
+        }
+        for a in 0..3 {
+            let xte = &mut g.xte[a];
+            for ii in 0..l {
+                let mut s = xte[ii];
+                for ((row, e), used) in self.x.chunks_exact(l).zip(&self.e).zip(&self.used) {
+                    if used[a] {
+                        s += row[ii] * e[a];
+                    }
+                }
+                xte[ii] = s;
+            }
+            for (e, used) in self.e.iter().zip(&self.used) {
+                if used[a] {
+                    g.ete[a] += e[a] * e[a];
+                    g.n[a] += 1;
+                }
+            }
+        }
+        self.x.clear();
+        self.e.clear();
+        self.used.clear();
+        self.clipped = false;
+    }
+}
+
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
 /// their axis).
 pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
@@ -1266,10 +1367,14 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
     let dense = plan.knots.is_empty();
     debug_assert!(!dense || plan.dense.iter().enumerate().all(|(k, d)| d.0 == k));
     let mut block: [RowBlock; 3] = std::array::from_fn(|_| RowBlock::new(l));
+    let mut shared = SharedRows::new(l);
     // A fit's pass and a step's lead with the model's own columns: their axis-independent values
     // are then the plan's first ones, computed once per sample rather than twice.
     let model_leads = ev.lin_plan.dense.len() <= plan.dense.len()
         && ev.lin_plan.dense.iter().zip(&plan.dense).all(|(m, c)| m.1 == c.1);
+    // A model whose coefficients are all zero (the linear fit's one pass, from zero) predicts
+    // an exact 0 at every sample: Σ 0·x over finite columns.
+    let predicts_zero = model.beta.iter().flatten().all(|&b| b == 0.0);
     data.kin
         .runs
         .iter()
@@ -1282,17 +1387,29 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
             let valid = &data.runs[r].valid;
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
+                // `local` was drained: its three XᵀX are equal (zero).
+                let mut same = true;
                 for i in valid.indices_in(start, end) {
                     let s = rk.samples.get(i);
                     let p = ev.point_with(r, i, s);
                     ev.common_values(&p, &plan, &mut common);
-                    let model_common = if model_leads {
-                        &common[..ev.lin_plan.dense.len()]
+                    let pred = if predicts_zero {
+                        [0.0; 3]
+                    } else if model_leads {
+                        ev.predict3_with(&p, &common[..ev.lin_plan.dense.len()])
                     } else {
                         ev.common_values(&p, &ev.lin_plan, &mut model_common);
-                        &model_common[..]
+                        ev.predict3_with(&p, &model_common)
                     };
-                    let pred = ev.predict3_with(&p, model_common);
+                    if plan.all_common {
+                        let used = s.rate_counts.map(|c| !is_clipped(c));
+                        let e: [f64; 3] = std::array::from_fn(|a| f64::from(s.rate_counts[a]) - pred[a]);
+                        shared.push(&common, e, used);
+                        if shared.is_full() {
+                            shared.add_to(&mut local, &mut same);
+                        }
+                        continue;
+                    }
                     for (a, &count) in s.rate_counts.iter().enumerate() {
                         if is_clipped(count) {
                             continue;
@@ -1330,6 +1447,7 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                 for (a, b) in block.iter_mut().enumerate() {
                     b.add_to(&mut local, a);
                 }
+                shared.add_to(&mut local, &mut same);
                 total.drain_rows(&mut local, if dense { &all_rows } else { &rows });
                 rows.drain(..).for_each(|ii| touched[ii] = false);
             }
