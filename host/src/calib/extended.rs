@@ -699,7 +699,8 @@ impl<'a> Evaluator<'a> {
             std::array::from_fn(|i| rt[i][0] * f[0] + rt[i][1] * f[1] + rt[i][2] * f[2])
         };
         // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame.
-        let (se, ce) = th_eff.sin_cos();
+        // The `libm` crate's sincos, as the plain point's: a quarter cheaper than glibc's here.
+        let (se, ce) = libm::sincos(th_eff);
         // A table axis tilted by ε from perpendicular puts θ1'·sin ε along z2 and scales the
         // in-plane part by cos ε: 1 − ε²/2 is 14 ppm at 0.3°, which every sensitivity would take.
         let (sin_tilt, cos_tilt) = sh.tilt_sin_cos;
@@ -826,6 +827,8 @@ impl<'a> Evaluator<'a> {
         let rk = &self.data.kin.runs[r];
         let (th, rate1) = (s.theta2_rad(), s.theta1_rate_dps());
         let rate2 = rk.gear_ratio * rate1;
+        // The `libm` crate's sincos (as the full point's): a quarter cheaper than glibc's, which
+        // was 14 % of a 1-h replay.
         let (se, ce) = libm::sincos(th);
         let rt = &self.rot_t[r];
         let to_package =
