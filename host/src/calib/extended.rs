@@ -1189,6 +1189,27 @@ impl Gram {
     }
 }
 
+/// Adds Σ xᵢ·xⱼ over `rows` (each `l` column values) to the upper triangle of the l×l `xtx`:
+/// column pair by column pair, four side by side in registers, each sum taking the rows in order.
+fn add_row_products<'r>(xtx: &mut [f64], l: usize, rows: impl Iterator<Item = &'r [f64]> + Clone) {
+    for ii in 0..l {
+        let mut jj = ii;
+        while jj < l {
+            let w = (l - jj).min(4);
+            let mut acc = [0.0f64; 4];
+            acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
+            for row in rows.clone() {
+                let xi = row[ii];
+                for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
+                    *s += xi * xj;
+                }
+            }
+            xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
+            jj += w;
+        }
+    }
+}
+
 /// Rows of one axis's columns and residuals, held until a block is full and then added to the
 /// sums column pair by column pair: each sum still takes its rows one after the other, as a
 /// per-row update did (the same sums bit for bit but for the sign of an exact zero), but from
@@ -1226,22 +1247,9 @@ impl RowBlock {
         if self.e.is_empty() {
             return;
         }
-        let (xtx, xte) = (&mut g.xtx[a], &mut g.xte[a]);
+        add_row_products(&mut g.xtx[a], l, self.x.chunks_exact(l));
+        let xte = &mut g.xte[a];
         for ii in 0..l {
-            let mut jj = ii;
-            while jj < l {
-                let w = (l - jj).min(4);
-                let mut acc = [0.0f64; 4];
-                acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
-                for row in self.x.chunks_exact(l) {
-                    let xi = row[ii];
-                    for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
-                        *s += xi * xj;
-                    }
-                }
-                xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
-                jj += w;
-            }
             let mut s = xte[ii];
             for (row, &e) in self.x.chunks_exact(l).zip(&self.e) {
                 s += row[ii] * e;
@@ -1307,26 +1315,8 @@ impl SharedRows {
         *same &= !self.clipped;
         let axes = if *same { 1 } else { 3 };
         for a in 0..axes {
-            let xtx = &mut g.xtx[a];
-            for ii in 0..l {
-                let mut jj = ii;
-                while jj < l {
-                    let w = (l - jj).min(4);
-                    let mut acc = [0.0f64; 4];
-                    acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
-                    for (row, used) in self.x.chunks_exact(l).zip(&self.used) {
-                        if !used[a] {
-                            continue;
-                        }
-                        let xi = row[ii];
-                        for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
-                            *s += xi * xj;
-                        }
-                    }
-                    xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
-                    jj += w;
-                }
-            }
+            let rows = self.x.chunks_exact(l).zip(&self.used).filter(move |(_, used)| used[a]).map(|(row, _)| row);
+            add_row_products(&mut g.xtx[a], l, rows);
         }
         if *same {
             let [x0, x1, x2] = &mut g.xtx;
