@@ -415,8 +415,8 @@ impl CaptureDecoder {
 
     /// Feeds bytes.
     pub fn feed(&mut self, bytes: &[u8]) {
-        // The stream is taken out for the call so each event is handled as it is decoded
-        // (collecting them first copied every one twice, ~3 % of a replay).
+        // The stream is taken out for the call so each event is handled as it is decoded:
+        // collecting them first copied every one twice.
         let mut stream = std::mem::take(&mut self.stream);
         stream.feed::<RigMsg>(bytes, |ev| self.on_event(ev));
         self.stream = stream;

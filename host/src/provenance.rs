@@ -309,8 +309,7 @@ pub fn digest_file(path: &Path) -> Result<CaptureDigest> {
 }
 
 /// A reader that digests what passes through it, so a capture decoded as it is read is hashed
-/// in the same pass: reading an hour-long capture a second time for its digest cost a replay
-/// ~2 % of its time (the hashing itself stays).
+/// in the same pass rather than read a second time for its digest (the hashing itself stays).
 pub struct DigestReader<R> {
     inner: R,
     hasher: Sha256,

@@ -594,7 +594,7 @@ fn speed_deviation_percent(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
 /// array, in the same order, but only the 2w + 2 a window spans are kept (a ring): a whole run's
 /// prefix array would be 12 bytes per sample beside the residual itself (issue 7's memory bar).
 // Out of line: inlined into `diagnose`, its running sums lived on the stack (a store and a
-// reload per element, ~3 % of a replay).
+// reload per element; ~1 % of a 1-h replay with the periodogram's loops).
 #[inline(never)]
 fn high_pass_variance(e: &[f32], w: usize) -> f64 {
     let n = e.len();
@@ -638,7 +638,7 @@ fn high_pass_variance(e: &[f32], w: usize) -> f64 {
 /// has the χ² it is compared with (`stats`) but no Ljung–Box, and no kept crate takes block means
 /// of an f32 residual with NaN gaps; the statistic is one sum.
 // Out of line: inlined into `diagnose`, its running sums lived on the stack (a store and a
-// reload per element, ~3 % of a replay).
+// reload per element; ~1 % of a 1-h replay with the periodogram's loops).
 #[inline(never)]
 fn ljung_box(e: &[f32], block: usize, lags: usize) -> (f64, usize) {
     let means: Vec<f64> = e

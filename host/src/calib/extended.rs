@@ -1268,8 +1268,8 @@ impl RowBlock {
 /// The rows of a plan whose every column is axis-independent ([`ColPlan::all_common`], such as
 /// the linear model's): one row of column values per sample for the three axes, each with its
 /// own residual. While no clipped sample has entered the sums since they were last drained, the
-/// three axes' XᵀX are the same numbers, so they are summed once and copied (they were three
-/// quarters of a plain fit's Gram time); otherwise each axis sums the rows it uses, in order, as
+/// three axes' XᵀX are the same numbers, so they are summed once and copied rather than three
+/// times; otherwise each axis sums the rows it uses, in order, as
 /// [`RowBlock`] does.
 struct SharedRows {
     l: usize,
