@@ -82,7 +82,21 @@ impl Sqlite {
         }
         let c = rusqlite::Connection::open(path)?;
         c.busy_timeout(std::time::Duration::from_millis(SQLITE_BUSY_TIMEOUT_MS))?;
-        c.pragma_update(None, "journal_mode", "WAL")?;
+        // Turning a new database to WAL needs its exclusive lock, and SQLite answers a writer
+        // that races another doing the same with SQLITE_BUSY at once, without the busy handler
+        // (it avoids a deadlock that way): retried here until the same timeout.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_millis(SQLITE_BUSY_TIMEOUT_MS);
+        loop {
+            match c.pragma_update(None, "journal_mode", "WAL") {
+                Ok(()) => break,
+                Err(rusqlite::Error::SqliteFailure(e, _))
+                    if e.code == rusqlite::ErrorCode::DatabaseBusy && std::time::Instant::now() < deadline =>
+                {
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
         c.pragma_update(None, "foreign_keys", "ON")?;
         Ok(Self(c))
     }
