@@ -702,9 +702,10 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let t_first = rk.samples.first().map_or(0.0, |s| s.t_s());
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
+        let mut point = None;
         for i in rd.valid.indices() {
             let s = rk.samples.get(i);
-            let p = ev.point_with(r, i, s);
+            let p = ev.point_at(r, i, s, &mut point);
             // θ2 in [0, 2π) once: both its bins below need it (fmod is a libm call).
             let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
             let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);

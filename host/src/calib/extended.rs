@@ -781,8 +781,15 @@ impl<'a> Evaluator<'a> {
     /// place on the knot grids), every kinematic field NaN: what every point shares.
     #[inline]
     fn when(&self, r: usize, i: usize, t_s: f64) -> Point {
+        let mut p = self.of_run(r, t_s);
+        self.refresh_when(i, t_s, &mut p);
+        p
+    }
+
+    /// A point of run `r` with every field NaN but its run's and the time `t_s`.
+    #[inline]
+    fn of_run(&self, r: usize, t_s: f64) -> Point {
         let nan3 = [f64::NAN; 3];
-        let stretch = self.data.layout.run_stretch[r];
         Point {
             omega: nan3,
             d_theta2: nan3,
@@ -792,9 +799,9 @@ impl<'a> Evaluator<'a> {
             rate2_eff_dps: f64::NAN,
             dtheta_eff: f64::NAN,
             drate_eff_dps: f64::NAN,
-            t_rel_s: t_s - self.data.t0_s,
-            t_scaled: (t_s - self.data.t_mid_s) / self.data.t_half_s,
-            temp_c: if self.needs_temperature { f64::from(self.temperature_c(r, i)) } else { f64::NAN },
+            t_rel_s: f64::NAN,
+            t_scaled: f64::NAN,
+            temp_c: f64::NAN,
             mesh_rad: f64::NAN,
             pose: self.data.kin.runs[r].pose,
             d_earth: [nan3; 3],
@@ -806,15 +813,23 @@ impl<'a> Evaluator<'a> {
             theta1_rate_dps: f64::NAN,
             run: r,
             t_s,
-            stretch,
-            knot_x: if self.needs_knots {
-                std::array::from_fn(|k| {
-                    let (t0, per_s) = self.knot_grid[stretch][k];
-                    (t_s - t0) * per_s
-                })
-            } else {
-                [f64::NAN; DRIFT_KNOT_SPACINGS_S.len()]
-            },
+            stretch: self.data.layout.run_stretch[r],
+            knot_x: [f64::NAN; DRIFT_KNOT_SPACINGS_S.len()],
+        }
+    }
+
+    /// The fields of [`Evaluator::when`] that change from sample to sample of a run.
+    #[inline]
+    fn refresh_when(&self, i: usize, t_s: f64, p: &mut Point) {
+        p.t_rel_s = t_s - self.data.t0_s;
+        p.t_scaled = (t_s - self.data.t_mid_s) / self.data.t_half_s;
+        if self.needs_temperature {
+            p.temp_c = f64::from(self.temperature_c(p.run, i));
+        }
+        p.t_s = t_s;
+        if self.needs_knots {
+            let grid = &self.knot_grid[p.stretch];
+            p.knot_x = std::array::from_fn(|k| (t_s - grid[k].0) * grid[k].1);
         }
     }
 
@@ -824,6 +839,16 @@ impl<'a> Evaluator<'a> {
     /// parameters are NaN. A third of a plain pass's time was spent on them.
     #[inline]
     fn plain_point(&self, r: usize, i: usize, s: KinSample) -> Point {
+        let mut p = Point { dtheta_eff: 1.0, drate_eff_dps: 0.0, cos_tilt: 1.0, ..self.of_run(r, s.t_s()) };
+        self.refresh_plain(i, s, &mut p);
+        p
+    }
+
+    /// The fields of [`Evaluator::plain_point`] that change from sample to sample of a run
+    /// (`p` holds one of the run's plain points).
+    #[inline]
+    fn refresh_plain(&self, i: usize, s: KinSample, p: &mut Point) {
+        let r = p.run;
         let rk = &self.data.kin.runs[r];
         let (th, rate1) = (s.theta2_rad(), s.theta1_rate_dps());
         let rate2 = rk.gear_ratio * rate1;
@@ -833,22 +858,30 @@ impl<'a> Evaluator<'a> {
         let rt = &self.rot_t[r];
         let to_package =
             |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|i| rt[i][0] * v[0] + rt[i][1] * v[1] + rt[i][2] * v[2]) };
-        let nan3 = [f64::NAN; 3];
-        Point {
-            omega: to_package(&protocol::exciter::table_rate(rate1, (se, ce), rate2)),
-            theta2_rad: th,
-            rate2_dps: rate2,
-            rate2_eff_dps: rate2,
-            dtheta_eff: 1.0,
-            drate_eff_dps: 0.0,
-            mesh_rad: th,
-            pose: rk.pose,
-            d_earth: [to_package(&earth_basis((0.0, 0.0), (se, ce))[0]), nan3, nan3],
-            cos_tilt: 1.0,
-            theta1_rate_rad_s: rate1.to_radians(),
-            theta1_rate_dps: rate1,
-            ..self.when(r, i, s.t_s())
+        p.omega = to_package(&protocol::exciter::table_rate(rate1, (se, ce), rate2));
+        p.theta2_rad = th;
+        p.rate2_dps = rate2;
+        p.rate2_eff_dps = rate2;
+        p.mesh_rad = th;
+        p.d_earth[0] = to_package(&earth_basis((0.0, 0.0), (se, ce))[0]);
+        p.theta1_rate_rad_s = rate1.to_radians();
+        p.theta1_rate_dps = rate1;
+        self.refresh_when(i, s.t_s(), p);
+    }
+
+    /// [`Evaluator::point_with`] into `slot`, which a pass keeps from sample to sample: a plain
+    /// point of the same run is refreshed in place rather than built whole (a point is ~450
+    /// bytes, most of them NaN or the run's in a plain pass; building it per sample cost a 1-h
+    /// replay 5 %).
+    #[inline]
+    pub fn point_at<'s>(&self, r: usize, i: usize, s: KinSample, slot: &'s mut Option<Point>) -> &'s Point {
+        if !(self.plain && slot.as_ref().is_some_and(|p| p.run == r)) {
+            return slot.insert(self.point_with(r, i, s));
         }
+        // Some point of run r: the closure is the fallback a `None` would take.
+        let p = slot.get_or_insert_with(|| self.plain_point(r, i, s));
+        self.refresh_plain(i, s, p);
+        p
     }
 
     /// θ2 at sample `i` of run `r` as [`Evaluator::point`] gives it (`Point::theta2_rad`),
@@ -1378,13 +1411,14 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
             let (mut touched, mut rows) = (vec![false; l], Vec::with_capacity(l));
             let all_rows: Vec<usize> = (0..l).collect();
             let valid = &data.runs[r].valid;
+            let mut point = None;
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
                 // `local` was drained: its three XᵀX are equal (zero).
                 let mut same = true;
                 for i in valid.indices_in(start, end) {
                     let s = rk.samples.get(i);
-                    let p = ev.point_with(r, i, s);
+                    let p = ev.point_at(r, i, s, &mut point);
                     ev.common_values(&p, &plan, &mut common);
                     let pred = if predicts_zero {
                         [0.0; 3]
