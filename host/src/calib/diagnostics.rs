@@ -716,9 +716,9 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let mut row = [f64::NAN; 3];
             let hb = angle_bin(th);
             angle.add_sample(hb, dev_pct);
-            let preds = ev.predict3(&p, &mut scratch);
+            let preds = ev.predict3(p, &mut scratch);
             for a in 0..3 {
-                let r = ev.axis_rate(&p, a).abs();
+                let r = ev.axis_rate(p, a).abs();
                 let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
                 if is_clipped(s.rate_counts[a]) {
                     clipped[a] += 1;

@@ -1419,14 +1419,14 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                 for i in valid.indices_in(start, end) {
                     let s = rk.samples.get(i);
                     let p = ev.point_at(r, i, s, &mut point);
-                    ev.common_values(&p, &plan, &mut common);
+                    ev.common_values(p, &plan, &mut common);
                     let pred = if predicts_zero {
                         [0.0; 3]
                     } else if model_leads {
-                        ev.predict3_with(&p, &common[..ev.lin_plan.dense.len()])
+                        ev.predict3_with(p, &common[..ev.lin_plan.dense.len()])
                     } else {
-                        ev.common_values(&p, &ev.lin_plan, &mut model_common);
-                        ev.predict3_with(&p, &model_common)
+                        ev.common_values(p, &ev.lin_plan, &mut model_common);
+                        ev.predict3_with(p, &model_common)
                     };
                     if plan.all_common {
                         let used = s.rate_counts.map(|c| !is_clipped(c));
@@ -1449,13 +1449,13 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
                             // Every column at every sample, in column order: the same sums as
                             // the sparse update below, without its bookkeeping, which was most
                             // of a plain pass; the rows are summed a block at a time.
-                            ev.fill_dense(&p, &plan, a, &common, block[a].push(e));
+                            ev.fill_dense(p, &plan, a, &common, block[a].push(e));
                             if block[a].is_full() {
                                 block[a].add_to(&mut local, a);
                             }
                             continue;
                         }
-                        ev.fill_nonzero(&p, &plan, a, &common, &mut nz);
+                        ev.fill_nonzero(p, &plan, a, &common, &mut nz);
                         let g = &mut local.xtx[a];
                         for (k, &(ii, xi)) in nz.iter().enumerate() {
                             if !touched[ii] {
