@@ -20,6 +20,19 @@ const HARMONIC_GUARD_BINS: usize = 3;
 /// and cost linear in the run's length; a series up to this length is one zero-padded segment.
 pub const MAX_SEGMENT: usize = 1 << 17;
 
+/// Σ x over the values that are not NaN, in order: what `f64::sum` of them gives, but for the
+/// sign of an exact zero (which the periodogram squares away). A NaN adds 0 rather than branch:
+/// skipped by a branch, the running sum went through the stack at every value (a store and a
+/// reload, ~3 % of a 1-h replay).
+fn nan_skipping_sum<T: Copy + Into<f64>>(x: &[T]) -> f64 {
+    let mut sum = -0.0f64;
+    for &v in x {
+        let v: f64 = v.into();
+        sum += if v.is_nan() { 0.0 } else { v };
+    }
+    sum
+}
+
 /// The periodogram of one series.
 #[derive(Debug, Clone)]
 pub struct Periodogram {
@@ -47,7 +60,7 @@ impl Periodogram {
     #[inline(never)]
     pub fn new<T: Copy + Into<f64>>(x: &[T], fs_hz: f64) -> Self {
         let n = x.len();
-        let mean = x.iter().map(|&v| v.into()).filter(|v: &f64| !v.is_nan()).sum::<f64>() / n.max(1) as f64;
+        let mean = nan_skipping_sum(x) / n.max(1) as f64;
         let (seg, n_fft) =
             if n <= MAX_SEGMENT { (n, n.next_power_of_two().max(2)) } else { (MAX_SEGMENT, MAX_SEGMENT) };
         let starts: Vec<usize> = if n <= MAX_SEGMENT {
