@@ -233,7 +233,12 @@ impl Run {
         let mut h = foldhash::fast::FixedState::with_seed(0).build_hasher();
         (self.pose.number(), self.rate_mdps, self.direction.sign(), samples.len()).hash(&mut h);
         for s in samples.iter_from(0) {
-            (s.t_us, s.encoder, s.rate_counts, s.status).hash(&mut h);
+            // Three words a sample (the counts and status packed, without loss, into one)
+            // rather than a write per field and the array's length: ~1 % of a 1-h replay.
+            let [x, y, z] = s.rate_counts.map(|c| u64::from(c as u16));
+            h.write_i64(s.t_us);
+            h.write_i64(s.encoder);
+            h.write_u64(x | y << 16 | z << 32 | u64::from(s.status) << 48);
         }
         for e in &self.index {
             (e.t_us, e.encoder).hash(&mut h);
