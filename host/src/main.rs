@@ -697,8 +697,7 @@ fn calibrate(
         }
         caps.push((digest, cap));
     }
-    let refs: Vec<(provenance::CaptureDigest, &Capture)> = caps.iter().map(|(d, c)| (d.clone(), c)).collect();
-    let prov = Provenance::gather(identity, session_started, &refs);
+    let prov = Provenance::gather(identity, session_started, &caps);
     // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
     let mut runs = Vec::new();
     for (_, cap) in &mut caps {

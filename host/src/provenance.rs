@@ -161,11 +161,7 @@ pub const HOST_VERSION: &str = env!("CARGO_PKG_VERSION");
 impl Provenance {
     /// Provenance of a result computed now from `files`: each capture as decoded, with the
     /// digest of the bytes it was decoded from.
-    pub fn gather(
-        identity: Identity,
-        session_started_utc: Option<String>,
-        files: &[(CaptureDigest, &Capture)],
-    ) -> Self {
+    pub fn gather(identity: Identity, session_started_utc: Option<String>, files: &[(CaptureDigest, Capture)]) -> Self {
         let captures = files.iter().map(|(d, _)| d.clone()).collect();
         let hello = files.iter().find_map(|(_, c)| c.hello);
         let raw: Vec<i8> =
