@@ -5,6 +5,7 @@
 //! how strong and what it suggests. Also the binned residual and spectrum the report plots.
 
 use super::axes::{is_clipped, AXES};
+use super::binning::Binning;
 use super::blocking::Blocking;
 use super::extended::{harmonics_of, Evaluator, LoopData, Model};
 use super::spectrum::{AmplitudeSpectrum, Periodogram};
@@ -451,12 +452,6 @@ fn angle_bin_centres() -> Vec<(f64, f64)> {
     (0..ANGLE_BINS).map(|b| ((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64).sin_cos()).collect()
 }
 
-/// The bin of [`ANGLE_BINS`] that holds θ, reduced to [0, 2π).
-#[inline]
-fn angle_bin(th_rad: f64) -> usize {
-    ((th_rad / std::f64::consts::TAU * ANGLE_BINS as f64) as usize).min(ANGLE_BINS - 1)
-}
-
 /// One run's sums per θ2 bin for the harmonic fits of the residual and of the speed deviation d
 /// (in %), and for the slope of the residual against d with every harmonic 0…32× removed from
 /// both (the ripple test).
@@ -677,6 +672,8 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
     let mut pooled = [(0.0f64, 0.0f64, 0.0f64, 0usize); 3]; // Σe², floor var·n, noise var·n, n
     let mut runs = Vec::with_capacity(n_runs);
     let centres = angle_bin_centres();
+    let (theta2_binning, angle_binning) =
+        (Binning::new(std::f64::consts::TAU, THETA2_BINS), Binning::new(std::f64::consts::TAU, ANGLE_BINS));
     let mut scratch = Vec::new();
     for (r, rk) in data.kin.runs.iter().enumerate() {
         let rd = &data.runs[r];
@@ -702,24 +699,24 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let t_first = rk.samples.first().map_or(0.0, |s| s.t_s());
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
+        let rate_binning = Binning::new(rate_max, RATE_BINS);
+        let time_binning = Binning::of_width(TIME_BIN_S, n_time);
         let mut point = None;
         for i in rd.valid.indices() {
             let s = rk.samples.get(i);
             let p = ev.point_at(r, i, s, &mut point);
-            // θ2 in [0, 2π) once: both its bins below need it (fmod is a libm call).
-            let th = p.theta2_rad.rem_euclid(std::f64::consts::TAU);
-            let bin = ((th / std::f64::consts::TAU * THETA2_BINS as f64) as usize).min(THETA2_BINS - 1);
-            let tb = (((s.t_s() - t_first) / TIME_BIN_S) as usize).min(n_time - 1);
+            let bin = theta2_binning.angle_index(p.theta2_rad);
+            let tb = time_binning.index(s.t_s() - t_first);
             let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
             dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
-            let hb = angle_bin(th);
+            let hb = angle_binning.angle_index(p.theta2_rad);
             angle.add_sample(hb, dev_pct);
             let preds = ev.predict3(p, &mut scratch);
             for a in 0..3 {
                 let r = ev.axis_rate(p, a).abs();
-                let rbin = ((r / rate_max * RATE_BINS as f64) as usize).min(RATE_BINS - 1);
+                let rbin = rate_binning.index(r);
                 if is_clipped(s.rate_counts[a]) {
                     clipped[a] += 1;
                     e[a].push(f32::NAN);

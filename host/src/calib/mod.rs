@@ -11,6 +11,7 @@
 
 pub mod apply;
 pub mod axes;
+pub mod binning;
 pub mod blocking;
 pub mod closure;
 pub mod derived;
