@@ -76,6 +76,10 @@ impl Periodogram {
         let mut input = fft.make_input_vec();
         let mut output = fft.make_output_vec();
         let mut power = vec![0.0; n_fft / 2 + 1];
+        // |X|²/seg: a division per bin and segment (1 % of a 1-h replay), unless seg is a power
+        // of two (every segment of a long series), where the reciprocal's product is the same bits.
+        let (seg_f, inv_seg) = (seg as f64, 1.0 / seg as f64);
+        let per_seg = |p: f64| if seg.is_power_of_two() { p * inv_seg } else { p / seg_f };
         for &s0 in &starts {
             for (dst, &v) in input.iter_mut().zip(&x[s0..s0 + seg]) {
                 let v: f64 = v.into();
@@ -84,7 +88,7 @@ impl Periodogram {
             input[seg..].fill(0.0);
             fft.process(&mut input, &mut output).expect("buffers made by the plan have its lengths");
             for (p, c) in power.iter_mut().zip(&output) {
-                *p += c.norm_sqr() / seg as f64;
+                *p += per_seg(c.norm_sqr());
             }
         }
         let segments = starts.len();
