@@ -7,7 +7,7 @@
 use super::axes::{is_clipped, AXES};
 use super::binning::Binning;
 use super::blocking::Blocking;
-use super::extended::{harmonics_of, Evaluator, LoopData, Model};
+use super::extended::{harmonics_of, Cursor, Evaluator, LoopData, Model};
 use super::spectrum::{AmplitudeSpectrum, Periodogram};
 use super::stats::{chi2_to_sigma, chi2_upper_quantile};
 use crate::geometry::Pose;
@@ -701,10 +701,9 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         let rate_binning = Binning::new(rate_max, RATE_BINS);
         let time_binning = Binning::of_width(TIME_BIN_S, n_time);
-        let mut point = None;
+        let mut cursor = Cursor::default();
         for i in rd.valid.indices() {
-            let s = rk.samples.get(i);
-            let p = ev.point_at(r, i, s, &mut point);
+            let (s, p) = ev.visit(r, i, &mut cursor);
             let bin = theta2_binning.angle_index(p.theta2_rad);
             let tb = time_binning.index(s.t_s() - t_first);
             let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;

@@ -222,7 +222,7 @@ impl KinSamples {
     }
 
     /// Sample `i` (panics beyond the end, as a slice does).
-    #[inline]
+    #[inline(always)]
     pub fn get(&self, i: usize) -> KinSample {
         let p = &self.packed[i];
         let (t_us, encoder) = if p.dt_us == ESCAPED {

@@ -26,6 +26,7 @@ pub mod paper;
 pub mod present;
 pub mod report;
 pub mod selection;
+pub mod sincos;
 pub mod spectrum;
 pub mod stats;
 pub mod truth_check;
