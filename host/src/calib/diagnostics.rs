@@ -675,6 +675,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
     let (theta2_binning, angle_binning) =
         (Binning::new(std::f64::consts::TAU, THETA2_BINS), Binning::new(std::f64::consts::TAU, ANGLE_BINS));
     let mut scratch = Vec::new();
+    let mut fft_planner = realfft::RealFftPlanner::new();
     for (r, rk) in data.kin.runs.iter().enumerate() {
         let rd = &data.runs[r];
         let fs = rk.sample_rate_hz;
@@ -759,7 +760,7 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
             let ea = &e[a];
             let (n, ss) = (n_axis[a], ss_axis[a]);
             let floor_var = high_pass_variance(ea, w);
-            let pg = Periodogram::new(ea, fs);
+            let pg = Periodogram::with_planner(ea, fs, &mut fft_planner);
             let noise_var = pg
                 .noise_variance(band_lo, band_hi, table_hz)
                 .filter(|v| v.is_finite() && *v > 0.0)
