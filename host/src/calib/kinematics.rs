@@ -505,8 +505,8 @@ fn line_fit(points: &[(f64, f64)], fallback_slope: f64) -> (f64, f64) {
 /// Local straight-line slopes of encoder count against time, counts/s, over windows of 2h+1
 /// consecutive samples: `f(centre index, centre sample, slope)` for every sample with a full
 /// window. Sliding sums of offsets from the run's first sample, in i128 so that they stay exact
-/// for any run length: O(1) per sample, the samples read in one pass (three cursors: the one
-/// entering the window, the one leaving it, the centre). The centred combinations n·Σte − Σt·Σe
+/// for any run length: O(1) per sample, the samples read in one pass and held while in the
+/// window. The centred combinations n·Σte − Σt·Σe
 /// and n·Σtt − (Σt)² are those of the window alone (≲ 1e13 for any sane window), so they pass
 /// through i64 on their way to f64.
 fn for_each_slope_cps(samples: &(impl Samples + ?Sized), h: usize, mut f: impl FnMut(usize, &RunSample, f64)) {
@@ -520,31 +520,39 @@ fn for_each_slope_cps(samples: &(impl Samples + ?Sized), h: usize, mut f: impl F
     let (t0, e0) = (first.t_us, first.encoder);
     let te = |s: &RunSample| (i128::from(s.t_us - t0), i128::from(s.encoder - e0));
     let (mut st, mut stt, mut se, mut ste) = (0i128, 0i128, 0i128, 0i128);
-    let (mut entering, mut leaving, mut centres) = (samples.iter_from(0), samples.iter_from(0), samples.iter_from(h));
+    // The window's samples, each unpacked once as it enters (a cursor each for the entering,
+    // leaving and centre samples unpacked every sample three times, 2 % of a 1-h replay).
+    // `window[oldest]` is its first sample, the others follow it round the ring.
+    let mut entering = samples.iter_from(0);
+    let mut window: Vec<RunSample> = Vec::with_capacity(w);
     for s in entering.by_ref().take(w) {
         let (t, e) = te(&s);
         st += t;
         stt += t * t;
         se += e;
         ste += t * e;
+        window.push(s);
     }
     let n = w as i128;
+    let mut oldest = 0;
     for j in 0..=samples.len() - w {
         if j > 0 {
-            let (Some(old), Some(new)) = (leaving.next(), entering.next()) else {
-                unreachable!("the cursors stay inside the samples");
+            let Some(new) = entering.next() else {
+                unreachable!("the window stays inside the samples");
             };
-            let (to, eo) = te(&old);
+            let (to, eo) = te(&window[oldest]);
             let (ti, ei) = te(&new);
             st += ti - to;
             stt += ti * ti - to * to;
             se += ei - eo;
             ste += ti * ei - to * eo;
+            window[oldest] = new;
+            oldest = if oldest + 1 == w { 0 } else { oldest + 1 };
         }
-        let centre = centres.next().expect("the centre lags the entering sample");
+        let centre = &window[if oldest + h < w { oldest + h } else { oldest + h - w }];
         let num = (n * ste - st * se) as i64 as f64;
         let den = (n * stt - st * st) as i64 as f64;
-        f(j + h, &centre, num / den * 1e6);
+        f(j + h, centre, num / den * 1e6);
     }
 }
 
