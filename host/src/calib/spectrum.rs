@@ -85,8 +85,8 @@ impl Periodogram {
         let mut power = vec![0.0; n_fft / 2 + 1];
         // |X|²/seg: a division per bin and segment (1 % of a 1-h replay), unless seg is a power
         // of two (every segment of a long series), where the reciprocal's product is the same bits.
-        let (seg_f, inv_seg) = (seg as f64, 1.0 / seg as f64);
-        let per_seg = |p: f64| if seg.is_power_of_two() { p * inv_seg } else { p / seg_f };
+        let (seg_f, inv_seg, exact) = (seg as f64, 1.0 / seg as f64, seg.is_power_of_two());
+        let per_seg = |p: f64| if exact { p * inv_seg } else { p / seg_f };
         for &s0 in &starts {
             for (dst, &v) in input.iter_mut().zip(&x[s0..s0 + seg]) {
                 let v: f64 = v.into();
