@@ -105,6 +105,11 @@ enum Cmd {
         /// rather than fitted, which tightens every sensitivity's σ by 10-20 ppm.
         #[arg(long, allow_negative_numbers = true, value_parser = parse_latitude)]
         latitude_deg: Option<f64>,
+        /// Plausible size (one σ, in the unit the notes give) of a catalogued effect the runs may
+        /// not separate, replacing the built-in one, e.g. `--consider g_sensitivity=0.02` (°/s
+        /// per g) for a part whose datasheet states it; 0 leaves the effect out. Repeatable.
+        #[arg(long, value_name = "EFFECT=SIGMA")]
+        consider: Vec<String>,
         /// Baud rate (ignored by USB CDC-ACM).
         #[arg(long, default_value_t = link::DEFAULT_BAUD)]
         baud: u32,
@@ -373,9 +378,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             db,
             yes,
             latitude_deg,
+            consider,
             baud,
             lockstep_clock,
         } => {
+            let mut considered = calib::consider::ConsiderOverrides::default();
+            for c in &consider {
+                considered.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
+            }
             // Resolved first: a wrong --db must not cost a session.
             let db = records::DbSpec::resolve(db.as_deref())?;
             let identity = Identity { sensor_serial: sensor, operator, rig };
@@ -415,7 +425,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     None => (replay, identity, None),
                 },
             };
-            let opts = calib::LoopOptions { latitude_deg, ..calib::LoopOptions::default() };
+            let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
             calibrate(&files, &out_dir, truth.as_deref(), identity, started, &db, &opts)
         }
         Cmd::Noise { capture, cal, json } => {

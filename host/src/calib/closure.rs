@@ -5,8 +5,11 @@
 //! their σ, a held-out prediction and, on simulated data, the error against the truth.
 
 use super::axes::AXES;
+use super::consider::{consider, ConsiderOverrides, ConsiderTerm, Consideration};
+use super::consistency::{consistency, Consistency};
 use super::derived::{derive, AxisEstimate, InterAxisAngle};
 use super::diagnostics::{diagnose, Diagnostics, Finding};
+use super::effects::terms::ConsiderCtx;
 use super::effects::Effect;
 use super::estimate::Estimate;
 use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
@@ -36,6 +39,9 @@ pub struct LoopOptions {
     /// horizontal rate is tested against Ω·cos(latitude).
     #[serde(default)]
     pub latitude_deg: Option<f64>,
+    /// Plausible sizes the user gave for effects the runs may not separate (`--consider`).
+    #[serde(default)]
+    pub consider: ConsiderOverrides,
     /// Effects added at most: a real exciter needs about ten (phase 2, drift 1, the gears' two
     /// pole-pass lines, pose fixture, g-sensitivity, table tilt, scale, filter); a capture needing
     /// more than 12 is better described as not understood.
@@ -44,7 +50,13 @@ pub struct LoopOptions {
 
 impl Default for LoopOptions {
     fn default() -> Self {
-        Self { cal: CalOptions::default(), alpha: 1e-3, latitude_deg: None, max_effects: 12 }
+        Self {
+            cal: CalOptions::default(),
+            alpha: 1e-3,
+            latitude_deg: None,
+            consider: ConsiderOverrides::default(),
+            max_effects: 12,
+        }
     }
 }
 
@@ -199,11 +211,8 @@ pub enum Note {
         /// The most the vertical part puts in the g-sensitivity, Ω/g, °/s per g.
         vertical_max_dps_per_g: f64,
     },
-    /// Earth's rotation is not in the model; every sensitivity's σ carries it as a Type-B term.
-    EarthNotModelled {
-        /// That term, ppm.
-        type_b_ppm: f64,
-    },
+    /// A catalogued effect the runs do not separate: its plausible size is carried in σ.
+    Unseparated(ConsiderTerm),
 }
 
 /// The loop's result.
@@ -219,6 +228,10 @@ pub struct LoopReport {
     /// [`Verdict::UnexplainedStructure`] by itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub earth_excess: Option<EarthExcess>,
+    /// What each group of runs (one signed speed) says about M, against the others; a
+    /// disagreement makes the verdict [`Verdict::UnexplainedStructure`] by itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub consistency: Option<Consistency>,
     /// Runs the data cannot do without.
     pub asks: Vec<Ask>,
     /// What the operator should know of the model (identifiability, Earth rotation, the
@@ -275,36 +288,24 @@ struct BaseEstimate {
     inter: [InterAxisAngle; 3],
 }
 
-fn base_estimate(f: &Fitted, nominal: f64, data: &LoopData) -> BaseEstimate {
+fn base_estimate(f: &Fitted, nominal: f64) -> BaseEstimate {
+    base_estimate_with(f, nominal, None)
+}
+
+/// [`base_estimate`] with a consider covariance added to the fit's own.
+fn base_estimate_with(f: &Fitted, nominal: f64, added: Option<&DMatrix<f64>>) -> BaseEstimate {
     let idx = base_indices(f);
     let params: [f64; 12] = std::array::from_fn(|p| {
         let (a, j) = (p / 4, p % 4);
         let c = if j < 3 { LinCol::Omega(j) } else { LinCol::One };
         f.model.beta_of(a, c).unwrap_or(0.0)
     });
-    let cov = DMatrix::from_fn(12, 12, |i, j| f.solution.cov[(idx[i], idx[j])]);
-    let (mut axes, inter) = derive(&params, &cov, nominal);
-    let type_b = earth_type_b_rel(&f.model, data);
-    for a in &mut axes {
-        a.k_counts_per_dps = a.k_counts_per_dps.widened(a.k_counts_per_dps.value * type_b);
+    let mut cov = DMatrix::from_fn(12, 12, |i, j| f.solution.cov[(idx[i], idx[j])]);
+    if let Some(a) = added {
+        cov += a;
     }
+    let (axes, inter) = derive(&params, &cov, nominal);
     BaseEstimate { params, cov, axes, inter }
-}
-
-/// Standard uncertainty, relative, that Earth's rotation puts on a sensitivity while the model
-/// does not hold it: its vertical part (at most Ω = 15.041 °/h) adds to θ1', a relative error of
-/// up to Ω/|θ1'| at the slowest run; taken as uniform within ± that bound, σ = bound/√3 (GUM
-/// 4.3.7, Type B). Zero once Earth rotation is modelled, or g-sensitivity, which holds the
-/// vertical part exactly (both turn with θ2 along the base axis).
-fn earth_type_b_rel(m: &Model, data: &LoopData) -> f64 {
-    if m.effects.iter().any(|e| e.is_earth() || *e == Effect::GSensitivity) {
-        return 0.0;
-    }
-    let slowest_dps = data.kin.runs.iter().map(|r| r.steady_rate_dps.abs()).fold(f64::INFINITY, f64::min);
-    if !slowest_dps.is_finite() || slowest_dps <= 0.0 {
-        return 0.0;
-    }
-    earth_rate_dps() / slowest_dps / 3f64.sqrt()
 }
 
 /// Re-solves the converged fit's sums with the weights of its own diagnostics, so that its
@@ -417,7 +418,7 @@ impl<'a> Context<'a> {
     fn paper_check(&self, linear: &Fitted, diag: &Diagnostics) -> Option<PaperCheck> {
         let mut weighted = linear.clone();
         reweight(&mut weighted, diag.weights());
-        let est = base_estimate(&weighted, self.nominal, self.data);
+        let est = base_estimate(&weighted, self.nominal);
         let joint = est.axes.map(|a| [a.s[0], a.s[1], a.s[2], a.k_counts_per_dps, a.offset_counts].map(|e| e.value));
         paper_check(&linear.per_run, &self.data.kin, diag.inflation, joint)
     }
@@ -425,8 +426,30 @@ impl<'a> Context<'a> {
     fn state(&self, mut fitted: Fitted) -> State {
         let diag = diagnose(self.data, &fitted.model, self.cutoff_hz, self.opts.alpha, self.opts.cal.noise_window_s);
         reweight(&mut fitted, diag.weights());
-        let estimate = base_estimate(&fitted, self.nominal, self.data);
+        let estimate = base_estimate(&fitted, self.nominal);
         State { fitted, diag, estimate }
+    }
+
+    /// The consider covariance of a model: what every catalogued effect it lacks and the runs
+    /// do not separate may do to M and the offsets.
+    fn consider(&self, s: &State) -> Consideration {
+        let cx = ConsiderCtx {
+            current: &s.fitted.model.effects,
+            cutoff_hz: self.cutoff_hz,
+            full_scale_dps: self.full_scale_dps,
+            delay_s: s.fitted.model.theta_of(SharedPar { effect: Effect::Delay, k: 0 }),
+        };
+        let base = base_indices(&s.fitted);
+        consider(
+            self.data,
+            &s.fitted,
+            s.diag.weights(),
+            &cx,
+            &base,
+            &s.estimate.params,
+            self.nominal,
+            &self.opts.consider,
+        )
     }
 
     fn held_out(&self, s: &State) -> Vec<HeldOutRun> {
@@ -579,6 +602,7 @@ impl Context<'_> {
             gear: data.kin.gear,
             paper,
             drift: drift_table(&s.fitted.model, data),
+            consider: Vec::new(),
         }
     }
 }
@@ -889,23 +913,27 @@ fn loop_on(
     if let Some(note) = earth_note(&state.fitted, opts.latitude_deg) {
         notes.push(note);
     }
-    let type_b = earth_type_b_rel(&state.fitted.model, &data);
-    if type_b > 0.0 {
-        notes.push(Note::EarthNotModelled { type_b_ppm: type_b * 1e6 });
-    }
+    let considered = ctx.consider(&state);
+    state.estimate = base_estimate_with(&state.fitted, ctx.nominal, Some(&considered.cov));
+    notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
     let earth_excess = earth_implausible(&state.fitted);
-    let verdict = if state.diag.has_structure() || earth_excess.is_some() {
+    let consistency =
+        consistency(&data, &state.fitted, state.diag.weights(), sensitivities(&state.fitted.model), opts.alpha);
+    let disagree = consistency.as_ref().is_some_and(Consistency::disagrees);
+    let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree {
         Verdict::UnexplainedStructure
     } else {
         Verdict::AtNoiseFloor
     };
-    let final_report = ctx.cal_report(&state, paper);
+    let mut final_report = ctx.cal_report(&state, paper);
+    final_report.consider = considered.terms;
     let added = steps.len() > 1;
     Ok(LoopReport {
         steps,
         verdict,
         alpha: opts.alpha,
         earth_excess,
+        consistency,
         asks,
         notes,
         skipped,

@@ -1630,6 +1630,23 @@ pub struct JointSolution {
 /// Solves the weighted joint problem (`weights[a]` = 1/variance of axis a's noise).
 pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<JointSolution> {
     let np = sel.len();
+    let (a_mat, b) = normal_equations(g, sel, weights);
+    let (scaled, d, rcond) = scaled_rcond(&a_mat);
+    if rcond < MIN_RCOND {
+        return None;
+    }
+    let inv_scaled = scaled.cholesky()?.inverse();
+    let cov = DMatrix::from_fn(np, np, |i, j| inv_scaled[(i, j)] * d[i] * d[j]);
+    let delta = &cov * &b;
+    let rss = residual_after(g, sel, &delta);
+    let chi2 = (0..3).map(|a| weights[a] * rss[a]).sum();
+    Some(JointSolution { delta, cov, chi2, rss, n: g.n })
+}
+
+/// The weighted normal equations of a selection: XᵀWX and XᵀWe over the three axes, parameters
+/// in the selection's order (axis-major linear ones, then shared).
+pub fn normal_equations(g: &Gram, sel: &Selection, weights: [f64; 3]) -> (DMatrix<f64>, DVector<f64>) {
+    let np = sel.len();
     let l = g.l;
     let mut a_mat = DMatrix::<f64>::zeros(np, np);
     let mut b = DVector::<f64>::zeros(np);
@@ -1642,16 +1659,7 @@ pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<Joint
             }
         }
     }
-    let (scaled, d, rcond) = scaled_rcond(&a_mat);
-    if rcond < MIN_RCOND {
-        return None;
-    }
-    let inv_scaled = scaled.cholesky()?.inverse();
-    let cov = DMatrix::from_fn(np, np, |i, j| inv_scaled[(i, j)] * d[i] * d[j]);
-    let delta = &cov * &b;
-    let rss = residual_after(g, sel, &delta);
-    let chi2 = (0..3).map(|a| weights[a] * rss[a]).sum();
-    Some(JointSolution { delta, cov, chi2, rss, n: g.n })
+    (a_mat, b)
 }
 
 /// A symmetric normal matrix scaled to unit diagonal, the scale, and the reciprocal condition

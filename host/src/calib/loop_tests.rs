@@ -439,7 +439,11 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
     for seed in [11, 12] {
         let (runs, truth) = capture_with(seed, &[180.0], BAR_DURATION_S, &["earth_rotation=60"], FullScale::Dps500);
         let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
-        assert!(r.notes.iter().any(|n| matches!(n, Note::EarthNotModelled { .. })), "{:?}", r.notes);
+        assert!(
+            r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation)),
+            "{:?}",
+            r.notes
+        );
         assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
         assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), &format!("earth, seed {seed}"));
     }
@@ -458,7 +462,11 @@ fn g_sensitivity_holds_earths_vertical_part_without_a_latitude() {
     assert!(effects.contains(&Effect::GSensitivity), "{}", r.summary());
     assert_eq!(effects.last(), Some(&Effect::EarthRotationHorizontal), "{}", r.summary());
     assert!(r.notes.iter().any(|n| matches!(n, Note::EarthHorizontalOnly { .. })), "{:?}", r.notes);
-    assert!(!r.notes.iter().any(|n| matches!(n, Note::EarthNotModelled { .. })), "{:?}", r.notes);
+    assert!(
+        !r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation)),
+        "{:?}",
+        r.notes
+    );
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "g-sensitivity with Earth");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }

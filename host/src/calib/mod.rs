@@ -14,6 +14,8 @@ pub mod axes;
 pub mod binning;
 pub mod blocking;
 pub mod closure;
+pub mod consider;
+pub mod consistency;
 pub mod derived;
 pub mod diagnostics;
 pub mod effects;

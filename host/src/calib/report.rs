@@ -132,6 +132,10 @@ pub struct CalReport {
     /// `offset_counts` becomes at other times and die temperatures.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub drift: Vec<RunDrift>,
+    /// The catalogued effects the runs do not separate, each with its plausible size and what it
+    /// adds to σ (already in `cov` and every σ derived from it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub consider: Vec<super::consider::ConsiderTerm>,
 }
 
 /// The modelled offset through one run, sampled every [`DRIFT_TABLE_STEP_S`].

@@ -1,6 +1,8 @@
 //! The gyro's output lags the encoder.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// Longest delay (either sign) the model represents, s: 50 ms is 6× the slowest L3G4200D filter
@@ -52,6 +54,15 @@ impl Behaviour for Delay {
     /// Delaying by τ moves θ2 by −θ2'·τ (and the angles after it with it).
     fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         -p.rate2_dps.to_radians() * t.d_shift
+    }
+
+    /// 5 ms: the L3G4200D's LPF2 cut-off is 30-110 Hz at 800 Hz ODR (datasheet, Table 5); a
+    /// filter chain's group delay there is ≈ 1/(2π·30 Hz) = 5.3 ms (engineering judgement).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        (!cx.has(Effect::Delay) && !cx.has(Effect::Phase)).then_some(ConsiderBound {
+            sigma: 5.0,
+            source: "group delay of the L3G4200D's low-pass chain at its 30-Hz cut-off (datasheet Table 5), engineering judgement",
+        })
     }
 
     fn candidate(&self, s: &Situation) -> bool {

@@ -1,6 +1,8 @@
 //! Offsets that wander with no assumed shape.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Layout};
 
 /// Offsets that wander with no assumed shape (a rate random walk on top of a warm-up that lags
@@ -65,6 +67,11 @@ impl Behaviour for DriftKnots {
     /// Never called: it owns no [`LinCol::Of`] column.
     fn value(&self, _: Own, _: &Point, _: usize, _: &AxisTerms, _: &Ctx) -> f64 {
         0.0
+    }
+
+    /// None: an offset drift moves slowly against the table's turn: what it leaves in M is what the drift models and the free drift are tested for.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     /// On top of a drift curve whose residual still drifts (a random walk, a warm-up that lags

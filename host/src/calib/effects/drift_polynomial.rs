@@ -1,6 +1,8 @@
 //! Offsets drifting as a quadratic in time.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// Offsets drifting as a quadratic in time: per axis the first two Legendre polynomials of the
@@ -53,6 +55,11 @@ impl Behaviour for DriftPolynomial {
             Own::Lin(0) => p.t_scaled,
             _ => 0.5 * (3.0 * p.t_scaled * p.t_scaled - 1.0),
         }
+    }
+
+    /// None: an offset drift moves slowly against the table's turn: what it leaves in M is what the drift models and the free drift are tested for.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     fn candidate(&self, s: &Situation) -> bool {

@@ -1,6 +1,9 @@
 //! Offsets following the die temperature.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts,
+    Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// Smallest spread of the smoothed temperature over the capture for the temperature drift to be a
@@ -48,6 +51,11 @@ impl Behaviour for DriftTemperature {
 
     fn value(&self, _: Own, p: &Point, _: usize, _: &AxisTerms, _: &Ctx) -> f64 {
         p.temp_c
+    }
+
+    /// None: an offset drift moves slowly against the table's turn: what it leaves in M is what the drift models and the free drift are tested for.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     fn candidate(&self, s: &Situation) -> bool {

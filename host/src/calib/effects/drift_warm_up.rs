@@ -1,7 +1,8 @@
 //! Offsets settling exponentially after power-up.
 
 use super::terms::{
-    decay, AxisTerms, Bound, Col, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation, Trial,
+    decay, AxisTerms, Bound, Col, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation, Trial,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -68,6 +69,11 @@ impl Behaviour for DriftWarmUp {
             // ∂(c·exp(−t/T))/∂T.
             Own::Shared(_) => cx.beta(a, AMPLITUDE) * decay(p.t_rel_s, tau_s) * p.t_rel_s / (tau_s * tau_s),
         }
+    }
+
+    /// None: an offset drift moves slowly against the table's turn: what it leaves in M is what the drift models and the free drift are tested for.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     fn candidate(&self, s: &Situation) -> bool {

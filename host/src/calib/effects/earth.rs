@@ -1,7 +1,8 @@
 //! Earth's rotation, fixed in the lab, seen through θ1 and θ2.
 
 use super::terms::{
-    dot, AxisTerms, Bound, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts, Situation,
+    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -104,6 +105,15 @@ impl Behaviour for Earth {
     fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         let Own::Shared(k) = own else { return 0.0 };
         dot(&t.u, &p.d_earth[usize::from(k)])
+    }
+
+    /// While no form of Earth's rotation is in the model, the fitted form's three components
+    /// each carry Ω/√3 (Ω = 15.041 °/h, IERS; a vector of that length in an unknown direction).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        (self.0 == Form::Fitted && !cx.current.iter().any(|e| e.is_earth())).then(|| ConsiderBound {
+            sigma: crate::sim::effects::EARTH_RATE_RAD_S.to_degrees() * 3600.0 / 3f64.sqrt(),
+            source: "Earth's rate, 15.041 °/h (IERS Conventions 2010), in a direction not known",
+        })
     }
 
     fn candidate(&self, _: &Situation) -> bool {

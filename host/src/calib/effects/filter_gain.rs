@@ -1,6 +1,9 @@
 //! The gyro's low-pass filter's gain at the table frequency.
 
-use super::terms::{dot, AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
+    Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// The gyro's low-pass filter beyond its delay: H(jω) ≈ e^{−jωτ}(1 − κω²), output = M(ω + κ·ω̈)
@@ -47,6 +50,19 @@ impl Behaviour for FilterGain {
 
     fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         dot(&t.u, &p.d_filter)
+    }
+
+    /// |κ| ≤ τ²/2 for a low-pass of real poles with group delay τ (each pole ω_i adds 1/ω_i to
+    /// τ and 1/(2ω_i²) to κ: κ = Σ 1/(2ω_i²) ≤ (Σ 1/ω_i)²/2, equal for one pole; a Butterworth
+    /// pair gives κ ≈ 0), as a uniform bound: σ = τ²/(2√3) (GUM 4.3.7). τ is the fitted delay,
+    /// or without one √2/(2π f_c) at the configured cut-off (L3G4200D datasheet, Table 5).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        let omega_c = 2.0 * std::f64::consts::PI * cx.cutoff_hz;
+        let tau_s = cx.delay_s.unwrap_or(std::f64::consts::SQRT_2 / omega_c).abs();
+        (!cx.has(Effect::FilterGain) && tau_s.is_finite() && tau_s > 0.0).then(|| ConsiderBound {
+            sigma: 1e6 * tau_s * tau_s / (2.0 * 3f64.sqrt()),
+            source: "gain droop of a low-pass with the fitted delay τ, between 0 (Butterworth) and τ²/2 (one pole), uniform",
+        })
     }
 
     /// Once a delay is in (the filter's phase), when the runs have two speeds.

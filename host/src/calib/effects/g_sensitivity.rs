@@ -1,6 +1,8 @@
 //! A rate bias in proportion to gravity.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 use crate::calib::axes::AXES;
 
@@ -50,6 +52,16 @@ impl Behaviour for GSensitivity {
     fn value(&self, own: Own, p: &Point, _: usize, _: &AxisTerms, _: &Ctx) -> f64 {
         let Own::Lin(k) = own else { return 0.0 };
         p.d_earth[0][usize::from(k)]
+    }
+
+    /// 0.1 °/s per g on each component: the L3G4200D datasheet gives none; MEMS gyros of its
+    /// class give 0.1 °/s/g typical (InvenSense MPU-6000 product specification, §6.1), taken
+    /// as one σ (engineering judgement).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        (!cx.has(Effect::GSensitivity)).then_some(ConsiderBound {
+            sigma: 0.1,
+            source: "typical linear-acceleration sensitivity of a MEMS gyro (MPU-6000 spec. §6.1; none in the L3G4200D datasheet)",
+        })
     }
 
     /// Tried whenever two speeds separate it (it acts at the table's own frequency, so one fit's

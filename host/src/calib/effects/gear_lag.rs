@@ -1,6 +1,8 @@
 //! The sensor table trailing the base by an angle that grows with speed.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// The sensor table lags the base by an angle proportional to speed (the magnetic gears'
@@ -50,6 +52,11 @@ impl Behaviour for GearLag {
     /// θ2'·∂ripple/∂θ.
     fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         p.theta1_rate_rad_s * (t.e2 * (p.dtheta_eff - 1.0) + t.ez * p.drate_eff_dps)
+    }
+
+    /// None: it moves only the transmission error's phase, never M or the offsets.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     /// Once a transmission error is in, when the runs have two speeds.

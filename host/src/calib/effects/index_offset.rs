@@ -1,6 +1,8 @@
 //! The index plate is off the θ2 the poses are defined for.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// The index plate is δ off θ2 = 0: θ2_true = θ2_index + δ, the same shift at every speed. One
@@ -48,6 +50,15 @@ impl Behaviour for IndexOffset {
     /// θ2 = 0 is).
     fn value(&self, _: Own, _: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         t.e2
+    }
+
+    /// 1°: the index plate is 2° wide, and an edge taken for its centre is 1° off (engineering
+    /// judgement).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        (!cx.has(Effect::IndexOffset) && !cx.has(Effect::Phase)).then_some(ConsiderBound {
+            sigma: 1.0,
+            source: "half the 2° width of the index plate (an edge taken for its centre), engineering judgement",
+        })
     }
 
     fn candidate(&self, s: &Situation) -> bool {

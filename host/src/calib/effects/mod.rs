@@ -37,7 +37,10 @@ pub use terms::DRIFT_KNOT_SPACINGS_S;
 use super::layout::Layout;
 use serde::{Deserialize, Serialize};
 use std::fmt;
-use terms::{AxisTerms, Col, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts, Situation, Trial};
+use terms::{
+    AxisTerms, Col, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts,
+    Situation, Trial,
+};
 
 /// Highest harmonic of the sensor-table rate fitted sample by sample (diagnostics and the
 /// transmission-error model): the 12-pole magnetic gears (EXCITER.md, "Mechanism") pass a pole
@@ -84,6 +87,11 @@ pub trait Behaviour {
 
     /// Whether the loop tries it now.
     fn candidate(&self, s: &Situation) -> bool;
+
+    /// While it is not in the model (`cx.current`), how large parameter `own` may plausibly be
+    /// (None: it cannot bias M or the offsets, or another term of the model already holds it).
+    /// Where the runs cannot separate it, that size is carried in the calibration's σ.
+    fn consider(&self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound>;
 
     /// What of a point parameter `own` needs beyond eq. 1-2.
     fn needs(&self, own: Own) -> Needs {
@@ -232,6 +240,11 @@ impl Effect {
     /// Its columns for data laid out as `layout`.
     pub fn params(self, layout: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
         self.behaviour(|b| b.params(layout))
+    }
+
+    /// Its plausible size while the model lacks it ([`Behaviour::consider`]).
+    pub fn consider(self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        self.behaviour(|b| b.consider(own, cx))
     }
 }
 

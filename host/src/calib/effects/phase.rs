@@ -1,6 +1,8 @@
 //! A delay and an index offset that the runs cannot tell apart.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// A delay and an index offset together when the runs share one θ2' and cannot tell them
@@ -46,6 +48,11 @@ impl Behaviour for Phase {
 
     fn value(&self, _: Own, _: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         t.d_shift
+    }
+
+    /// None: held by the delay's and the index offset's own terms.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     fn candidate(&self, s: &Situation) -> bool {

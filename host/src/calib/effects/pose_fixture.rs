@@ -1,7 +1,8 @@
 //! The pose-2 fixture turned about the table axis against pose 1's.
 
 use super::terms::{
-    dot, AxisTerms, Bound, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts, Situation,
+    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -55,6 +56,14 @@ impl Behaviour for PoseFixture {
     fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         let Own::Shared(k) = own else { return 0.0 };
         dot(&t.u, &p.d_fixture[usize::from(k)])
+    }
+
+    /// The mount tolerance of a machined angle block ([`crate::calib::derived::MOUNT_TOLERANCE_DEG`]).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        (!cx.has(Effect::PoseFixture)).then_some(ConsiderBound {
+            sigma: crate::calib::derived::MOUNT_TOLERANCE_DEG,
+            source: "a machined 90° angle block holds a fixture to about 0.1°, engineering judgement",
+        })
     }
 
     /// Once the phase is modelled (a fixture turn is a phase of pose 2's own), with two poses

@@ -1,6 +1,8 @@
 //! Scale depending on the rate along the axis.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout};
 
 /// Scale depending on the rate r along the axis (the row of M normalised): per axis |r|
@@ -53,6 +55,19 @@ impl Behaviour for RateScale {
             Own::Lin(0) => r.abs(),
             _ => r * r.abs(),
         }
+    }
+
+    /// The L3G4200D's non-linearity, 0.2 % of full scale (datasheet, Table 4: best-fit straight
+    /// line), as one σ of either term at full scale (2000 ppm of |r| for the asymmetry).
+    fn consider(&self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        if cx.has(Effect::RateScale) {
+            return None;
+        }
+        let source = "non-linearity 0.2 % of full scale (L3G4200D datasheet Table 4)";
+        Some(match own {
+            Own::Lin(0) => ConsiderBound { sigma: 2000.0, source },
+            _ => ConsiderBound { sigma: 0.2, source },
+        })
     }
 
     fn candidate(&self, s: &Situation) -> bool {

@@ -1,6 +1,8 @@
 //! A periodic angle error of the sensor table.
 
-use super::terms::{AxisTerms, Bound, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation};
+use super::terms::{
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+};
 use super::{Behaviour, Effect, Layout, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
 
@@ -107,6 +109,11 @@ impl Behaviour for TableHarmonic {
         } else {
             t.e2 * sn / n + t.ez * p.rate2_dps * cn
         }
+    }
+
+    /// None: over whole turns a harmonic of θ2 above the first is orthogonal to M's columns.
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        None
     }
 
     /// When the residual shows its order.

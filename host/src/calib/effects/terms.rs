@@ -434,3 +434,35 @@ pub fn decay(t_s: f64, tau_s: f64) -> f64 {
 pub fn dot(x: &[f64; 3], y: &[f64; 3]) -> f64 {
     x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 }
+
+/// How large an effect may plausibly be when the runs cannot measure it: one standard
+/// uncertainty of each of its parameters, in the parameter's reported unit
+/// ([`super::Behaviour::reported`]), with where that figure comes from. It enters the
+/// calibration's covariance as a consider parameter (`calib::consider`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConsiderBound {
+    /// One standard uncertainty, reported unit.
+    pub sigma: f64,
+    /// Its source: a datasheet table, physics, or a stated engineering judgement.
+    pub source: &'static str,
+}
+
+/// What an effect's [`super::Behaviour::consider`] may look at.
+#[derive(Debug, Clone, Copy)]
+pub struct ConsiderCtx<'a> {
+    /// The effects in the final model.
+    pub current: &'a [Effect],
+    /// The gyro's configured low-pass cut-off, Hz.
+    pub cutoff_hz: f64,
+    /// The gyro's full scale, °/s.
+    pub full_scale_dps: f64,
+    /// The model's fitted delay between gyro and encoder, s, if it holds one.
+    pub delay_s: Option<f64>,
+}
+
+impl ConsiderCtx<'_> {
+    /// Whether `e` is in the model.
+    pub fn has(&self, e: Effect) -> bool {
+        self.current.contains(&e)
+    }
+}

@@ -3,6 +3,8 @@
 
 use super::PlusMinus;
 use crate::calib::closure::{Ask, EarthExcess, Note};
+use crate::calib::consider::ConsiderTerm;
+use crate::calib::consistency::Consistency;
 
 /// A run the data cannot do without, as the operator is asked for it.
 pub fn ask(a: &Ask) -> String {
@@ -45,9 +47,7 @@ pub fn note(n: &Note) -> String {
             "Earth rotation: horizontal part fitted {:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {vertical_max_dps_per_g:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two.",
             PlusMinus(*horizontal_dph)
         ),
-        Note::EarthNotModelled { type_b_ppm } => format!(
-            "Earth rotation is not in the model (no --latitude-deg, and the test did not find it): every sensitivity's σ includes {type_b_ppm:.1} ppm for it (up to 15.041 °/h against the slowest run's θ1', uniform). Give the lab's latitude to remove it."
-        ),
+        Note::Unseparated(t) => unseparated(t),
     }
 }
 
@@ -57,5 +57,47 @@ pub fn earth_excess(e: &EarthExcess) -> String {
         "Earth rotation fitted at {:.1} °/h, {:.1}σ more than the Earth turns (15.041 °/h): the term is holding another effect the runs cannot tell from it (g-sensitivity, a table tilt); give --latitude-deg, or add runs in both directions.",
         PlusMinus(e.total_dph),
         e.excess_sigma
+    )
+}
+
+/// A consider term in words: the effect, its plausible size and source, what it costs, and the
+/// runs that would remove it.
+fn unseparated(t: &ConsiderTerm) -> String {
+    let sizes: Vec<String> = t.params.iter().map(|p| format!("{} {} {}", p.name, p.sigma, p.unit)).collect();
+    let sizes = if t.params.iter().all(|p| p.sigma == t.params[0].sigma && p.unit == t.params[0].unit) {
+        format!("{} {} each of {}", t.params[0].sigma, t.params[0].unit, t.params.len())
+    } else {
+        sizes.join(", ")
+    };
+    let worst = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
+    format!(
+        "{} is not separated by these runs: at a plausible size (1σ: {sizes}; {}) it adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Runs that remove it: {}.",
+        t.effect.name(),
+        t.source,
+        worst(t.k_sigma_ppm),
+        worst(t.direction_sigma_deg),
+        t.removed_by
+    )
+}
+
+/// Runs at different speeds that want different M, in words.
+pub fn disagreement(c: &Consistency) -> String {
+    let groups: Vec<String> = c
+        .groups
+        .iter()
+        .map(|g| {
+            format!(
+                "the runs at {:+.0} °/s against those at {:+.0} °/s: {} differs by {:+.1} ppm of the sensitivity ({:.1}σ)",
+                g.rate_dps, g.reference_rate_dps, g.element, g.max_ppm, g.max_z
+            )
+        })
+        .collect();
+    format!(
+        "The runs disagree about M (χ² = {:.1} for {} degrees of freedom against {:.1}, {:.1}σ): {}. An effect that changes with speed and that no catalogued effect explains is in M.",
+        c.chi2,
+        c.dof,
+        c.threshold,
+        c.significance_sigma,
+        groups.join("; ")
     )
 }

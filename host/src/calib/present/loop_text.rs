@@ -240,6 +240,7 @@ pub fn verdict(r: &LoopReport) -> String {
                 .earth_excess
                 .iter()
                 .map(advice::earth_excess)
+                .chain(r.consistency.iter().filter(|c| c.disagrees()).map(advice::disagreement))
                 .chain(d.findings.iter().map(findings::finding))
                 .collect();
             format!(

@@ -1,0 +1,382 @@
+//! What the runs cannot separate goes into σ: the consider covariance of the calibration.
+//!
+//! A catalogued effect the final model lacks biases M and the offsets by S·c, where c are its
+//! parameters and S = P·B the sensitivity of the estimate to them: P the model's covariance
+//! (the inverse weighted normal matrix) and B the cross-products of the model's columns with the
+//! effect's (Tapley, Schutz & Born, *Statistical Orbit Determination*, §6.3, "consider
+//! covariance"). What the data know of c beyond the model is the partial information
+//! I = C − Bᵀ·P·B (C the effect's own block).
+//!
+//! Each effect says how large it may plausibly be (one σ, with a source:
+//! [`super::effects::Behaviour::consider`]). In the prior's whitened coordinates
+//! (I_w = D·I·D, D the σs), a direction whose information λ reaches [`SEPARATED_SNR2`] would show
+//! an effect of plausible size at ≥ 5σ: the runs separate it, and the loop's tests, which did not
+//! add it, speak for it. Every other direction is not separated: its posterior variance
+//! σ²/(1 + λ) and the square of its posterior mean (what the residual says of it) enter the
+//! covariance of M and the offsets through S. The effect at its bound would move the estimate by
+//! that much and no test could have seen it.
+//!
+//! The cross-products come from one pass over the data with the model's columns and every
+//! considered effect's: the same sums a candidate's score is read from.
+
+use super::derived::derive;
+use super::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
+use super::effects::Effect;
+use super::extended::{accumulate, normal_equations, Fitted, Gram, LoopData, Selection};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// Information, in units of the prior (an effect of one σ along the direction gives this Δχ²),
+/// from which the runs are taken to separate a direction of an effect: 25 is a 5σ signal for an
+/// effect of plausible size, past the loop's Bonferroni threshold for one parameter
+/// (χ²₁ at 1e-3/40: 16.4).
+pub const SEPARATED_SNR2: f64 = 25.0;
+
+/// Smallest added σ of a sensitivity (ppm) or a direction (°) that a term is reported for; below
+/// it the runs separate the effect in all that matters.
+const REPORTED_PPM: f64 = 0.05;
+const REPORTED_DEG: f64 = 1e-6;
+
+/// One parameter of a considered effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsideredParam {
+    /// What.
+    pub name: String,
+    /// Its plausible size, one σ.
+    pub sigma: f64,
+    /// Unit.
+    pub unit: String,
+}
+
+/// One catalogued effect the runs do not separate, and what it costs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsiderTerm {
+    /// The effect.
+    pub effect: Effect,
+    /// Its parameters' plausible sizes.
+    pub params: Vec<ConsideredParam>,
+    /// Where those sizes come from.
+    pub source: String,
+    /// σ it adds to each sensitivity, ppm (alone; the terms add in quadrature).
+    pub k_sigma_ppm: [f64; 3],
+    /// σ it adds to each axis direction, degrees.
+    pub direction_sigma_deg: [f64; 3],
+    /// Directions (whitened) the runs do not separate, of the effect's parameters.
+    pub unseparated: usize,
+    /// The runs that would separate it.
+    pub removed_by: String,
+}
+
+/// The consider covariance: what it adds to the 12 base parameters' covariance, and its terms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Consideration {
+    /// Added covariance of the base parameters (`CalReport` order).
+    pub cov: DMatrix<f64>,
+    /// The terms, largest first.
+    pub terms: Vec<ConsiderTerm>,
+}
+
+impl Consideration {
+    /// Nothing considered.
+    pub fn none() -> Self {
+        Self { cov: DMatrix::zeros(12, 12), terms: Vec::new() }
+    }
+}
+
+/// A user's own size for an effect's parameters, in their reported units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ConsiderOverride {
+    /// The effect.
+    pub effect: Effect,
+    /// One σ of each of its parameters, reported unit (0 leaves it out).
+    pub sigma: f64,
+}
+
+/// Effects whose size the user gave, at most this many (the catalogue's physical effects).
+pub const MAX_OVERRIDES: usize = 8;
+
+/// The sizes given on the command line (`--consider KEY=SIGMA`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct ConsiderOverrides(pub [Option<ConsiderOverride>; MAX_OVERRIDES]);
+
+impl ConsiderOverrides {
+    /// Parses `KEY=SIGMA`, KEY an effect's key (`g_sensitivity`, `earth_rotation`, …).
+    pub fn add(&mut self, spec: &str) -> Result<(), String> {
+        let (key, value) = spec.split_once('=').ok_or_else(|| format!("'{spec}' is not KEY=SIGMA"))?;
+        let effect = Effect::catalogue()
+            .into_iter()
+            .find(|e| e.key() == key)
+            .ok_or_else(|| format!("no effect '{key}' (keys: {})", considered_keys().join(", ")))?;
+        let sigma: f64 = value.parse().map_err(|_| format!("'{value}' is not a number"))?;
+        if !(sigma.is_finite() && sigma >= 0.0) {
+            return Err(format!("the size of {key} must be a finite number ≥ 0, not {value}"));
+        }
+        let slot = self.0.iter_mut().find(|s| s.is_none_or(|o| o.effect == effect)).ok_or("too many --consider")?;
+        *slot = Some(ConsiderOverride { effect, sigma });
+        Ok(())
+    }
+
+    fn of(&self, e: Effect) -> Option<f64> {
+        self.0.iter().flatten().find(|o| o.effect == e).map(|o| o.sigma)
+    }
+}
+
+/// Keys of the effects that may be considered (those with a plausible size in some model).
+pub fn considered_keys() -> Vec<String> {
+    let cx = ConsiderCtx { current: &[], cutoff_hz: 30.0, full_scale_dps: 500.0, delay_s: None };
+    Effect::catalogue()
+        .into_iter()
+        .filter(|e| {
+            (0..3).any(|k| e.consider(Own::Lin(k), &cx).is_some() || e.consider(Own::Shared(k as u8), &cx).is_some())
+        })
+        .map(|e| e.key())
+        .collect()
+}
+
+/// An effect's columns that have a plausible size, with that size in the fit's units.
+struct Candidate {
+    effect: Effect,
+    cols: Vec<Col>,
+    /// One σ per column, fitted unit (a linear column's: counts per unit of the column, from
+    /// each axis's sensitivity).
+    sigma: Vec<[f64; 3]>,
+    params: Vec<ConsideredParam>,
+    source: &'static str,
+}
+
+fn candidates(
+    data: &LoopData,
+    f: &Fitted,
+    cx: &ConsiderCtx,
+    k: [f64; 3],
+    overrides: &ConsiderOverrides,
+) -> Vec<Candidate> {
+    let mut out = Vec::new();
+    for effect in Effect::catalogue().into_iter().filter(|e| !f.model.effects.contains(e)) {
+        let (lin, shared) = effect.params(&data.layout);
+        let mut c = Candidate { effect, cols: Vec::new(), sigma: Vec::new(), params: Vec::new(), source: "" };
+        let mut add = |col: Col, own: Own, bound: Option<ConsiderBound>| {
+            let Some(mut b) = bound else { return };
+            let r = match col {
+                Col::Lin(l) => l.reported(cx.full_scale_dps),
+                Col::Shared(p) => Some(p.reported()),
+            };
+            let Some(r) = r else { return };
+            if let Some(s) = overrides.of(effect) {
+                b = ConsiderBound { sigma: s, source: "given with --consider" };
+            }
+            if b.sigma <= 0.0 {
+                return;
+            }
+            let fitted = b.sigma / r.scale;
+            c.sigma.push(match own {
+                Own::Lin(_) => k.map(|ka| fitted * ka),
+                Own::Shared(_) => [fitted; 3],
+            });
+            c.params.push(ConsideredParam { name: r.name, sigma: b.sigma, unit: r.unit.into() });
+            c.cols.push(col);
+            c.source = b.source;
+        };
+        for l in lin {
+            if let LinCol::Of(_, kk) = l {
+                add(Col::Lin(l), Own::Lin(kk), effect.consider(Own::Lin(kk), cx));
+            }
+        }
+        for p in shared {
+            add(Col::Shared(p), Own::Shared(p.k), effect.consider(Own::Shared(p.k), cx));
+        }
+        if !c.cols.is_empty() {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Positions of parameters in the joint solve of a selection of `nl` linear and some shared
+/// columns: linear column p of axis a, or shared q.
+fn lin_param(nl: usize, a: usize, p: usize) -> usize {
+    a * nl + p
+}
+
+/// The consider covariance of `f` (fitted with `weights`) for every catalogued effect it lacks.
+/// `base` are the 12 base parameters' indices in `f`'s covariance; `k` the sensitivities.
+#[allow(clippy::too_many_arguments)]
+pub fn consider(
+    data: &LoopData,
+    f: &Fitted,
+    weights: [f64; 3],
+    cx: &ConsiderCtx,
+    base: &[usize; 12],
+    params: &[f64; 12],
+    nominal: f64,
+    overrides: &ConsiderOverrides,
+) -> Consideration {
+    let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
+    let cands = candidates(data, f, cx, k, overrides);
+    if cands.is_empty() {
+        return Consideration::none();
+    }
+    let (nl, ns) = (f.model.lin.len(), f.model.shared.len());
+    let mut cols = f.model.cols();
+    let mut sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
+    // Where each candidate's columns sit in the selection: (is linear, position in lin/shared).
+    let mut places: Vec<Vec<(bool, usize)>> = Vec::new();
+    for c in &cands {
+        let mut pl = Vec::new();
+        for &col in &c.cols {
+            let j = cols.len();
+            cols.push(col);
+            match col {
+                Col::Lin(_) => {
+                    pl.push((true, sel.lin.len()));
+                    sel.lin.push(j);
+                }
+                Col::Shared(_) => {
+                    pl.push((false, sel.shared.len()));
+                    sel.shared.push(j);
+                }
+            }
+        }
+        places.push(pl);
+    }
+    let Some(total) = Gram::sum(&accumulate(data, &f.model, &cols)) else {
+        return Consideration::none();
+    };
+    let (n_mat, b_vec) = normal_equations(&total, &sel, weights);
+    let nl_ext = sel.lin.len();
+    let model_idx: Vec<usize> = (0..3)
+        .flat_map(|a| (0..nl).map(move |p| lin_param(nl_ext, a, p)))
+        .chain((0..ns).map(|q| 3 * nl_ext + q))
+        .collect();
+    let a_mat = DMatrix::from_fn(model_idx.len(), model_idx.len(), |i, j| n_mat[(model_idx[i], model_idx[j])]);
+    let Some(chol) = a_mat.cholesky() else {
+        return Consideration::none();
+    };
+    let b_model = DVector::from_fn(model_idx.len(), |i, _| b_vec[model_idx[i]]);
+    let mut out = Consideration::none();
+    for (c, pl) in cands.iter().zip(&places) {
+        // The effect's parameters (a linear column is one per axis) and their prior σ.
+        let mut idx = Vec::new();
+        let mut sd = Vec::new();
+        for (&(is_lin, p), s) in pl.iter().zip(&c.sigma) {
+            if is_lin {
+                for (a, &sa) in s.iter().enumerate() {
+                    idx.push(lin_param(nl_ext, a, p));
+                    sd.push(sa);
+                }
+            } else {
+                idx.push(3 * nl_ext + p);
+                sd.push(s[0]);
+            }
+        }
+        let b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]);
+        let s_mat = chol.solve(&b);
+        let c_mat = DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]);
+        let info = &c_mat - b.transpose() * &s_mat;
+        // The residual's correlation with the effect, beyond what the model's own step takes.
+        let grad = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
+        let Some((sigma_c, unseparated)) = posterior(&info, &grad, &sd) else {
+            continue;
+        };
+        if unseparated == 0 {
+            continue;
+        }
+        let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
+        let added = &s12 * sigma_c * s12.transpose();
+        let (axes, _) = derive(params, &added, nominal);
+        let term = ConsiderTerm {
+            effect: c.effect,
+            params: c.params.clone(),
+            source: c.source.into(),
+            k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),
+            direction_sigma_deg: axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees()),
+            unseparated,
+            removed_by: c.effect.identified_by().into(),
+        };
+        out.cov += added;
+        if term.k_sigma_ppm.iter().any(|&p| p > REPORTED_PPM)
+            || term.direction_sigma_deg.iter().any(|&d| d > REPORTED_DEG)
+        {
+            out.terms.push(term);
+        }
+    }
+    out.terms.sort_by(|a, b| max3(b.k_sigma_ppm).total_cmp(&max3(a.k_sigma_ppm)));
+    out
+}
+
+fn max3(v: [f64; 3]) -> f64 {
+    v.into_iter().fold(0.0, f64::max)
+}
+
+/// The covariance (posterior variance plus the square of the posterior mean) of an effect's
+/// parameters in the directions the runs do not separate, from its partial information `info`,
+/// the residual's gradient `grad` along its columns and its prior σs `sd`; with the count of
+/// those directions. None when the information is not finite.
+fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DMatrix<f64>, usize)> {
+    let n = sd.len();
+    let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
+    let mut w = &d * info * &d;
+    w = (&w + w.transpose()) * 0.5;
+    if w.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let eig = w.symmetric_eigen();
+    let g_w = &d * grad;
+    let mut var = DMatrix::zeros(n, n);
+    let mut mean = DVector::zeros(n);
+    let mut unseparated = 0;
+    for (i, &lambda) in eig.eigenvalues.iter().enumerate() {
+        let lambda = lambda.max(0.0);
+        if lambda >= SEPARATED_SNR2 {
+            continue;
+        }
+        unseparated += 1;
+        let u = eig.eigenvectors.column(i);
+        var += u * u.transpose() / (1.0 + lambda);
+        mean += u * (u.dot(&g_w) / (1.0 + lambda));
+    }
+    let whitened = var + &mean * mean.transpose();
+    Some((&d * whitened * &d, unseparated))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A direction the data do not see keeps its prior; one they see well is left to the tests.
+    #[test]
+    fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
+        let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
+        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite");
+        assert_eq!(n, 1);
+        assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
+        assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
+        // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
+        let info = DMatrix::from_row_slice(1, 1, &[3.0]);
+        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0]).expect("finite");
+        assert_eq!(n, 1);
+        assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
+        // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
+        let (c, _) = posterior(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite");
+        assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
+    }
+
+    #[test]
+    fn overrides_parse_and_refuse() {
+        let mut o = ConsiderOverrides::default();
+        o.add("g_sensitivity=0.02").expect("parses");
+        assert_eq!(o.of(Effect::GSensitivity), Some(0.02));
+        o.add("g_sensitivity=0.03").expect("replaces");
+        assert_eq!(o.of(Effect::GSensitivity), Some(0.03));
+        assert_eq!(o.add("g_sens=1").unwrap_err().split(" (keys").next(), Some("no effect 'g_sens'"));
+        assert_eq!(o.add("g_sensitivity").unwrap_err(), "'g_sensitivity' is not KEY=SIGMA");
+        assert_eq!(
+            o.add("g_sensitivity=-1").unwrap_err(),
+            "the size of g_sensitivity must be a finite number ≥ 0, not -1"
+        );
+        let keys = considered_keys();
+        for k in ["g_sensitivity", "earth_rotation", "rate_scale", "filter_gain", "table_tilt", "pose_fixture"] {
+            assert!(keys.iter().any(|x| x == k), "{k} in {keys:?}");
+        }
+    }
+}

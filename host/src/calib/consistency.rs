@@ -1,0 +1,170 @@
+//! Do the runs agree? What each group of runs (one signed speed) says about M, tested against
+//! the others.
+//!
+//! An effect outside the catalogue that changes with speed is absorbed into M by the joint fit
+//! and can leave a white residual; but then the runs at one speed want another M than the runs
+//! at the other. The test adds, for every group but the first, its own change of the nine
+//! elements of M to the final model, and asks whether the data want it: the score (Lagrange
+//! multiplier) statistic sᵀ I⁻¹ s, with s the residual's gradient along the added columns and I
+//! their information beyond the model's, is χ² with as many degrees of freedom as the runs
+//! separate if the groups agree (Rao 1948; Engle, *Handbook of Econometrics* II, ch. 13). It is
+//! read from the per-run sums the final fit already holds: no pass of its own.
+
+use super::axes::AXES;
+use super::extended::{full_selection, normal_equations, Fitted, Gram, LinCol, LoopData};
+use super::stats::{chi2_to_sigma, chi2_upper_quantile};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// Eigenvalues of the added columns' partial information below this fraction of the largest are
+/// directions the groups do not separate (one pose at a speed sees only two of M's three
+/// columns), and are left out of the test and its degrees of freedom.
+const RANK_TOLERANCE: f64 = 1e-9;
+
+/// Two signed speeds are one group when they differ by less than this fraction (the same
+/// commanded rate with a slightly different steady one).
+const SAME_RATE_FRACTION: f64 = 0.05;
+
+/// What one group says about M, against the first group.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroupDifference {
+    /// The group's signed base-table rate, °/s.
+    pub rate_dps: f64,
+    /// The first group's, °/s.
+    pub reference_rate_dps: f64,
+    /// Its change of M, counts per °/s (row = axis), where the runs separate it.
+    pub delta_m: [[f64; 3]; 3],
+    /// Its σ.
+    pub delta_m_sigma: [[f64; 3]; 3],
+    /// The largest |Δ/σ| of an element.
+    pub max_z: f64,
+    /// That element's change in ppm of the axis's sensitivity.
+    pub max_ppm: f64,
+    /// That element, e.g. `m_x.omega_y`.
+    pub element: String,
+}
+
+/// The test of all groups together.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Consistency {
+    /// The score statistic.
+    pub chi2: f64,
+    /// Its degrees of freedom.
+    pub dof: usize,
+    /// The upper α point it is tested against.
+    pub threshold: f64,
+    /// The statistic as a normal deviate.
+    pub significance_sigma: f64,
+    /// Each group against the first.
+    pub groups: Vec<GroupDifference>,
+}
+
+impl Consistency {
+    /// Whether the groups disagree beyond chance.
+    pub fn disagrees(&self) -> bool {
+        self.chi2 > self.threshold
+    }
+}
+
+/// Run indices grouped by signed speed, in order of first appearance.
+fn groups(data: &LoopData) -> Vec<(f64, Vec<usize>)> {
+    let mut out: Vec<(f64, Vec<usize>)> = Vec::new();
+    for (r, k) in data.kin.runs.iter().enumerate() {
+        let rate = k.steady_rate_dps;
+        match out.iter_mut().find(|(g, _)| (g - rate).abs() <= SAME_RATE_FRACTION * g.abs().max(rate.abs())) {
+            Some((_, runs)) => runs.push(r),
+            None => out.push((rate, vec![r])),
+        }
+    }
+    out
+}
+
+/// The test on a converged fit with its χ² weights, at family-wise level `alpha`; None with
+/// one group, or when the groups separate nothing.
+pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], alpha: f64) -> Option<Consistency> {
+    let groups = groups(data);
+    if groups.len() < 2 {
+        return None;
+    }
+    let sel = full_selection(&f.model);
+    let total = Gram::sum(&f.per_run)?;
+    let (n_mat, b_tot) = normal_equations(&total, &sel, weights);
+    let np = n_mat.nrows();
+    let chol = n_mat.clone().cholesky()?;
+    // The sums were taken before the fit's last (negligible) step: the gradient after it.
+    let delta = chol.solve(&b_tot);
+    let m_idx: Vec<usize> = (0..3)
+        .flat_map(|a| (0..3).map(move |j| (a, j)))
+        .map(|(a, j)| f.lin_index(a, LinCol::Omega(j)))
+        .collect::<Option<_>>()?;
+    let extra = groups.len() - 1;
+    let ne = 9 * extra;
+    let mut cross = DMatrix::zeros(np, ne);
+    let mut own = DMatrix::zeros(ne, ne);
+    let mut score = DVector::zeros(ne);
+    for (gi, (_, runs)) in groups.iter().skip(1).enumerate() {
+        let g = Gram::sum(runs.iter().map(|&r| &f.per_run[r]))?;
+        let (ng, bg) = normal_equations(&g, &sel, weights);
+        let grad = bg - &ng * &delta;
+        for (e, &pe) in m_idx.iter().enumerate() {
+            let c = 9 * gi + e;
+            score[c] = grad[pe];
+            for p in 0..np {
+                cross[(p, c)] = ng[(p, pe)];
+            }
+            for (e2, &pe2) in m_idx.iter().enumerate() {
+                own[(c, 9 * gi + e2)] = ng[(pe, pe2)];
+            }
+        }
+    }
+    let info = &own - cross.transpose() * chol.solve(&cross);
+    let info = (&info + info.transpose()) * 0.5;
+    let eig = info.symmetric_eigen();
+    let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    if !(top.is_finite() && top > 0.0) {
+        return None;
+    }
+    // The pseudo-inverse on the directions the groups separate.
+    let mut inv = DMatrix::zeros(ne, ne);
+    let mut dof = 0;
+    for (i, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > RANK_TOLERANCE * top {
+            let u = eig.eigenvectors.column(i);
+            inv += u * u.transpose() / l;
+            dof += 1;
+        }
+    }
+    let est = &inv * &score;
+    let chi2 = score.dot(&est);
+    let threshold = chi2_upper_quantile(dof, alpha);
+    let group_diffs = groups
+        .iter()
+        .skip(1)
+        .enumerate()
+        .map(|(gi, (rate, _))| {
+            let at = |a: usize, j: usize| 9 * gi + 3 * a + j;
+            let delta_m = std::array::from_fn(|a| std::array::from_fn(|j| est[at(a, j)]));
+            let delta_m_sigma =
+                std::array::from_fn(|a| std::array::from_fn(|j| inv[(at(a, j), at(a, j))].max(0.0).sqrt()));
+            let mut worst = (0.0, 0.0, String::new());
+            for a in 0..3 {
+                for j in 0..3 {
+                    let (d, s): (f64, f64) = (delta_m[a][j], delta_m_sigma[a][j]);
+                    if s > 0.0 && (d / s).abs() > worst.0 {
+                        worst = ((d / s).abs(), d / k[a] * 1e6, format!("m_{}.omega_{}", AXES[a], AXES[j]));
+                    }
+                }
+            }
+            GroupDifference {
+                rate_dps: *rate,
+                reference_rate_dps: groups[0].0,
+                delta_m,
+                delta_m_sigma,
+                max_z: worst.0,
+                max_ppm: worst.1,
+                element: worst.2,
+            }
+        })
+        .collect();
+    Some(Consistency { chi2, dof, threshold, significance_sigma: chi2_to_sigma(dof, chi2), groups: group_diffs })
+}
