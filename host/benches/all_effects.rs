@@ -35,53 +35,22 @@
 //!
 //! `BENCH_SEEDS=N` runs seeds 1..=N (default 10); `BENCH_PLANS` lists the run plans, separated by
 //! `;`, each the base-table rates of `--rates-dps` and, after `@`, the seconds per run (default
-//! [`DURATION_S`]). The default, `180,-180@300`, is the session the tool asks for once it finds
+//! [`replay::DURATION_S`]). The default, `180,-180@300`, is the session the tool asks for once it finds
 //! g-sensitivity, long enough for the statistical σ of a sensitivity (6.7 ppm) to put the 20-ppm
 //! bar at 3σ: at 120 s per run that σ is ≈ 10 ppm with every effect in the model, and the bar
 //! is 2σ.
 
 mod measured;
+use measured::replay::{self, max_abs, number, read_json, HOST, REALISTIC_EFFECTS as EFFECTS};
 use measured::Usage;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
-/// The `host` binary cargo built beside this bench.
-const HOST: &str = env!("CARGO_BIN_EXE_host");
-
-/// Every physical effect of issue 10, each at the simulator's default size. None is declared to
-/// the calibration and no latitude is given: the loop has to find them all from the data.
-/// The simulator's other switches (`delay_ms`, `nonlinearity`, `gear_ratio_error`,
-/// `mystery_harmonic`) stay off.
-const EFFECTS: [&str; 10] = [
-    "filter_delay",
-    "index_offset_deg",
-    "offset_drift",
-    "speed_ripple",
-    "earth_rotation",
-    "gear_transmission",
-    "g_sensitivity",
-    "table_tilt",
-    "pose_fixture",
-    "bias_random_walk",
-];
-
-/// Seconds per run, spin-up included, of a plan that gives none: the session an operator runs
-/// by default.
-const DURATION_S: &str = "120";
-
 /// The plans run when `BENCH_PLANS` is not set.
 const DEFAULT_PLANS: &str = "180,-180@300";
-
-/// A plan's rates (`--rates-dps`) and seconds per run.
-fn rates_and_duration(plan: &str) -> (&str, &str) {
-    plan.split_once('@').unwrap_or((plan, DURATION_S))
-}
 
 /// Issue 10's bars (see the top of the file).
 const BAR_INTRINSIC_DEG: f64 = 0.002;
@@ -89,9 +58,6 @@ const BAR_PPM: f64 = 20.0;
 const BAR_Z: f64 = 3.0;
 /// The common rotation may be this many of the tool's reported mount σ.
 const BAR_ROTATION_MOUNT_SIGMAS: f64 = 3.0;
-
-/// Calibrations run side by side: one per core of the 2-core machine the figures are quoted for.
-const WORKERS: usize = 2;
 
 fn bench_dir() -> PathBuf {
     measured::bench_dir("all-effects")
@@ -102,55 +68,9 @@ fn case_dir(plan: &str, seed: u64) -> PathBuf {
     bench_dir().join(plan).join(format!("s{seed}"))
 }
 
-/// The cached capture of `plan` for `seed`, simulated with [`EFFECTS`] if absent. The truth is
-/// written after the capture is complete, so it marks a whole one: an interrupted simulation
-/// is redone.
+/// The cached capture of `plan` for `seed`, simulated with [`EFFECTS`] if absent.
 fn simulated(plan: &str, seed: u64) -> Result<PathBuf, String> {
-    let dir = case_dir(plan, seed);
-    let cap = dir.join("x.cap");
-    if cap.exists() && dir.join("x.truth.json").exists() {
-        return Ok(cap);
-    }
-    std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
-    let t = Instant::now();
-    let mut cmd = Command::new(HOST);
-    cmd.arg("simulate").arg("--out").arg(&cap).args(["--seed", &seed.to_string()]);
-    // `=`: a plan starting with a negative rate must not read as an option.
-    let (rates, duration_s) = rates_and_duration(plan);
-    cmd.arg(format!("--rates-dps={rates}")).args(["--duration", duration_s]);
-    for e in EFFECTS {
-        cmd.args(["--effect", e]);
-    }
-    let log = std::fs::File::create(dir.join("simulate.log")).map_err(|e| format!("simulate.log: {e}"))?;
-    let status = cmd.stdout(Stdio::null()).stderr(log).status().map_err(|e| format!("host simulate: {e}"))?;
-    if !status.success() {
-        return Err(format!("host simulate failed ({status}): see {}", dir.join("simulate.log").display()));
-    }
-    eprintln!("simulated {} in {:.1} s", cap.display(), t.elapsed().as_secs_f64());
-    Ok(cap)
-}
-
-/// Runs `host calibrate --replay cap` into a fresh `out/` beside it (a stale `calibration.json`
-/// must not stand in for a failed run) and waits for it with `wait4`, which hands back that
-/// child's own CPU time.
-fn calibrate(cap: &Path) -> Result<Usage, String> {
-    let dir = cap.parent().expect("the capture is in its case directory");
-    let out = dir.join("out");
-    let _ = std::fs::remove_dir_all(&out);
-    std::fs::create_dir_all(&out).map_err(|e| format!("create {}: {e}", out.display()))?;
-    let db = format!("sqlite:{}", out.join("records.sqlite").display());
-    let stdout = std::fs::File::create(dir.join("calibrate.txt")).map_err(|e| format!("calibrate.txt: {e}"))?;
-    let stderr = std::fs::File::create(dir.join("calibrate.log")).map_err(|e| format!("calibrate.log: {e}"))?;
-    let mut cmd = Command::new(HOST);
-    cmd.arg("calibrate")
-        .arg("--replay")
-        .arg(cap)
-        .arg("--out-dir")
-        .arg(&out)
-        .args(["--db", &db])
-        .stdout(stdout)
-        .stderr(stderr);
-    measured::run_measured(cmd).map_err(|e| format!("host calibrate: {e}"))
+    replay::simulated(&case_dir(plan, seed), plan, seed, &EFFECTS)
 }
 
 /// A calibration's errors against the truth, per axis where it has one.
@@ -169,11 +89,6 @@ struct Errors {
     sigma_ppm: [f64; 3],
     /// The mount's 1-σ the tool reports (largest over the axes; 0 when absent).
     mount_sigma_deg: f64,
-}
-
-/// Largest |x|; a NaN (e.g. a z with σ_k = 0) counts as infinite, so it can never pass a bar.
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |m, x| m.max(if x.is_nan() { f64::INFINITY } else { x.abs() }))
 }
 
 impl Errors {
@@ -197,20 +112,8 @@ impl Errors {
     }
 }
 
-fn read_json(path: &Path) -> Result<Value, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("read {}: {e}", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| format!("parse {}: {e}", path.display()))
-}
-
-fn number(v: &Value, what: &str) -> Result<f64, String> {
-    v.as_f64().ok_or_else(|| format!("{what} is not a number"))
-}
-
 fn vector(v: &Value, what: &str) -> Result<Vector3<f64>, String> {
-    match v.as_array().map(Vec::as_slice) {
-        Some([x, y, z]) => Ok(Vector3::new(number(x, what)?, number(y, what)?, number(z, what)?)),
-        _ => Err(format!("{what} is not 3 numbers")),
-    }
+    replay::triple(v, what).map(Vector3::from)
 }
 
 /// Angle between two directions, degrees: atan2 of sine and cosine, accurate at the
@@ -349,7 +252,7 @@ fn run_case(plans: &[String], plan: usize, seed: u64) -> Outcome {
             return o;
         }
     };
-    match calibrate(&cap) {
+    match replay::calibrate(&cap) {
         Ok(u) => o.usage = Some(u),
         Err(e) => {
             o.problem = Some(e);
@@ -426,38 +329,26 @@ fn summary(plan: &str, outcomes: &[&Outcome]) {
 
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is taken.
-    let seeds: u64 = std::env::var("BENCH_SEEDS").ok().and_then(|v| v.trim().parse().ok()).unwrap_or(10).max(1);
-    let plans: Vec<String> = std::env::var("BENCH_PLANS")
-        .unwrap_or_else(|_| DEFAULT_PLANS.into())
-        .split(';')
-        .map(|p| p.trim().to_string())
-        .filter(|p| !p.is_empty())
-        .collect();
+    let seeds = replay::seeds_from_env("BENCH_SEEDS", 10);
+    let plans = replay::plans_from_env("BENCH_PLANS", DEFAULT_PLANS);
     println!("host calibrate --replay with every effect on, {HOST}");
     println!("effects: {}", EFFECTS.join(" "));
     println!(
-        "seeds 1..={seeds}, plans {}; {WORKERS} calibrations at a time; CPU = user + system time of the child (wait4)",
-        plans.join(" ; ")
+        "seeds 1..={seeds}, plans {}; {} calibrations at a time; CPU = user + system time of the child (wait4)",
+        plans.join(" ; "),
+        replay::WORKERS
     );
     let jobs: Vec<(usize, u64)> = (0..plans.len()).flat_map(|p| (1..=seeds).map(move |s| (p, s))).collect();
-    let next = AtomicUsize::new(0);
-    let done = Mutex::new(Vec::with_capacity(jobs.len()));
     let t = Instant::now();
-    std::thread::scope(|scope| {
-        for _ in 0..WORKERS {
-            scope.spawn(|| {
-                while let Some(&(plan, seed)) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
-                    let o = run_case(&plans, plan, seed);
-                    let line = case_line(&plans, &o);
-                    let mut done = done.lock().expect("no worker panics holding it");
-                    eprintln!("[{}/{} after {:.0} s] {line}", done.len() + 1, jobs.len(), t.elapsed().as_secs_f64());
-                    done.push(o);
-                }
-            });
-        }
-    });
-    let mut outcomes = done.into_inner().expect("no worker panicked");
-    outcomes.sort_by_key(|o| (o.plan, o.seed));
+    let mut finished = 0;
+    let outcomes = replay::run_parallel(
+        &jobs,
+        |&(plan, seed)| run_case(&plans, plan, seed),
+        |_, o| {
+            finished += 1;
+            eprintln!("[{finished}/{} after {:.0} s] {}", jobs.len(), t.elapsed().as_secs_f64(), case_line(&plans, o));
+        },
+    );
     println!();
     println!("per (plan, seed), each figure the largest over the three axes; the rotation's bar in brackets:");
     for o in &outcomes {

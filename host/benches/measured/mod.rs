@@ -1,10 +1,19 @@
 //! What the benchmarks share: where their data lives, and running one child process with the
 //! kernel's accounting of that child alone (`wait4`), so neither the bench itself nor anything
-//! else on the machine counts in its CPU time and peak memory.
+//! else on the machine counts in its CPU time and peak memory. [`replay`] simulates, calibrates
+//! and reads back (the accuracy benches); [`trust`] is the trust matrix's arithmetic. Their
+//! unit tests run in the `bench_measured` test target (`cargo test -p host --test
+//! bench_measured`): a `harness = false` bench runs its `main`, never its `#[test]`s.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
+
+// Each bench uses its own part of these (`throughput` none).
+#[allow(dead_code)]
+pub mod replay;
+#[allow(dead_code)]
+pub mod trust;
 
 /// One child's figures.
 pub struct Usage {
@@ -45,11 +54,10 @@ pub fn run_measured(mut cmd: Command) -> Result<Usage, String> {
         return Err(format!("wait4: {}", std::io::Error::last_os_error()));
     }
     let code = if libc::WIFEXITED(status) { libc::WEXITSTATUS(status) } else { -1 };
-    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
     Ok(Usage {
         code,
         wall_s,
-        cpu_s: secs(usage.ru_utime) + secs(usage.ru_stime),
+        cpu_s: cpu_s(&usage),
         // Linux reports ru_maxrss in KiB.
         peak_mib: usage.ru_maxrss as f64 / 1024.0,
     })
@@ -58,4 +66,23 @@ pub fn run_measured(mut cmd: Command) -> Result<Usage, String> {
 /// The median (NaN of nothing).
 pub fn median(v: Vec<f64>) -> f64 {
     statrs::statistics::OrderStatistics::median(&mut statrs::statistics::Data::new(v))
+}
+
+/// CPU time (user + system) of every child of this process that has been waited for, s.
+#[allow(dead_code)] // read by `trust_matrix` only
+pub fn children_cpu_s() -> f64 {
+    // SAFETY: an all-zero `rusage` is a valid value of the plain C struct.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `usage` is valid for writes; RUSAGE_CHILDREN is a valid `who`.
+    let got = unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) };
+    if got != 0 {
+        return f64::NAN;
+    }
+    cpu_s(&usage)
+}
+
+/// User + system time of a `rusage`, s.
+fn cpu_s(usage: &libc::rusage) -> f64 {
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    secs(usage.ru_utime) + secs(usage.ru_stime)
 }

@@ -1,0 +1,217 @@
+//! The unit tests of the benches' shared code (`benches/measured/`): the plans' syntax, the trust
+//! matrix's z-values, cell figures and bars. Under `cargo bench` a `harness = false` bench is
+//! compiled with `cfg(test)` but without its `#[test]`s and runs its `main`, so the tests live
+//! here, on the same source.
+
+// Only the tests below use it here.
+#[allow(dead_code)]
+#[path = "../benches/measured/mod.rs"]
+mod measured;
+
+mod replay {
+    use crate::measured::replay::*;
+
+    #[test]
+    fn a_plan_without_seconds_runs_the_default_length() {
+        assert_eq!(rates_and_duration("180,-180@300"), ("180,-180", "300"));
+        assert_eq!(rates_and_duration("180,90"), ("180,90", DURATION_S));
+        assert_eq!(full_plan("180,90"), format!("180,90@{DURATION_S}"));
+        assert_eq!(full_plan("-180@20"), "-180@20");
+    }
+
+    #[test]
+    fn a_nan_is_the_largest_of_all() {
+        assert_eq!(max_abs(&[1.0, -3.0, 2.0]), 3.0);
+        assert_eq!(max_abs(&[1.0, f64::NAN]), f64::INFINITY);
+        assert_eq!(max_abs(&[]), 0.0);
+    }
+}
+
+mod trust {
+    use crate::measured::trust::*;
+    use serde_json::{json, Value};
+
+    const XYZ: [char; 3] = ['x', 'y', 'z'];
+
+    /// The tool's own parameter names (no `m_xx`: check.py then takes 4i + j).
+    fn tool_names() -> Vec<String> {
+        (0..12)
+            .map(|p| match p % 4 {
+                3 => format!("offset_{}_counts", XYZ[p / 4]),
+                j => format!("m_{}.omega_{}_dps", XYZ[p / 4], XYZ[j]),
+            })
+            .collect()
+    }
+
+    /// A hand-made truth (k = 100, 200, 300; x and y on their package axes, z tilted by
+    /// asin 0.001 towards x) and a calibration whose every z is known by hand.
+    fn pair() -> (Value, Value) {
+        let cz = (1.0f64 - 1e-6).sqrt();
+        let truth = json!({
+            "k_counts_per_dps": [100.0, 200.0, 300.0],
+            "s": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.001, 0.0, cz]],
+            "m_counts_per_dps": [[100.0, 0.0, 0.0], [0.0, 200.0, 0.0], [0.3, 0.0, 300.0 * cz]],
+        });
+        let mut cov = vec![vec![0.0; 12]; 12];
+        // Row x: σ 0.1 on every element (isotropic). Row y: σ 0.2. Row z: σ 0.15, 0.2, 0.01 with
+        // cov(m_zx, m_zy) = 0.018.
+        for (p, var) in
+            [(0, 0.01), (1, 0.01), (2, 0.01), (4, 0.04), (5, 0.04), (6, 0.04), (8, 0.0225), (9, 0.04), (10, 1e-4)]
+        {
+            cov[p][p] = var;
+        }
+        cov[8][9] = 0.018;
+        cov[9][8] = 0.018;
+        for b in [3, 7, 11] {
+            cov[b][b] = 1.0;
+        }
+        let cal = json!({
+            "param_names": tool_names(),
+            "cov": cov,
+            "m_counts_per_dps": [[100.2, 0.3, 0.0], [0.0, 199.9, -0.4], [0.0, 0.0, 300.0]],
+            "axes": [
+                {"k_counts_per_dps": 100.25, "k_sigma": 0.05},
+                {"k_counts_per_dps": 199.9, "k_sigma": 0.2},
+                {"k_counts_per_dps": 300.3, "k_sigma": 0.1},
+            ],
+        });
+        (cal, truth)
+    }
+
+    #[test]
+    fn the_z_values_of_a_hand_made_pair() {
+        let (cal, truth) = pair();
+        let z = z_values(&cal, &truth).unwrap();
+        // Per axis: k, m_i0, m_i1, m_i2, direction. With an isotropic σ on the row, the
+        // direction's z is the row's component across the true axis over σ: 0.3/0.1, 0.4/0.2.
+        // Row z lies on z, the truth 0.001 off it towards x: across-error 0.001·300 = 0.3 along
+        // x, whose variance within the plane, after the y-x correlation is taken out, is
+        // 0.0225 − 0.018²/0.04 = 0.0144: z = 0.3/0.12 = 2.5.
+        let m_zz = 300.0 * (1.0 - (1.0f64 - 1e-6).sqrt()) / 0.01;
+        let want = [5.0, 2.0, 3.0, 0.0, 3.0, 0.5, 0.0, 0.5, 2.0, 2.0, 3.0, 2.0, 0.0, m_zz, 2.5];
+        for (i, (got, want)) in z.iter().zip(want).enumerate() {
+            assert!((got - want).abs() < 1e-6, "z[{i}] = {got}, not {want}: {z:?}");
+        }
+    }
+
+    #[test]
+    fn named_m_parameters_are_found_wherever_they_are() {
+        // check.py takes `m_<i><j>` from param_names when the name is there: swap m_xx and m_xy
+        // in the names and in cov, and the z-values stay.
+        let (mut cal, truth) = pair();
+        let mut names: Vec<String> = tool_names();
+        names[0] = "m_xy".into();
+        names[1] = "m_xx".into();
+        names[2] = "m_xz".into();
+        cal["param_names"] = json!(names);
+        let z0 = z_values(&pair().0, &truth).unwrap();
+        let cov = cal["cov"].clone();
+        let swap = |p: usize| [1, 0].get(p).copied().unwrap_or(p);
+        cal["cov"] = json!((0..12)
+            .map(|r| (0..12).map(|q| cov[swap(r)][swap(q)].clone()).collect::<Vec<_>>())
+            .collect::<Vec<_>>());
+        // Make the swap matter: m_xx and m_xy get different variances.
+        cal["cov"][1][1] = json!(0.04);
+        let z = z_values(&cal, &truth).unwrap();
+        assert!((z[1] - 1.0).abs() < 1e-9, "m_xx against its own variance, at index 1: {}", z[1]);
+        assert_eq!(z[2], z0[2], "m_xy against its variance, now at index 0");
+    }
+
+    #[test]
+    fn a_covariance_flat_across_the_axis_makes_the_direction_infinite() {
+        let cov3 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        assert_eq!(direction_z([0.0, 0.0, 300.0], cov3, [0.0, 0.0, 1.0]), f64::INFINITY);
+        let nan = [[f64::NAN; 3]; 3];
+        assert_eq!(direction_z([0.0, 0.0, 300.0], nan, [0.0, 0.0, 1.0]), f64::INFINITY);
+    }
+
+    #[test]
+    fn a_calibration_without_its_fields_is_an_error() {
+        let (mut cal, truth) = pair();
+        cal["axes"] = json!([]);
+        assert!(z_values(&cal, &truth).is_err());
+    }
+
+    fn seed(code: i32, z: f64) -> SeedOutcome {
+        SeedOutcome { code: Some(code), z: Some([z; Z_COUNT]), cpu_s: Some(0.5) }
+    }
+
+    #[test]
+    fn z_rms_of_known_values() {
+        assert_eq!(z_rms(&[[1.0; Z_COUNT]; 3]), 1.0);
+        let mut a = [3.0; Z_COUNT];
+        a[..Z_COUNT / 2].fill(-4.0);
+        let b = [2.0; Z_COUNT];
+        let lo = Z_COUNT / 2;
+        let want =
+            ((16.0 * lo as f64 + 9.0 * (Z_COUNT - lo) as f64 + 4.0 * Z_COUNT as f64) / (2 * Z_COUNT) as f64).sqrt();
+        assert!((z_rms(&[a, b]) - want).abs() < 1e-12);
+        let mut c = [1.0; Z_COUNT];
+        c[3] = f64::NAN;
+        assert_eq!(z_rms(&[c]), f64::INFINITY);
+    }
+
+    #[test]
+    fn one_exit_0_at_z_5_makes_the_cell_confidently_wrong() {
+        let c = cell_stats(&[seed(0, 1.0), seed(0, 5.0), seed(3, 9.0)]);
+        assert_eq!(c.confidently_wrong, 1);
+        assert!(!c.never_confidently_wrong());
+        assert_eq!(c.max_z_exit0, Some(5.0));
+        assert_eq!(c.max_z_all, Some(9.0));
+        let b = bars([(&c, false)]);
+        assert_eq!(b.confidently_wrong_cells, 1);
+        assert!(!b.never_confidently_wrong() && !b.all_hold());
+    }
+
+    #[test]
+    fn a_flagged_seed_far_off_is_not_confidently_wrong() {
+        let c = cell_stats(&[seed(0, 1.0), seed(3, 9.0)]);
+        assert_eq!(c.confidently_wrong, 0);
+        assert!(c.never_confidently_wrong());
+        assert_eq!(c.max_z_exit0, Some(1.0));
+        assert_eq!(c.z_rms_exit0, Some(1.0), "the flagged seed's z stays out of the RMS");
+        assert!(bars([(&c, false)]).all_hold());
+    }
+
+    #[test]
+    fn exit_0_without_a_result_counts_as_infinitely_wrong() {
+        let c = cell_stats(&[SeedOutcome { code: Some(0), z: None, cpu_s: Some(1.0) }]);
+        assert_eq!(c.max_z_exit0, Some(f64::INFINITY));
+        assert_eq!(c.confidently_wrong, 1);
+        assert_eq!(c.max_z_all, None);
+        assert_eq!(c.z_rms_exit0, None);
+    }
+
+    #[test]
+    fn exit_statuses_are_counted() {
+        let none = SeedOutcome::default();
+        let c = cell_stats(&[seed(0, 1.0), seed(3, 1.0), seed(1, 1.0), none, seed(0, 1.0)]);
+        assert_eq!((c.seeds, c.exit0, c.exit3, c.other), (5, 2, 1, 2));
+        assert_eq!(c.calibrations, 4);
+        assert_eq!(c.cpu_per_calibration(), 0.5);
+        assert!(!c.all_exit0());
+    }
+
+    #[test]
+    fn the_rms_bar_holds_only_within_its_range() {
+        assert_eq!(cell_stats(&[seed(0, 0.5)]).rms_holds(), Some(false));
+        assert_eq!(cell_stats(&[seed(0, 1.0)]).rms_holds(), Some(true));
+        assert_eq!(cell_stats(&[seed(0, 1.4)]).rms_holds(), Some(false));
+        assert_eq!(cell_stats(&[seed(3, 0.1)]).rms_holds(), None, "no exit-0 seed: nothing to judge");
+        let low = cell_stats(&[seed(0, 0.5), seed(0, 0.6)]);
+        let b = bars([(&low, false), (&cell_stats(&[seed(0, 1.0)]), false)]);
+        assert_eq!((b.rms_cells, b.rms_outside), (2, 1));
+        assert!(b.never_confidently_wrong() && !b.rms_holds() && !b.all_hold());
+    }
+
+    #[test]
+    fn the_live_bar_wants_every_seed_at_exit_0() {
+        let flagged = cell_stats(&[seed(0, 1.0), seed(3, 1.0)]);
+        let clean = cell_stats(&[seed(0, 1.0), seed(0, 1.0)]);
+        assert_eq!(bars([(&flagged, true), (&clean, true)]).live_holds(), Some(false));
+        assert!(!bars([(&flagged, true)]).all_hold());
+        assert_eq!(bars([(&flagged, false), (&clean, true)]).live_holds(), Some(true));
+        assert_eq!(bars([(&clean, false)]).live_holds(), None, "no live cell ran");
+        assert!(bars([(&flagged, false)]).all_hold(), "a flagged seed off the live design is honest");
+    }
+}
