@@ -742,6 +742,7 @@ fn calibrate(
     eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",
+        calib::Verdict::UnexplainedStructure if lr.unvouched.is_some() => "not vouched for",
         calib::Verdict::UnexplainedStructure => "unexplained structure",
     };
     let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);

@@ -247,6 +247,11 @@ pub struct LoopReport {
     pub final_diagnostics: Option<Diagnostics>,
     /// The final model's calibration report (linear part: M, offsets, with σ).
     pub final_report: CalReport,
+    /// Why nothing vouches for the calibration though it was computed (a noise floor or test
+    /// statistic that is not a number, [`super::sanity::vouch`]); the verdict is then
+    /// [`Verdict::UnexplainedStructure`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unvouched: Option<String>,
 }
 
 impl LoopReport {
@@ -764,18 +769,20 @@ fn earth_implausible(f: &Fitted) -> Option<EarthExcess> {
 pub fn calibrate(runs: &[Run], cal: &CalOptions) -> Result<CalReport, CalError> {
     check_runs(runs)?;
     let data = LoopData::new(kinematics::reconstruct(runs, &cal.kinematics)?);
+    super::sanity::enough_samples(&data)?;
     let opts = LoopOptions { cal: *cal, max_effects: 0, ..LoopOptions::default() };
     let ctx = Context::new(&data, &opts, runs[0].gyro, None);
     let linear = ctx.linear_fit()?;
     let state = ctx.state(linear.clone());
-    Ok(ctx.cal_report(&state, ctx.paper_check(&linear, &state.diag)))
+    let report = ctx.cal_report(&state, ctx.paper_check(&linear, &state.diag));
+    super::sanity::sound(&report).map(|()| report)
 }
 
 /// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
 pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::Truth>) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
-    loop_on(kin, runs[0].gyro, opts, truth)
+    loop_on(kin, runs[0].gyro, opts, truth).and_then(super::sanity::vouch)
 }
 
 /// [`close_loop`] on runs whose samples were turned into kinematics as they were decoded
@@ -791,7 +798,7 @@ pub fn close_loop_reconstructed(
 ) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = rec.finish(runs)?;
-    loop_on(kin, runs[0].gyro, opts, truth)
+    loop_on(kin, runs[0].gyro, opts, truth).and_then(super::sanity::vouch)
 }
 
 /// The loop proper, on reconstructed kinematics.
@@ -802,6 +809,7 @@ fn loop_on(
     truth: Option<&crate::sim::Truth>,
 ) -> Result<LoopReport, CalError> {
     let data = LoopData::new(kin);
+    super::sanity::enough_samples(&data)?;
     let ctx = Context::new(&data, opts, gyro, truth);
     // Earth rotation is in every lab. With the latitude known its vertical part is known, and
     // the model holds it from the start. Without, a fitted vertical part trades off against
@@ -940,5 +948,6 @@ fn loop_on(
         initial,
         final_diagnostics: added.then_some(state.diag),
         final_report,
+        unvouched: None,
     })
 }

@@ -31,6 +31,32 @@ pub enum CalError {
         /// Samples needed.
         needed: usize,
     },
+    /// A run whose gaps leave the fit too few samples: each gap costs the samples within
+    /// `MAX_DELAY_S` of it ([`super::sanity::needed_samples`] says how many a run needs).
+    #[error("run {run} ({label}): too few usable samples once the gaps are cut out ({usable} of {kept} at steady speed lie {clear_ms:.0} ms clear of every gap), need at least {needed} (one sensor-table revolution)")]
+    TooFewBetweenGaps {
+        /// Run number, from 1.
+        run: usize,
+        /// Run label (pose, rate).
+        label: String,
+        /// Samples the fit would use.
+        usable: usize,
+        /// How far from a gap a sample must lie to be used, ms.
+        clear_ms: f64,
+        /// Samples kept at steady speed, gaps included.
+        kept: usize,
+        /// Samples needed.
+        needed: usize,
+    },
+    /// A fit that is not one: a parameter or σ that is not a finite number, or a covariance that
+    /// is not positive definite ([`super::sanity::sound`]).
+    #[error("degenerate fit ({model}): {what}; no calibration")]
+    Degenerate {
+        /// The model fitted.
+        model: String,
+        /// What is not a number, and where.
+        what: String,
+    },
     /// Without a complete index pulse θ2 has no zero.
     #[error("run {run} ({label}): no complete index pulse (rising then falling edge) among {edges} edges, cannot reference θ2")]
     NoIndex {

@@ -27,6 +27,7 @@ pub mod layout;
 pub mod paper;
 pub mod present;
 pub mod report;
+pub mod sanity;
 pub mod selection;
 pub mod sincos;
 pub mod spectrum;

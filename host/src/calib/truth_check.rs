@@ -2,6 +2,7 @@
 //! of its own reported uncertainty.
 
 use super::derived::{mahalanobis2, AxisEstimate};
+use super::report::CalReport;
 use crate::sim::Truth;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -92,6 +93,40 @@ impl TruthErrors {
     pub fn max_z(&self) -> f64 {
         self.direction_z.iter().chain(self.sensitivity_z.iter()).fold(0.0, |m, &v| m.max(v.abs()))
     }
+}
+
+/// Every |z| of a calibration against a true M (counts per °/s, rows = axes), as
+/// `../shared/validation/check.py` reckons them: per axis, the sensitivity against its σ, each
+/// element of its row of M against √ of its variance in `cov`, and its direction as a 2-dof
+/// distance (the tilt components' Mahalanobis distance, as in [`TruthErrors`]): 21 values, axis
+/// by axis. A value that is not a number (a σ of 0 or NaN, a covariance that is not one) is +∞:
+/// a calibration that cannot say how far off it is, is off.
+pub fn z_against_m(report: &CalReport, m_true: &[[f64; 3]; 3]) -> Vec<f64> {
+    let mut z = Vec::with_capacity(21);
+    for (i, a) in report.axes.iter().enumerate() {
+        let row = m_true[i];
+        let k = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let s = row.map(|v| v / k);
+        z.push(a.k_counts_per_dps.z(k).abs());
+        for (j, &t) in row.iter().enumerate() {
+            let p = 4 * i + j;
+            z.push(((report.m_counts_per_dps[i][j] - t) / report.cov[p][p].sqrt()).abs());
+        }
+        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
+        let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
+        let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
+        let c = a.tilt_components_cov_deg2;
+        // A 2×2 covariance that is not positive definite gives no distance (check.py's too).
+        let pd = c[0][0] > 0.0 && c[0][0] * c[1][1] - c[0][1] * c[1][0] > 0.0;
+        let finite = d.iter().chain(c.iter().flatten()).all(|v| v.is_finite());
+        z.push(if pd && finite { mahalanobis2(d, c) } else { f64::INFINITY });
+    }
+    z.into_iter().map(|v| if v.is_nan() { f64::INFINITY } else { v }).collect()
+}
+
+/// The largest of [`z_against_m`].
+pub fn max_z_against_m(report: &CalReport, m_true: &[[f64; 3]; 3]) -> f64 {
+    z_against_m(report, m_true).into_iter().fold(0.0, f64::max)
 }
 
 #[cfg(test)]

@@ -206,6 +206,9 @@ pub fn summary(r: &LoopReport) -> String {
     }
     let tag = match r.verdict {
         Verdict::AtNoiseFloor => "VERDICT: calibrated, residual at the noise floor.",
+        Verdict::UnexplainedStructure if r.unvouched.is_some() => {
+            "VERDICT: NOT VOUCHED FOR — do not trust this calibration."
+        }
         Verdict::UnexplainedStructure => "VERDICT: UNEXPLAINED STRUCTURE — do not trust this calibration.",
     };
     let _ = writeln!(o, "\n{tag}\n{}", verdict(r));
@@ -235,6 +238,10 @@ pub fn verdict(r: &LoopReport) -> String {
                 d.tests
             )
         }
+        Verdict::UnexplainedStructure if r.unvouched.is_some() => format!(
+            "DO NOT TRUST THIS CALIBRATION: a figure the verdict rests on is not a number ({}), so no test can vouch for the fit. The numbers below are the best fit of the model, not a characterisation of the sensor.",
+            r.unvouched.as_deref().unwrap_or_default()
+        ),
         Verdict::UnexplainedStructure => {
             let what: Vec<String> = r
                 .earth_excess
