@@ -16,7 +16,7 @@
 //!   flags what it cannot separate or widens its σ to cover it);
 //! - every cell with exit-0 seeds has their z RMS within 0.7-1.3 (σ neither inflated nor too
 //!   small; an honest σ gives ≈ 1.1, as the direction's z is a 2-dof distance);
-//! - every cell of the default live design (`180,90@120`, or `TRUST_LIVE`) whose effect is
+//! - every cell of the default live design (`180,90,-180@120`, `host calibrate`'s default, or `TRUST_LIVE`) whose effect is
 //!   catalogued (all but `mystery_harmonic`, structure no model explains) ends at exit 0 on
 //!   every seed.
 //!
@@ -44,7 +44,7 @@
 //!   (no `@`: 120 s);
 //! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order;
 //! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none` and `all` run once);
-//! - `TRUST_LIVE="180,90@120"`: the live design of the third bar;
+//! - `TRUST_LIVE="180,90,-180@120"`: the live design of the third bar;
 //! - `TRUST_CACHE=0`: remove each capture once calibrated (see below).
 //!
 //! Quick subset (4 cells × 2 seeds: seconds of calibration, once the release build is there):
@@ -78,7 +78,7 @@ const DEFAULT_RATES: [&str; 4] = ["180", "180,90", "180,-180", "180,90,-180"];
 const DEFAULT_LENGTHS_S: [&str; 3] = ["20", "120", "300"];
 
 /// The design an operator runs live by default (the third bar's).
-const DEFAULT_LIVE: &str = "180,90@120";
+const DEFAULT_LIVE: &str = "180,90,-180@120";
 
 /// Effects outside the calibration's catalogue: structure no model explains, flagged at best.
 const NOT_CATALOGUED: [&str; 1] = ["mystery_harmonic"];

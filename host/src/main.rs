@@ -70,10 +70,12 @@ enum Cmd {
         /// Live: seconds of data per run once at speed.
         #[arg(long, default_value_t = 120.0, value_parser = parse_duration)]
         duration: f64,
-        /// Live: base-table rates to run in each pose, °/s, negative for clockwise. Two speeds
-        /// (the default) tell a gyro delay from an index offset; add a negative rate (e.g.
-        /// 180,90,-180) to separate the offsets from the constant θ2' term as well.
-        #[arg(long, value_delimiter = ',', default_value = "180,90", allow_negative_numbers = true, value_parser = parse_rate)]
+        /// Live: base-table rates to run in each pose, °/s, negative for clockwise. The default's
+        /// three signed speeds separate every catalogued effect (docs/trust.md): two speeds tell a
+        /// gyro delay from an index offset, and the scale seen at each signed speed holds three
+        /// unknowns, M's, Earth's vertical rate (odd in the direction) and the filter's droop
+        /// (growing with speed).
+        #[arg(long, value_delimiter = ',', default_value = "180,90,-180", allow_negative_numbers = true, value_parser = parse_rate)]
         rates_dps: Vec<f64>,
         /// Live: end the session with a static run (motor off) of this many seconds in the last
         /// pose, for noise figures (Allan deviation, ARW, bias instability, RRW). An hour gives

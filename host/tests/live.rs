@@ -59,6 +59,16 @@ fn scratch(name: &str) -> Scratch {
     Scratch(d)
 }
 
+/// The captures of a default live session (`--rates-dps 180,90,-180` in both poses), in order.
+const DEFAULT_FILES: [&str; 6] = [
+    "pose1-p180dps.cap",
+    "pose1-p90dps.cap",
+    "pose1-m180dps.cap",
+    "pose2-p180dps.cap",
+    "pose2-p90dps.cap",
+    "pose2-m180dps.cap",
+];
+
 fn decode(path: &Path) -> capture::Capture {
     capture::decode(&std::fs::read(path).unwrap())
 }
@@ -113,7 +123,7 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("session.json")).unwrap()).unwrap();
     assert_eq!(manifest["sensor_serial"], "G-LIVE-11");
-    assert_eq!(manifest["captures"].as_array().unwrap().len(), 4, "2 poses × 2 default rates");
+    assert_eq!(manifest["captures"].as_array().unwrap().len(), 6, "2 poses × 3 default rates");
     let prov = &report["provenance"];
     assert_eq!(prov["sensor_serial"], "G-LIVE-11");
     assert_eq!(prov["operator"], "ci");
@@ -123,10 +133,7 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
 
     // Replayed later without --sensor: the manifest beside the captures names the sensor, and
     // the captures are checked against its fingerprints.
-    let caps: Vec<String> = ["pose1-p180dps.cap", "pose1-p90dps.cap", "pose2-p180dps.cap", "pose2-p90dps.cap"]
-        .iter()
-        .map(|f| dir.join(f).display().to_string())
-        .collect();
+    let caps: Vec<String> = DEFAULT_FILES.iter().map(|f| dir.join(f).display().to_string()).collect();
     let again = dir.join("again");
     let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--replay"];
     args.extend(caps.iter().map(String::as_str));
@@ -510,10 +517,10 @@ const NS: u64 = 1_000_000_000;
 /// What issue 8 asks of the live path, through the `host` binary: `host virtual-rig` on a line
 /// as hostile as a real bench (a byte in a thousand lost both ways, a burst of garbage every
 /// 2 s, the Start's Ack and the first RunStopped dropped), `host calibrate --port` without
-/// `--yes` at the default speeds (180, 90 °/s) and duration (120 s) in both poses, and an
+/// `--yes` at the default speeds (180, 90, −180 °/s) and duration (120 s) in both poses, and an
 /// operator who answers each prompt 30 s (simulated) after it appears, while the host keeps
 /// draining the rig's idle stream. The session completes at exit 0, no capture holds a fault,
-/// and the four captures replayed give exactly the live calibration. The 30 s waits are
+/// and the six captures replayed give exactly the live calibration. The 30 s waits are
 /// themselves the proof that the host reads the port at a prompt: in lockstep the rig's time
 /// advances only through the host's reads (a host blocked at the prompt, F2, would stop the
 /// clock and trip the relay's hang guard), and the rig's queue-drop counter stays at 0.
@@ -553,16 +560,18 @@ fn hostile_bench_through_the_host_binary_completes_and_replays_to_the_same_calib
     // The sensor's serial, pose 1, pose 2: each answered 30 s after it was asked.
     assert_eq!(waits_s.len(), 3, "{err}");
     assert!(waits_s.iter().all(|w| *w >= 30.0), "{waits_s:?}");
-    assert!(end_ns >= 4 * 120 * NS + 90 * NS, "4 runs of 120 s and 3 prompts of 30 s: {end_ns} ns");
+    assert!(end_ns >= 6 * 120 * NS + 90 * NS, "6 runs of 120 s and 3 prompts of 30 s: {end_ns} ns");
     // The dropped Ack made the host send the first Start again; each run was stopped.
     let starts = bench.received("Start");
     let stops = bench.received("Stop");
-    assert!(starts.len() >= 5 && stops.len() >= 4, "Start at {starts:?} s, Stop at {stops:?} s");
+    assert!(starts.len() >= 7 && stops.len() >= 6, "Start at {starts:?} s, Stop at {stops:?} s");
     assert!(bench.log().iter().any(|l| l == "virtual rig: dropped Ack #2"), "{:?}", bench.log());
     assert!(bench.log().iter().any(|l| l == "virtual rig: dropped RunStopped #1"), "{:?}", bench.log());
 
-    let files = ["pose1-p180dps.cap", "pose1-p90dps.cap", "pose2-p180dps.cap", "pose2-p90dps.cap"];
-    for (file, (pose, rate)) in files.iter().zip([(1, 180.0), (1, 90.0), (2, 180.0), (2, 90.0)]) {
+    let files = DEFAULT_FILES;
+    for (file, (pose, rate)) in
+        files.iter().zip([(1, 180.0), (1, 90.0), (1, -180.0), (2, 180.0), (2, 90.0), (2, -180.0)])
+    {
         let cap = decode(&dir.join(file));
         assert_eq!(cap.runs.len(), 1, "{file}");
         let run = &cap.runs[0];

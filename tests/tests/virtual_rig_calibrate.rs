@@ -3,7 +3,7 @@
 //! `host::capture::decode`, `host::calib::close_loop`; see host/src/main.rs), and the result held
 //! against the imperfect gyro the virtual rig simulates.
 //!
-//! A default session (both poses at 180 and 90 °/s, 120 s each) on a healthy rig must end at the
+//! A default session (both poses at 180, 90 and −180 °/s, 120 s each) on a healthy rig must end at the
 //! noise floor, which is exit 0 of `host calibrate`. The virtual gyro has the L3G4200D's
 //! datasheet noise; without it (`--noiseless-gyro`) the speed loop's table jitter, ≈ 0.03 °/s rms
 //! at 20-400 Hz and below the encoder's resolution, is unexplained structure (firmware/README.md).
@@ -21,7 +21,7 @@ use std::sync::atomic::AtomicBool;
 const DURATION_S: f64 = 120.0;
 
 /// `host calibrate --rates-dps`'s default.
-const RATES_DPS: [f64; 2] = [180.0, 90.0];
+const RATES_DPS: [f64; 3] = [180.0, 90.0, -180.0];
 
 #[test]
 fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
@@ -61,7 +61,7 @@ fn host_calibrate_over_a_pty_recovers_the_virtual_gyro() {
         );
         assert_eq!(cap.runs.len(), 1, "{}", file.display());
         let r = &cap.runs[0];
-        assert_eq!((r.pose, f64::from(r.rate_mdps)), (run.pose, run.rate_dps * 1e3), "{}", file.display());
+        assert_eq!((r.pose, r.commanded_rate_dps()), (run.pose, run.rate_dps), "{}", file.display());
         assert!(r.stopped, "{}: RunStopped recorded", file.display());
         runs.extend(cap.runs);
     }
