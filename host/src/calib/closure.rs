@@ -923,6 +923,10 @@ fn loop_on(
     }
     let considered = ctx.consider(&state);
     state.estimate = base_estimate_with(&state.fitted, ctx.nominal, Some(&considered.cov));
+    // The final model's error against a simulated truth, in the σ it is reported with.
+    if let (Some(last), Some(t)) = (steps.last_mut(), ctx.truth) {
+        last.truth = Some(TruthErrors::of(&state.estimate.axes, t));
+    }
     notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
     let earth_excess = earth_implausible(&state.fitted);
     let consistency =

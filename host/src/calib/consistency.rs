@@ -178,3 +178,55 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
         .collect();
     Some(Consistency { chi2, dof, threshold, significance_sigma: chi2_to_sigma(dof, chi2), groups: group_diffs })
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::calib::{close_loop, LoopOptions};
+    use crate::capture::{decode, Run};
+    use crate::geometry::Pose;
+    use crate::sim::{simulate, RunSpec, SimConfig};
+
+    /// Both poses at 180 and 90 °/s, 40 s each, no effect: one simulated sensor.
+    fn two_speeds(seed: u64) -> Vec<Run> {
+        let runs = Pose::ALL
+            .iter()
+            .flat_map(|&pose| [180.0, 90.0].map(|rate_dps| RunSpec { pose, rate_dps, duration_s: 40.0 }))
+            .collect();
+        let out = simulate(&SimConfig::with_runs(seed, runs)).expect("simulates");
+        decode(&out.bytes).runs
+    }
+
+    /// The runs at 90 °/s read `ppm` more than the sensor does: an effect that changes with speed
+    /// and that no catalogued effect is (every axis, every column alike).
+    fn scale_slow_runs(runs: &mut [Run], ppm: f64) {
+        for r in runs.iter_mut().filter(|r| r.commanded_rate_dps().abs() < 100.0) {
+            for s in &mut r.samples {
+                s.rate_counts = s.rate_counts.map(|c| (f64::from(c) * (1.0 + ppm * 1e-6)).round() as i16);
+            }
+        }
+    }
+
+    /// Runs that agree pass; runs at 90 °/s that read 1000 ppm more than those at 180 °/s are
+    /// named, with the size of the disagreement.
+    #[test]
+    fn runs_at_two_speeds_that_want_different_m_are_named() {
+        let opts = LoopOptions { max_effects: 0, ..LoopOptions::default() };
+        let runs = two_speeds(21);
+        let r = close_loop(&runs, &opts, None).expect("calibrates");
+        let c = r.consistency.as_ref().expect("two speeds are compared");
+        assert!(!c.disagrees(), "χ² {} for {} dof against {}", c.chi2, c.dof, c.threshold);
+        assert_eq!(c.groups.len(), 1);
+        assert_eq!((c.groups[0].rate_dps.round(), c.groups[0].reference_rate_dps.round()), (90.0, 180.0));
+
+        let mut runs = two_speeds(21);
+        scale_slow_runs(&mut runs, 1000.0);
+        let r = close_loop(&runs, &opts, None).expect("calibrates");
+        let c = r.consistency.as_ref().expect("two speeds are compared");
+        assert!(c.disagrees(), "χ² {} for {} dof against {}", c.chi2, c.dof, c.threshold);
+        let g = &c.groups[0];
+        // The diagonal element that moved most reads ≈ +1000 ppm of its sensitivity.
+        assert!(g.max_z > 4.0 && (g.max_ppm - 1000.0).abs() < 300.0, "{g:?}");
+        assert_eq!(r.verdict(), crate::calib::Verdict::UnexplainedStructure);
+        assert!(r.summary().contains("The runs disagree about M"), "{}", r.summary());
+    }
+}

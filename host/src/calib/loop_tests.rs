@@ -555,3 +555,28 @@ fn smoothed_temperatures_are_the_per_sample_ones() {
     }
     assert_eq!(data.temp_spread_c(), hi - lo);
 }
+
+/// g-sensitivity at three times its simulated default (0.15 °/s/g at most) with one speed in one
+/// direction, where it turns in the sensor frame exactly as the signal does: no test can see it,
+/// M absorbs it (hundreds of ppm), and only σ can carry it. The consider term names it, its
+/// source and the runs that remove it, and the result is within 3σ of the truth. Without the term
+/// this was |z| ≈ 8 at exit 0 (the trust bench, `180@20`).
+#[test]
+fn one_speed_carries_an_inseparable_g_sensitivity_in_sigma() {
+    let (runs, truth) = capture_with(8, &[180.0], SHORT_S, &["g_sensitivity=0.15"], FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let term = r
+        .notes
+        .iter()
+        .find_map(|n| match n {
+            Note::Unseparated(t) if t.effect == Effect::GSensitivity => Some(t.clone()),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("no g-sensitivity term: {:?}", r.notes));
+    assert!(term.k_sigma_ppm.iter().all(|&p| p > 100.0), "{term:?}");
+    assert!(term.removed_by.contains("two speeds"), "{term:?}");
+    assert_eq!(r.final_report().consider.first().map(|t| t.effect), Some(Effect::GSensitivity));
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(t.max_sensitivity_ppm() > 50.0, "the effect must bias M for this test to mean anything: {t:?}");
+    assert_within_3_sigma(&t, "one speed, g-sensitivity");
+}
