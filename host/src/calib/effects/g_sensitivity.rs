@@ -65,9 +65,12 @@ impl Behaviour for GSensitivity {
     }
 
     /// Tried whenever two speeds separate it (it acts at the table's own frequency, so one fit's
-    /// residual cannot show it); with nine parameters it could soak up a phase error, so it comes
-    /// once the phase is modelled, or when there is none.
+    /// residual cannot show it). With nine parameters it could soak up a phase error, but the
+    /// selection takes the most significant drop for its parameter count, which a one-parameter
+    /// delay or index offset wins when the structure is a phase; keeping it out while a phase is
+    /// suspected let a real g-sensitivity end in a drift model and a biased M (the trust bench,
+    /// `180,90@120`, `g_sensitivity`: 300 ppm, flagged only by the runs' disagreement).
     fn candidate(&self, s: &Situation) -> bool {
-        s.separates_delay_and_index && !s.has(Effect::GSensitivity) && (s.phase_modelled() || !s.evidence.phase)
+        s.separates_delay_and_index && !s.has(Effect::GSensitivity)
     }
 }
