@@ -4,6 +4,10 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
+/// Earth's sidereal rotation rate, rad/s (IERS Conventions 2010, §1.2: 7.292115×10⁻⁵ rad/s,
+/// 15.041 °/h).
+pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
+
 /// How the gyro package is mounted on the sensor table. The pose travels in the capture itself
 /// (`RunStarted::run_tag`), so that a capture cannot be attributed to the wrong pose.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

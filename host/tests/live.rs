@@ -775,38 +775,12 @@ fn a_lossy_line_never_certifies_a_calibration_off_the_truth() {
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
 
-/// The largest |z| of `calibration.json` against a true M, as `../shared/validation/check.py`
-/// reckons it: each sensitivity against `k_sigma`, each element of M against √ of its variance,
-/// each direction as a 2-dof distance in the plane normal to it (from its row's block of `cov`).
-/// Read from the JSON, where a NaN is `null`, so that a calibration holding one is judged too (as
-/// infinitely far off: it cannot say how far it is).
+/// The largest |z| of `calibration.json` against a true M ([`host::calib::truth_check::z_values`],
+/// as `../shared/validation/check.py` reckons it; JSON's `null` is a NaN and judged infinitely
+/// far off). A file it cannot read is infinitely far off too.
 fn max_z_like_check_py(json: &str, m_true: &[[f64; 3]; 3]) -> f64 {
-    use nalgebra::{Matrix2, Matrix3, Vector3};
-    let c: serde_json::Value = serde_json::from_str(json).unwrap();
-    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
-    let cov = |i: usize, j: usize| num(&c["cov"][i][j]);
-    let mut z = Vec::new();
-    for i in 0..3 {
-        let t = Vector3::from(m_true[i]);
-        let m = Vector3::from_fn(|j, _| num(&c["m_counts_per_dps"][i][j]));
-        let a = &c["axes"][i];
-        z.push((num(&a["k_counts_per_dps"]) - t.norm()).abs() / num(&a["k_sigma"]));
-        for j in 0..3 {
-            z.push((m[j] - t[j]).abs() / cov(4 * i + j, 4 * i + j).sqrt());
-        }
-        // ds = (I − s sᵀ) dm / |m|: its components along u and v, normal to s.
-        let s = m.normalize();
-        let other = if s[0].abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-        let u = s.cross(&other).normalize();
-        let v = s.cross(&u);
-        let c3 = Matrix3::from_fn(|r, q| cov(4 * i + r, 4 * i + q));
-        let basis = [u / m.norm(), v / m.norm()];
-        let c2 = Matrix2::from_fn(|r, q| basis[r].dot(&(c3 * basis[q])));
-        let e = nalgebra::Vector2::new(u.dot(&(s - t.normalize())), v.dot(&(s - t.normalize())));
-        z.push(match c2.try_inverse().filter(|_| c2.determinant() > 0.0) {
-            Some(ci) => (e.transpose() * ci * e)[(0, 0)].sqrt(),
-            None => f64::INFINITY,
-        });
-    }
-    z.into_iter().map(|v| if v.is_nan() { f64::INFINITY } else { v }).fold(0.0, f64::max)
+    serde_json::from_str(json)
+        .map_err(|e| e.to_string())
+        .and_then(|c| host::calib::truth_check::z_values(&c, m_true))
+        .map_or(f64::INFINITY, |z| z.into_iter().fold(0.0, f64::max))
 }

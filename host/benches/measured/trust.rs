@@ -2,95 +2,22 @@
 //! simulated truth, and a cell's figures and bars over its seeds. Plain functions, unit-tested by
 //! the `bench_measured` test target (`host/tests/bench_measured.rs`).
 
-use super::replay::{max_abs, number, triple};
-use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+use super::replay::{max_abs, triple};
 use serde_json::Value;
 use std::ops::RangeInclusive;
 
-/// z-values judged per axis: the sensitivity, the three elements of the axis' row of M, and the
-/// direction, in the order `validation/check.py` appends them.
-pub const Z_PER_AXIS: usize = 5;
+pub use host::calib::truth_check::{Zs, Z_COUNT};
 
-/// z-values judged per calibration. (check.py's docstring says 21; its code appends the
-/// [`Z_PER_AXIS`] values above for each of the three axes, and these are those.)
-pub const Z_COUNT: usize = 3 * Z_PER_AXIS;
-
-/// One calibration's z-values, axis x first.
-pub type Zs = [f64; Z_COUNT];
-
-const AXES: [char; 3] = ['x', 'y', 'z'];
-
-/// 2-dof Mahalanobis distance of s = m/|m| from `s_true` in the plane normal to s, with `cov3`
-/// the covariance of the row m: check.py's `direction_z`, step for step. A covariance that is
-/// not positive in that plane (check.py: infinite) or not a number (check.py: NaN) is infinite.
-pub fn direction_z(m: [f64; 3], cov3: [[f64; 3]; 3], s_true: [f64; 3]) -> f64 {
-    let m = Vector3::from(m);
-    let cov = Matrix3::from_fn(|r, c| cov3[r][c]);
-    let nm = m.norm();
-    let s = m / nm;
-    let a = if s.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-    let u = s.cross(&a).normalize();
-    let v = s.cross(&u);
-    // ds = (I − s sᵀ) dm / |m|: its components along u and v are u·dm/|m| and v·dm/|m|.
-    let basis = [u / nm, v / nm];
-    let c = Matrix2::from_fn(|r, q| basis[r].dot(&(cov * basis[q])));
-    let d = s - Vector3::from(s_true);
-    let e = Vector2::new(u.dot(&d), v.dot(&d));
-    let det = c[(0, 0)] * c[(1, 1)] - c[(0, 1)] * c[(1, 0)];
-    if det.is_nan() || det <= 0.0 {
-        return f64::INFINITY;
-    }
-    let q = (c[(1, 1)] * e[0] * e[0] - 2.0 * c[(0, 1)] * e[0] * e[1] + c[(0, 0)] * e[1] * e[1]) / det;
-    q.max(0.0).sqrt()
-}
-
-/// The z-values of a calibration (`calibration.json` of `host calibrate`) against the simulator's
-/// truth (`x.truth.json`: `k_counts_per_dps`, rows `s`, `m_counts_per_dps`, check.py's `k`, `S`,
-/// `M`), computed as `validation/check.py` does. Per axis i: |k − k_true| / `k_sigma`; each
-/// element j of row i of M, |m_ij − M_ij| / √cov[p][p] with p the index of `m_<i><j>` in
-/// `param_names` or else 4i + j; and [`direction_z`] of row i with the rows' 3×3 block of `cov`.
+/// The z-values of a calibration against the simulator's truth file (`x.truth.json`, its
+/// `m_counts_per_dps`): [`host::calib::truth_check::z_values`].
 pub fn z_values(cal: &Value, truth: &Value) -> Result<Zs, String> {
-    let names: Vec<&str> = cal["param_names"]
-        .as_array()
-        .ok_or("calibration: param_names is not a list")?
-        .iter()
-        .map(|n| n.as_str().ok_or("calibration: param_names holds a non-string"))
-        .collect::<Result<_, _>>()?;
-    let cov_rows = cal["cov"].as_array().ok_or("calibration: cov is not a matrix")?;
-    let cov = |r: usize, q: usize| -> Result<f64, String> {
-        cov_rows
-            .get(r)
-            .and_then(|row| row.get(q))
-            .and_then(Value::as_f64)
-            .ok_or(format!("calibration: no cov[{r}][{q}]"))
-    };
-    let axes = cal["axes"].as_array().filter(|a| a.len() == 3).ok_or("calibration: axes is not 3 axes")?;
-    let mut z = [0.0; Z_COUNT];
-    for (i, a) in axes.iter().enumerate() {
-        let k = number(&a["k_counts_per_dps"], "calibration: axes[i].k_counts_per_dps")?;
-        let k_sigma = number(&a["k_sigma"], "calibration: axes[i].k_sigma")?;
-        let k_true = number(&truth["k_counts_per_dps"][i], "truth: k_counts_per_dps[i]")?;
-        let m = triple(&cal["m_counts_per_dps"][i], "calibration: m_counts_per_dps[i]")?;
-        let m_true = triple(&truth["m_counts_per_dps"][i], "truth: m_counts_per_dps[i]")?;
-        let s_true = triple(&truth["s"][i], "truth: s[i]")?;
-        let idx: [usize; 3] = std::array::from_fn(|j| {
-            let name = format!("m_{}{}", AXES[i], AXES[j]);
-            names.iter().position(|n| *n == name).unwrap_or(4 * i + j)
-        });
-        let zi = &mut z[Z_PER_AXIS * i..Z_PER_AXIS * (i + 1)];
-        zi[0] = (k - k_true).abs() / k_sigma;
-        for (j, &p) in idx.iter().enumerate() {
-            zi[1 + j] = (m[j] - m_true[j]).abs() / cov(p, p)?.sqrt();
-        }
-        let mut cov3 = [[0.0; 3]; 3];
-        for (r, &pr) in idx.iter().enumerate() {
-            for (q, &pq) in idx.iter().enumerate() {
-                cov3[r][q] = cov(pr, pq)?;
-            }
-        }
-        zi[4] = direction_z(m, cov3, s_true);
-    }
-    Ok(z)
+    let m: [[f64; 3]; 3] = [0, 1, 2]
+        .map(|i| triple(&truth["m_counts_per_dps"][i], "truth: m_counts_per_dps[i]"))
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?
+        .try_into()
+        .expect("three rows");
+    host::calib::truth_check::z_values(cal, &m)
 }
 
 /// Above this |z| a result the tool vouches for (exit 0) is confidently wrong.

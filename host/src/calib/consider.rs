@@ -22,7 +22,7 @@
 use super::derived::derive;
 use super::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
 use super::effects::Effect;
-use super::extended::{accumulate, normal_equations, Fitted, Gram, LoopData, Selection};
+use super::extended::{accumulate_pairs, normal_equations, Fitted, Gram, LoopData, Reach, Selection};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -63,6 +63,11 @@ pub struct ConsiderTerm {
     pub direction_sigma_deg: [f64; 3],
     /// Directions (whitened) the runs do not separate, of the effect's parameters.
     pub unseparated: usize,
+    /// The least of those directions' information λ (the squared signal-to-noise of an effect
+    /// of plausible size along it; [`SEPARATED_SNR2`] separates it). Near 0: these runs cannot
+    /// see it at all; between: longer runs of the same design would separate it.
+    #[serde(default)]
+    pub least_seen: f64,
     /// The runs that would separate it.
     pub removed_by: String,
 }
@@ -239,7 +244,8 @@ pub fn consider(
         }
         places.push(pl);
     }
-    let Some(total) = Gram::sum(&accumulate(data, &f.model, &cols)) else {
+    let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
+    let Some(total) = Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach)) else {
         return Consideration::none();
     };
     let (n_mat, b_vec) = normal_equations(&total, &sel, weights);
@@ -275,10 +281,10 @@ pub fn consider(
         let info = &c_mat - b.transpose() * &s_mat;
         // The residual's correlation with the effect, beyond what the model's own step takes.
         let grad = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
-        let Some((sigma_c, unseparated)) = posterior(&info, &grad, &sd) else {
+        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd) else {
             continue;
         };
-        if unseparated == 0 {
+        if lambdas.is_empty() {
             continue;
         }
         let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
@@ -290,7 +296,8 @@ pub fn consider(
             source: c.source.into(),
             k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),
             direction_sigma_deg: axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees()),
-            unseparated,
+            unseparated: lambdas.len(),
+            least_seen: lambdas.iter().copied().fold(f64::INFINITY, f64::min),
             removed_by: c.effect.identified_by().into(),
         };
         out.cov += added;
@@ -312,7 +319,7 @@ fn max3(v: [f64; 3]) -> f64 {
 /// parameters in the directions the runs do not separate, from its partial information `info`,
 /// the residual's gradient `grad` along its columns and its prior σs `sd`; with the count of
 /// those directions. None when the information is not finite.
-fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DMatrix<f64>, usize)> {
+fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DMatrix<f64>, Vec<f64>)> {
     let n = sd.len();
     let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
     let mut w = &d * info * &d;
@@ -324,13 +331,13 @@ fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DM
     let g_w = &d * grad;
     let mut var = DMatrix::zeros(n, n);
     let mut mean = DVector::zeros(n);
-    let mut unseparated = 0;
+    let mut unseparated = Vec::new();
     for (i, &lambda) in eig.eigenvalues.iter().enumerate() {
         let lambda = lambda.max(0.0);
         if lambda >= SEPARATED_SNR2 {
             continue;
         }
-        unseparated += 1;
+        unseparated.push(lambda);
         let u = eig.eigenvectors.column(i);
         var += u * u.transpose() / (1.0 + lambda);
         mean += u * (u.dot(&g_w) / (1.0 + lambda));
@@ -348,13 +355,14 @@ mod tests {
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
         let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite");
-        assert_eq!(n, 1);
+        assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
         let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0]).expect("finite");
-        assert_eq!(n, 1);
+        assert_eq!(n.len(), 1);
+        assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
         let (c, _) = posterior(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite");

@@ -79,6 +79,10 @@ pub struct RunSummary {
     pub excluded_window_edge: usize,
     /// Excluded as stale.
     pub excluded_stale: usize,
+    /// Excluded around gaps in the samples (a lost frame, an excluded stretch): the samples
+    /// within the longest delay the model fits of a gap, whose history the delay would need.
+    #[serde(default)]
+    pub excluded_near_gaps: usize,
     /// Samples in the θ1' window.
     pub rate_window_samples: usize,
     /// Encoder quantisation on θ1', °/s rms.

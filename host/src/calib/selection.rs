@@ -18,8 +18,8 @@ use super::effects::terms::{Evidence, Situation};
 use super::effects::Effect;
 use super::error::CalError;
 use super::extended::{
-    accumulate, apply_step, fit, full_selection, residual_after, solve_joint, Col, Fitted, Gram, LinCol, LoopData,
-    Selection,
+    accumulate_pairs, apply_step, fit, full_selection, residual_after, solve_joint, Col, Fitted, Gram, LinCol,
+    LoopData, Reach, Selection,
 };
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector};
@@ -193,7 +193,8 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
         cols.extend(c.cols.iter().copied());
         positions.push(start..cols.len());
     }
-    let per_run = accumulate(data, &state.model, &cols);
+    let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
+    let per_run = accumulate_pairs(data, &state.model, &cols, &reach);
     let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
     let Some(base) = solve_joint(&total, &base_sel, weights) else {

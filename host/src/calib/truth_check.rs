@@ -4,8 +4,9 @@
 use super::derived::{mahalanobis2, AxisEstimate};
 use super::report::CalReport;
 use crate::sim::Truth;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 /// Errors of one calibration against the simulated truth.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -95,33 +96,106 @@ impl TruthErrors {
     }
 }
 
-/// Every |z| of a calibration against a true M (counts per °/s, rows = axes), as
-/// `../shared/validation/check.py` reckons them: per axis, the sensitivity against its σ, each
-/// element of its row of M against √ of its variance in `cov`, and its direction as a 2-dof
-/// distance (the tilt components' Mahalanobis distance, as in [`TruthErrors`]): 21 values, axis
-/// by axis. A value that is not a number (a σ of 0 or NaN, a covariance that is not one) is +∞:
-/// a calibration that cannot say how far off it is, is off.
-pub fn z_against_m(report: &CalReport, m_true: &[[f64; 3]; 3]) -> Vec<f64> {
-    let mut z = Vec::with_capacity(21);
-    for (i, a) in report.axes.iter().enumerate() {
-        let row = m_true[i];
-        let k = row.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let s = row.map(|v| v / k);
-        z.push(a.k_counts_per_dps.z(k).abs());
-        for (j, &t) in row.iter().enumerate() {
-            let p = 4 * i + j;
-            z.push(((report.m_counts_per_dps[i][j] - t) / report.cov[p][p].sqrt()).abs());
-        }
-        let (j, l) = ((i + 1) % 3, (i + 2) % 3);
-        let truth_tilt = [s[j].atan2(s[i]).to_degrees(), s[l].atan2(s[i]).to_degrees()];
-        let d = [a.tilt_components_deg[0] - truth_tilt[0], a.tilt_components_deg[1] - truth_tilt[1]];
-        let c = a.tilt_components_cov_deg2;
-        // A 2×2 covariance that is not positive definite gives no distance (check.py's too).
-        let pd = c[0][0] > 0.0 && c[0][0] * c[1][1] - c[0][1] * c[1][0] > 0.0;
-        let finite = d.iter().chain(c.iter().flatten()).all(|v| v.is_finite());
-        z.push(if pd && finite { mahalanobis2(d, c) } else { f64::INFINITY });
+/// z-values judged per axis: the sensitivity, the three elements of the axis' row of M, and the
+/// direction, in the order `../shared/validation/check.py` appends them.
+pub const Z_PER_AXIS: usize = 5;
+
+/// z-values judged per calibration. (check.py's docstring says 21; its code appends the
+/// [`Z_PER_AXIS`] values above for each of the three axes, and these are those.)
+pub const Z_COUNT: usize = 3 * Z_PER_AXIS;
+
+/// One calibration's z-values, axis x first.
+pub type Zs = [f64; Z_COUNT];
+
+/// 2-dof Mahalanobis distance of s = m/|m| from `s_true` in the plane normal to s, with `cov3`
+/// the covariance of the row m: check.py's `direction_z`, step for step. A covariance that is
+/// not positive in that plane (check.py: infinite) or not a number (check.py: NaN) is infinite.
+pub fn direction_z(m: [f64; 3], cov3: [[f64; 3]; 3], s_true: [f64; 3]) -> f64 {
+    let m = Vector3::from(m);
+    let cov = Matrix3::from_fn(|r, c| cov3[r][c]);
+    let nm = m.norm();
+    let s = m / nm;
+    let a = if s.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = s.cross(&a).normalize();
+    let v = s.cross(&u);
+    // ds = (I − s sᵀ) dm / |m|: its components along u and v are u·dm/|m| and v·dm/|m|.
+    let basis = [u / nm, v / nm];
+    let c = Matrix2::from_fn(|r, q| basis[r].dot(&(cov * basis[q])));
+    let d = s - Vector3::from(s_true);
+    let e = Vector2::new(u.dot(&d), v.dot(&d));
+    let det = c[(0, 0)] * c[(1, 1)] - c[(0, 1)] * c[(1, 0)];
+    if det.is_nan() || det <= 0.0 {
+        return f64::INFINITY;
     }
-    z.into_iter().map(|v| if v.is_nan() { f64::INFINITY } else { v }).collect()
+    let q = (c[(1, 1)] * e[0] * e[0] - 2.0 * c[(0, 1)] * e[0] * e[1] + c[(0, 0)] * e[1] * e[1]) / det;
+    q.max(0.0).sqrt()
+}
+
+fn number(v: &Value, what: &str) -> Result<f64, String> {
+    v.as_f64().ok_or_else(|| format!("{what} is not a number"))
+}
+
+fn triple(v: &Value, what: &str) -> Result<[f64; 3], String> {
+    match v.as_array().map(Vec::as_slice) {
+        Some([x, y, z]) => Ok([number(x, what)?, number(y, what)?, number(z, what)?]),
+        _ => Err(format!("{what} is not 3 numbers")),
+    }
+}
+
+/// The z-values of a calibration (the JSON of `calibration.json`) against a true M (counts per
+/// °/s, rows = axes), computed as `../shared/validation/check.py` does: per axis i,
+/// |k − |M_i|| / `k_sigma`; each element j of row i of M, |m_ij − M_ij| / √cov[p][p] with p the
+/// index of `m_<i><j>` in `param_names` or else 4i + j; and [`direction_z`] of row i with the
+/// rows' 3×3 block of `cov`. A value that is not a number (a σ of 0 or NaN) is +∞: a
+/// calibration that cannot say how far off it is, is off. The one place these z-values are
+/// computed (the tests, the trust bench and the final step's report all use it).
+pub fn z_values(cal: &Value, m_true: &[[f64; 3]; 3]) -> Result<Zs, String> {
+    const AXES: [char; 3] = ['x', 'y', 'z'];
+    let names: Vec<&str> = cal["param_names"]
+        .as_array()
+        .ok_or("calibration: param_names is not a list")?
+        .iter()
+        .map(|n| n.as_str().ok_or("calibration: param_names holds a non-string"))
+        .collect::<Result<_, _>>()?;
+    let cov_rows = cal["cov"].as_array().ok_or("calibration: cov is not a matrix")?;
+    // A null (JSON's NaN) is a number that is not one.
+    let cov = |r: usize, q: usize| -> Result<f64, String> {
+        let v = cov_rows.get(r).and_then(|row| row.get(q)).ok_or(format!("calibration: no cov[{r}][{q}]"))?;
+        Ok(v.as_f64().unwrap_or(f64::NAN))
+    };
+    let axes = cal["axes"].as_array().filter(|a| a.len() == 3).ok_or("calibration: axes is not 3 axes")?;
+    let mut z = [0.0; Z_COUNT];
+    for (i, a) in axes.iter().enumerate() {
+        let k = number(&a["k_counts_per_dps"], "calibration: axes[i].k_counts_per_dps")?;
+        let k_sigma = a["k_sigma"].as_f64().unwrap_or(f64::NAN);
+        let m = triple(&cal["m_counts_per_dps"][i], "calibration: m_counts_per_dps[i]")?;
+        let row = Vector3::from(m_true[i]);
+        let idx: [usize; 3] = std::array::from_fn(|j| {
+            let name = format!("m_{}{}", AXES[i], AXES[j]);
+            names.iter().position(|n| *n == name).unwrap_or(4 * i + j)
+        });
+        let zi = &mut z[Z_PER_AXIS * i..Z_PER_AXIS * (i + 1)];
+        zi[0] = (k - row.norm()).abs() / k_sigma;
+        for (j, &p) in idx.iter().enumerate() {
+            zi[1 + j] = (m[j] - row[j]).abs() / cov(p, p)?.sqrt();
+        }
+        let mut cov3 = [[0.0; 3]; 3];
+        for (r, &pr) in idx.iter().enumerate() {
+            for (q, &pq) in idx.iter().enumerate() {
+                cov3[r][q] = cov(pr, pq)?;
+            }
+        }
+        zi[4] = direction_z(m, cov3, row.normalize().into());
+    }
+    Ok(z.map(|v| if v.is_nan() { f64::INFINITY } else { v }))
+}
+
+/// [`z_values`] of a report (as `calibration.json` holds it).
+pub fn z_against_m(report: &CalReport, m_true: &[[f64; 3]; 3]) -> Zs {
+    serde_json::to_value(report)
+        .map_err(|e| e.to_string())
+        .and_then(|v| z_values(&v, m_true))
+        .unwrap_or([f64::INFINITY; Z_COUNT])
 }
 
 /// The largest of [`z_against_m`].

@@ -117,9 +117,7 @@ impl Default for BiasRandomWalk {
     }
 }
 
-/// Earth's sidereal rotation rate, rad/s (IERS Conventions 2010, §1.2: 7.292115×10⁻⁵ rad/s,
-/// 15.041 °/h).
-pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
+pub use crate::geometry::EARTH_RATE_RAD_S;
 
 /// Earth's rotation as the lab feels it: vertical component Ω·sin(latitude), horizontal
 /// Ω·cos(latitude) towards north, at `heading_deg` from where the base points at θ2 = 0.

@@ -111,7 +111,7 @@ impl Behaviour for Earth {
     /// each carry Ω/√3 (Ω = 15.041 °/h, IERS; a vector of that length in an unknown direction).
     fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
         (self.0 == Form::Fitted && !cx.current.iter().any(|e| e.is_earth())).then(|| ConsiderBound {
-            sigma: crate::sim::effects::EARTH_RATE_RAD_S.to_degrees() * 3600.0 / 3f64.sqrt(),
+            sigma: crate::geometry::EARTH_RATE_RAD_S.to_degrees() * 3600.0 / 3f64.sqrt(),
             source: "Earth's rate, 15.041 °/h (IERS Conventions 2010), in a direction not known",
         })
     }

@@ -3,7 +3,7 @@
 
 use super::PlusMinus;
 use crate::calib::closure::{Ask, EarthExcess, Note};
-use crate::calib::consider::ConsiderTerm;
+use crate::calib::consider::{ConsiderTerm, SEPARATED_SNR2};
 use crate::calib::consistency::Consistency;
 
 /// A run the data cannot do without, as the operator is asked for it.
@@ -60,18 +60,39 @@ pub fn earth_excess(e: &EarthExcess) -> String {
     )
 }
 
+/// `v` to four significant digits, no exponent (a plausible size, not a measurement).
+fn four_digits(v: f64) -> String {
+    let decimals = if v == 0.0 || !v.is_finite() { 0 } else { (3 - v.abs().log10().floor() as i32).max(0) as usize };
+    format!("{v:.decimals$}")
+}
+
+/// The least information λ of a consider term's directions for which longer runs are advised.
+const LEAST_SEEN_FOR_LONGER: f64 = 0.25;
+
 /// A consider term in words: the effect, its plausible size and source, what it costs, and the
 /// runs that would remove it.
 fn unseparated(t: &ConsiderTerm) -> String {
-    let sizes: Vec<String> = t.params.iter().map(|p| format!("{} {} {}", p.name, p.sigma, p.unit)).collect();
+    let sizes: Vec<String> =
+        t.params.iter().map(|p| format!("{} {} {}", p.name, four_digits(p.sigma), p.unit)).collect();
     let sizes = if t.params.iter().all(|p| p.sigma == t.params[0].sigma && p.unit == t.params[0].unit) {
-        format!("{} {} each of {}", t.params[0].sigma, t.params[0].unit, t.params.len())
+        format!("{} {} each of {}", four_digits(t.params[0].sigma), t.params[0].unit, t.params.len())
     } else {
         sizes.join(", ")
     };
     let worst = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
+    // Information grows with rig time: where these runs see the effect at all (λ ≥ 0.25, a
+    // judgement: beyond 100× the rig time no one runs), the same design longer separates it.
+    let longer = if (LEAST_SEEN_FOR_LONGER..SEPARATED_SNR2).contains(&t.least_seen) {
+        format!(
+            "; these runs see it at λ = {:.1} of the {SEPARATED_SNR2:.0} that separates it, so the same runs {:.0}× as long would",
+            t.least_seen,
+            (SEPARATED_SNR2 / t.least_seen).ceil()
+        )
+    } else {
+        String::new()
+    };
     format!(
-        "{} is not separated by these runs: at a plausible size (1σ: {sizes}; {}) it adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Runs that remove it: {}.",
+        "{} is not separated by these runs: at a plausible size (1σ: {sizes}; {}) it adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Runs that remove it: {}{longer}.",
         t.effect.name(),
         t.source,
         worst(t.k_sigma_ppm),

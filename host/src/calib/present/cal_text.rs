@@ -92,7 +92,7 @@ impl CalReport {
             let i = &r.index;
             let _ = writeln!(
                 o,
-                "  run {} ({}, {:+.1} °/s → {:+.3} °/s measured, {:.1} Hz): {}/{} samples used ({} unsteady, {} edge, {} stale); index {} pulses ({} rejected), θ2 ref ± {:.1e}°, centre rms {:.2} counts; θ1' window {} samples, quantisation {:.4} °/s",
+                "  run {} ({}, {:+.1} °/s → {:+.3} °/s measured, {:.1} Hz): {}/{} samples used ({} unsteady, {} edge, {} stale, {} near gaps); index {} pulses ({} rejected), θ2 ref ± {:.1e}°, centre rms {:.2} counts; θ1' window {} samples, quantisation {:.4} °/s",
                 r.run,
                 r.pose,
                 r.commanded_rate_dps,
@@ -103,6 +103,7 @@ impl CalReport {
                 r.excluded_unsteady,
                 r.excluded_window_edge,
                 r.excluded_stale,
+                r.excluded_near_gaps,
                 i.pulses,
                 i.rejected,
                 i.ref_sigma_deg,
