@@ -147,6 +147,9 @@ struct Candidate {
     sigma: Vec<[f64; 3]>,
     params: Vec<ConsideredParam>,
     source: &'static str,
+    /// Whether the loop tried it (`selection::tried`): a test then rules out what the runs
+    /// see of it, and only what they do not see is considered.
+    tried: bool,
 }
 
 fn candidates(
@@ -159,7 +162,8 @@ fn candidates(
     let mut out = Vec::new();
     for effect in Effect::catalogue().into_iter().filter(|e| !f.model.effects.contains(e)) {
         let (lin, shared) = effect.params(&data.layout);
-        let mut c = Candidate { effect, cols: Vec::new(), sigma: Vec::new(), params: Vec::new(), source: "" };
+        let tried = super::selection::tried(data, &f.model.effects, effect);
+        let mut c = Candidate { effect, cols: Vec::new(), sigma: Vec::new(), params: Vec::new(), source: "", tried };
         let mut add = |col: Col, own: Own, bound: Option<ConsiderBound>| {
             let Some(mut b) = bound else { return };
             let r = match col {
@@ -281,7 +285,7 @@ pub fn consider(
         let info = &c_mat - b.transpose() * &s_mat;
         // The residual's correlation with the effect, beyond what the model's own step takes.
         let grad = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
-        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd) else {
+        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd, c.tried) else {
             continue;
         };
         if lambdas.is_empty() {
@@ -317,9 +321,11 @@ fn max3(v: [f64; 3]) -> f64 {
 
 /// The covariance (posterior variance plus the square of the posterior mean) of an effect's
 /// parameters in the directions the runs do not separate, from its partial information `info`,
-/// the residual's gradient `grad` along its columns and its prior σs `sd`; with the count of
-/// those directions. None when the information is not finite.
-fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DMatrix<f64>, Vec<f64>)> {
+/// the residual's gradient `grad` along its columns and its prior σs `sd`; with those
+/// directions' information λ. An effect the loop did not try (`tried` false) has every
+/// direction counted: no test ruled out what the runs see of it, and its posterior mean is what
+/// they say it is. None when the information is not finite.
+fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64], tried: bool) -> Option<(DMatrix<f64>, Vec<f64>)> {
     let n = sd.len();
     let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
     let mut w = &d * info * &d;
@@ -334,7 +340,7 @@ fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<(DM
     let mut unseparated = Vec::new();
     for (i, &lambda) in eig.eigenvalues.iter().enumerate() {
         let lambda = lambda.max(0.0);
-        if lambda >= SEPARATED_SNR2 {
+        if tried && lambda >= SEPARATED_SNR2 {
             continue;
         }
         unseparated.push(lambda);
@@ -354,18 +360,24 @@ mod tests {
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite");
+        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], true).expect("finite");
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
-        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0]).expect("finite");
+        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0], true).expect("finite");
         assert_eq!(n.len(), 1);
         assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
+        // A direction seen well (whitened λ = 3²·1e6 ≥ 25) of an effect the loop did not try is
+        // counted: its posterior variance is 1/(1 + λ) of the prior's.
+        let info2 = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
+        let (c2, n2) = posterior(&info2, &DVector::zeros(2), &[2.0, 3.0], false).expect("finite");
+        assert_eq!(n2.len(), 2);
+        assert!((c2[(1, 1)] - 9.0 / (1.0 + 9e6)).abs() < 1e-15, "{c2}");
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
-        let (c, _) = posterior(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite");
+        let (c, _) = posterior(&info, &DVector::from_element(1, 2.0), &[1.0], true).expect("finite");
         assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
     }
 
