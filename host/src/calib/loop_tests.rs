@@ -255,6 +255,20 @@ fn loop_report_serialises_and_feeds_apply() {
     assert!((w[0] - 100.0).abs() < 0.05 && w[1].abs() < 0.05 && w[2].abs() < 0.05, "{w:?}");
 }
 
+/// A random walk of the offset that a quadratic curve takes first is then taken by the free
+/// drift, which is scored in the curve's place (with both the sums are singular): the run
+/// offsets and the drift the curve left are gone, the result is at the floor and within 3σ.
+/// (Before, both seeds of the trust bench's cell ended flagged, structure left.)
+#[test]
+fn a_random_walk_a_curve_took_first_goes_to_the_free_drift() {
+    let (runs, truth) =
+        capture_with(1, &[180.0, 90.0, -180.0], BAR_DURATION_S, &["bias_random_walk"], FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    assert!(r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
 /// A candidates' pass sums only the pairs a test needs (the model's columns with every column,
 /// each candidate's with its own): those are the full pass's sums bit for bit, the rest are 0.
 /// Every catalogued candidate of a model with a delay, the free drift's sparse knots among them.

@@ -180,16 +180,43 @@ pub struct DriftChoice {
 /// warm-up's time constant is not in that solution (its grid value stands).
 fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
     let ns = state.model.shared.len();
-    let (lin, shared) = c.effect.params(&state.model.layout);
-    let mut model = state.model.with(
-        c.effect,
-        std::array::from_fn(|_| vec![0.0; lin.len()]),
-        shared.iter().map(|_| c.held_at.unwrap_or(0.0)).collect(),
-    );
+    let mut model = start_model_at_zero(state, c);
     let frozen: Vec<bool> = (0..model.shared.len()).map(|k| k >= ns && c.held_at.is_some()).collect();
     let nl = model.lin.len();
     apply_step(&mut model, nl, &sol.delta, &frozen);
     model
+}
+
+/// The model's effects that candidate `c` replaces when added ([`replaced_by_free_drift`]).
+fn replaced(state: &Fitted, c: &Candidate, data: &LoopData) -> Vec<Effect> {
+    if !c.effect.is_free_drift() {
+        return Vec::new();
+    }
+    state.model.effects.iter().copied().filter(|&e| replaced_by_free_drift(e, data)).collect()
+}
+
+/// `base` without the columns of the effects candidate `c` replaces, and how many parameters
+/// that takes out.
+fn without_replaced(state: &Fitted, c: &Candidate, data: &LoopData, base: &Selection) -> (Selection, usize) {
+    let mut sel = base.clone();
+    let nl = state.model.lin.len();
+    for e in replaced(state, c, data) {
+        let (lin, shared) = e.params(&state.model.layout);
+        sel.lin.retain(|&j| !lin.contains(&state.model.lin[j]));
+        sel.shared.retain(|&j| !shared.contains(&state.model.shared[j - nl]));
+    }
+    let removed = base.len() - sel.len();
+    (sel, removed)
+}
+
+/// The model with candidate `c` added at zero (its warm-up time constant at its grid value).
+fn start_model_at_zero(state: &Fitted, c: &Candidate) -> super::extended::Model {
+    let (lin, shared) = c.effect.params(&state.model.layout);
+    state.model.with(
+        c.effect,
+        std::array::from_fn(|_| vec![0.0; lin.len()]),
+        shared.iter().map(|_| c.held_at.unwrap_or(0.0)).collect(),
+    )
 }
 
 /// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level.
@@ -221,8 +248,11 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     let m = cands.len();
     let mut scores: Vec<(Score, usize, Option<super::extended::JointSolution>)> = Vec::with_capacity(m);
     for (ci, (c, pos)) in cands.iter().zip(&positions).enumerate() {
-        let mut sel = base_sel.clone();
-        let mut dof = 0;
+        // The free drift is scored as it is fitted: in place of what it replaces (a drift curve
+        // already in: with both the sums are singular, and a random walk that a curve took
+        // first was left as structure, flagged on every seed of the trust bench).
+        let (mut sel, removed) = without_replaced(state, c, data, &base_sel);
+        let mut dof: usize = 0;
         for (j, col) in pos.clone().zip(&c.cols) {
             match col {
                 Col::Lin(_) => {
@@ -235,6 +265,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 }
             }
         }
+        let dof = dof.saturating_sub(removed).max(1);
         let threshold = super::stats::chi2_upper_quantile(dof, alpha / m as f64);
         let sol = solve_joint(&total, &sel, weights);
         let delta_chi2 = sol.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
@@ -265,7 +296,14 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     let fit_of = |i: usize| -> Result<Fitted, String> {
         let (_, ci, sol) = &scores[i];
         let sol = sol.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
-        let mut start = start_model(state, &cands[*ci], sol);
+        let replaces = replaced(state, &cands[*ci], data);
+        // A step solved without the replaced columns does not map onto the model's parameters:
+        // the replacement starts at zero (the knots enter linearly; one pass places them).
+        let mut start = if replaces.is_empty() {
+            start_model(state, &cands[*ci], sol)
+        } else {
+            start_model_at_zero(state, &cands[*ci])
+        };
         if cands[*ci].effect.is_free_drift() {
             // The free drift replaces what it holds: a drift curve already in (with both, the
             // knots hold the curve's shape and its parameters run off) and, when each run has
