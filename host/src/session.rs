@@ -348,19 +348,20 @@ pub fn record_run<P: Read + Write>(
 
 /// After a failed or interrupted run: sends `Stop` and keeps reading (and recording) and
 /// heartbeating until the rig reports the run over (`RunStopped` of `tag`, or a `Motor` report
-/// without the tag), sending `Stop` again every second, for at most [`STOP_TIMEOUT`] (the protocol's bound on a ramp-down's
+/// without the tag), sending `Stop` again every second until it is acknowledged, for at most
+/// [`STOP_TIMEOUT`] (the protocol's bound on a ramp-down's
 /// confirmation). A `Stop` while idle is harmless; an idle rig's next `Motor` report (100 ms)
 /// ends the wait. Errors say why the stop was not confirmed.
 fn wait_stopped<P: Read + Write>(link: &mut Link<P>, tag: u8) -> Result<()> {
     let deadline = link.now() + STOP_TIMEOUT;
-    let mut last_stop: Option<Duration> = None;
-    let mut stopped = false;
+    let mut last_stop: Option<(u16, Duration)> = None;
+    let (mut acked, mut stopped) = (false, false);
     while !stopped {
-        // Again every ACK_TIMEOUT until the rig says it stopped: a `Stop` lost on the line must
-        // not leave the table at speed (`Stop` is idempotent, and is a frame like a heartbeat).
-        if last_stop.is_none_or(|t| link.now().saturating_sub(t) >= crate::link::ACK_TIMEOUT) {
-            link.send(&Command::Stop).context("sending Stop")?;
-            last_stop = Some(link.now());
+        // Again every ACK_TIMEOUT until the rig acknowledges it: a `Stop` lost on the line must
+        // not leave the table at speed (`Stop` is idempotent).
+        if !acked && last_stop.is_none_or(|(_, t)| link.now().saturating_sub(t) >= crate::link::ACK_TIMEOUT) {
+            let seq = link.send(&Command::Stop).context("sending Stop")?;
+            last_stop = Some((seq, link.now()));
         }
         if link.now() > deadline {
             bail!(
@@ -370,9 +371,11 @@ fn wait_stopped<P: Read + Write>(link: &mut Link<P>, tag: u8) -> Result<()> {
             );
         }
         link.keep_alive().context("heartbeating the ramp-down")?;
+        let stop_seq = last_stop.map(|(seq, _)| seq);
         link.poll(|m| match m {
             RigMsg::RunStopped(r) if r.run_tag == tag => stopped = true,
             RigMsg::Motor(ms) if ms.run_tag != tag => stopped = true,
+            RigMsg::Ack(a) if Some(a.cmd_seq) == stop_seq => acked = true,
             _ => {}
         })
         .context("waiting for the table to stop")?;
