@@ -245,7 +245,11 @@ mod app {
         let captures = cx.local.captures;
         if let Some(c) = captures.data_ready() {
             let read = gyro.lock(|g| g.read());
-            rig.lock(|r| r.data_ready(c.t_us, c.encoder, read));
+            // A read that trips the run cuts the bridge here, not up to 1 ms later at the next
+            // control tick (which applies the same OFF).
+            if rig.lock(|r| r.data_ready(c.t_us, c.encoder, read)).is_some() {
+                board::cut_drive();
+            }
         }
         if let Some(c) = captures.index() {
             let level = board::index_level();
@@ -261,11 +265,13 @@ mod app {
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
         let drdy_high = board::drdy_level();
-        let (cmd, release, feed) = cx
-            .shared
-            .rig
-            .lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us)));
-        cx.local.motor.apply(cmd);
+        let motor = cx.local.motor;
+        // Applied under the lock: a data-ready trip cannot fall between computing the command
+        // and applying it, and be undone by a command computed before it.
+        let (release, feed) = cx.shared.rig.lock(|r| {
+            motor.apply(r.control_tick(t_us, encoder));
+            (r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us))
+        });
         if release {
             let _ = cx.shared.gyro.lock(|g| g.read());
         }
