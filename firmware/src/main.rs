@@ -69,14 +69,15 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     }
 }
 
-/// The QEMU image's HardFault: the same safe action, reported on USART1.
+/// The QEMU image's HardFault: the same safe action, reported on USART1, then a system reset:
+/// QEMU 7.2 models no IWDG, so the reset the board's watchdog would make 34-94 ms later is
+/// requested here (SYSRESETREQ, which QEMU does model), and the boot test sees the image start
+/// again after a panic in `init`.
 #[cfg(all(target_os = "none", feature = "qemu"))]
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     qemu::force_motor_safe("HardFault");
-    loop {
-        cortex_m::asm::nop();
-    }
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
@@ -144,6 +145,15 @@ mod app {
         // halted core does not leave the motor driven.
         dp.DBGMCU.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
         dp.DBGMCU.apb2_fz().modify(|_, w| w.dbg_tim1_stop().set_bit());
+
+        // The watchdog before anything that can panic or hang (clock start-up, the gyro probe,
+        // USB): a panic in init ends in the HardFault loop with the motor safe, and the watchdog
+        // then resets the MCU instead of leaving the rig dead until a power cycle. The bridge
+        // is off until the pins are set up below (EN pulled down out of reset). Everything up
+        // to the first feed (the first control tick) takes a few ms, well inside the 34 ms the
+        // fastest LSI (47 kHz) leaves of WATCHDOG_MS.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(WATCHDOG_MS.millis());
 
         // 8 MHz HSE crystal → 168 MHz core, 48 MHz for USB; APB1 timers 84 MHz, APB2 168 MHz.
         let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
@@ -224,8 +234,7 @@ mod app {
         let mut rig = Rig::new(config);
         rig.power_up(counters.now_us(), probe, watchdog_reset);
 
-        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-        watchdog.start(WATCHDOG_MS.millis());
+        watchdog.feed();
         defmt::info!("rig up; watchdog reset: {}", watchdog_reset);
 
         (Shared { rig, gyro }, Local { captures, counters, clock: counters, tim3, motor, watchdog, usb_dev, serial })

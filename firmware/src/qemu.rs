@@ -85,6 +85,12 @@ mod app {
             w.rxneie().set_bit()
         });
 
+        // Test only: a panic in init, once USART1 can report it (the boot test then sees the
+        // reset that follows, and the same report again).
+        if cfg!(feature = "qemu-init-panic-test") {
+            panic!("qemu-init-panic-test: a deliberate panic in init");
+        }
+
         // The prototype: TIM5 and the encoder counter start seconds before their 32-bit wrap,
         // so every stream crosses both.
         let mut rig = VirtualRig::prototype();
