@@ -187,9 +187,12 @@ impl<P: Read + Write> Link<P> {
         };
         self.last_rx = self.clock.now();
         if let Some(rec) = self.record.as_mut() {
-            rec.write_all(&self.buf[..n])
-                .and_then(|()| rec.flush())
-                .with_context(|| format!("cannot write the capture {}", self.record_name))?;
+            if let Err(e) = rec.write_all(&self.buf[..n]).and_then(|()| rec.flush()) {
+                // Recording stops (the file keeps what was written), the link does not: the
+                // caller still has a table to stop, and heartbeats to send while it ramps down.
+                self.record = None;
+                return Err(e).with_context(|| format!("cannot write the capture {}", self.record_name));
+            }
         }
         self.rx.feed::<RigMsg>(&self.buf[..n], |ev| {
             if let Event::Frame { msg, .. } = ev {
@@ -323,6 +326,8 @@ mod tests {
             format!("{e:#}"),
             "cannot write the capture /data/pose1-p180dps.cap: No space left on device (os error 28)"
         );
+        // The link itself goes on (the table must still be stopped), without the capture.
+        assert_eq!(link.poll(|_| {}).unwrap(), 3);
     }
 
     /// Issue 28: a pulled cable (the serial port's hang-up, `EIO` from a tty whose other end
