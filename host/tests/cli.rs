@@ -463,7 +463,7 @@ fn a_bad_simulation_config_is_a_usage_error_naming_the_field() {
             format!(
                 r#"{{"seed":1,"runs":[{{"pose":"One","rate_dps":180.0,"duration_s":-1.0}}],{gyro},"noise_dps_per_sqrt_hz":0.03,"effects":{{}},"spin_up_s":1.0,"gap_s":0.5,"start_t_us":0,"start_encoder":0,"index_plate_width_deg":10.0}}"#
             ),
-            "error: invalid simulation: runs[0].duration_s must be > 0\n".to_string(),
+            "error: invalid simulation: runs[0].duration_s must be > 0 and at most 21600 s (6 h: ≈ 400 MB of capture per run)\n".to_string(),
         ),
         (
             r#"{"seed":1,"runs":[]}"#.to_string(),
