@@ -396,6 +396,49 @@ fn a_trip_whose_fault_and_run_stopped_are_lost_is_seen_in_the_motor_reports() {
     assert!(!dir.join("pose1-p90dps.cap").exists() && !dir.join("pose2-p180dps.cap").exists());
 }
 
+/// Issue 28: the same during the ramp-down after the host's own `Stop`: the host stalls 3 s, the
+/// rig trips `HostLinkLost` mid-ramp and its `Fault` and `RunStopped` are lost. A `Motor` report
+/// with run tag 0 used to count as the stop confirmed (exit 0); its fault bit now says the ramp
+/// ended in a trip.
+#[test]
+fn a_trip_during_the_ramp_down_whose_fault_is_lost_is_seen_in_the_motor_reports() {
+    let mut bench = LockstepBench::start("lost-trip-ramp", &["--drop", "Fault:1", "--drop", "RunStopped:1"]);
+    let dir = scratch("lost-trip-ramp");
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let mut session = bench.host_with(
+        &["calibrate", "--sensor", "SN-TRIP", "--yes", "--duration", "3", "--rates-dps", "180"]
+            .into_iter()
+            .chain(["--out-dir", dir.to_str().unwrap(), "--db", &db])
+            .collect::<Vec<_>>(),
+        std::process::Stdio::null(),
+    );
+    let (log, stall) = (bench.log.clone(), bench.stall_ns.clone());
+    let mut stop_ns = None;
+    let mut stalled = false;
+    bench.relay(&mut session, |now_ns, _| {
+        if stop_ns.is_none() && log.lock().unwrap().iter().any(|l| l.starts_with("virtual rig: received Stop")) {
+            stop_ns = Some(now_ns);
+        }
+        // 0.2 s into the 2 s ramp-down.
+        if !stalled && stop_ns.is_some_and(|t| now_ns >= t + NS / 5) {
+            stall.store(3 * NS, std::sync::atomic::Ordering::SeqCst);
+            stalled = true;
+        }
+    });
+    let (status, err, _) = session.finish();
+    let log = bench.log();
+    assert!(log.iter().any(|l| l == "virtual rig: dropped Fault #1"), "{log:?}");
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        format!(
+            "error: stopping pose 1, +180.0 °/s (capture kept in {}): the rig's motor reports show a trip (fault bits \
+             0x04: HostLinkLost) while ramping down; its Fault frame was lost",
+            dir.join("pose1-p180dps.cap").display()
+        )
+    );
+}
+
 /// Where in the session a signal is sent.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum When {
