@@ -57,12 +57,30 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
+/// HardFault's entry, on a fresh stack: the stack pointer is set back to the top of the stack
+/// region (`_stack_start`) before any code pushes, then [`hard_fault`] runs. A stack overflow
+/// (flip-link puts the stack at the bottom of RAM, so an overflow faults at 0x2000_0000) enters
+/// HardFault with the stack pointer below RAM; a handler that pushed there would fault again
+/// and lock the core up (measured in QEMU: "Lockup: can't escalate 3 to HardFault"), with the
+/// bridge as it was until the watchdog's reset. HardFault never returns: the old stack is not
+/// needed.
+#[cfg(target_os = "none")]
+#[unsafe(naked)]
+#[unsafe(no_mangle)]
+unsafe extern "C" fn HardFault() -> ! {
+    core::arch::naked_asm!(
+        "ldr r0, =_stack_start",
+        "msr msp, r0",
+        "b {handler}",
+        handler = sym hard_fault,
+    )
+}
+
 /// A fault (and every panic, which ends here): the motor is made safe
 /// before anything else, then the watchdog resets the MCU. Without this the bridge kept its
 /// last duty until the reset (34-94 ms: the LSI is 17-47 kHz).
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+extern "C" fn hard_fault() -> ! {
     board::force_motor_safe();
     loop {
         cortex_m::asm::nop();
@@ -72,10 +90,9 @@ unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
 /// The QEMU image's HardFault: the same safe action, reported on USART1, then a system reset:
 /// QEMU 7.2 models no IWDG, so the reset the board's watchdog would make 34-94 ms later is
 /// requested here (SYSRESETREQ, which QEMU does model), and the boot test sees the image start
-/// again after a panic in `init`.
+/// again after a panic in `init` or a stack overflow.
 #[cfg(all(target_os = "none", feature = "qemu"))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+extern "C" fn hard_fault() -> ! {
     qemu::force_motor_safe("HardFault");
     cortex_m::peripheral::SCB::sys_reset()
 }

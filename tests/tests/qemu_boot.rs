@@ -460,3 +460,43 @@ fn qemu_a_panic_in_init_ends_in_a_reset() {
     assert!(text.starts_with(&REPORT.repeat(2)), "{text:?}");
     eprintln!("qemu: the init panic's report twice after {:?}", started.elapsed());
 }
+
+/// Issue 28: a stack overflow ends in the safe state, then a reset. flip-link puts the stack at
+/// the bottom of RAM, so the overflow faults there instead of overwriting the rig's state; the
+/// HardFault entry moves the stack pointer back to the top of the stack region before anything
+/// is pushed (a handler pushing below RAM locked the core up: "Lockup: can't escalate 3 to
+/// HardFault"), so the safe-state writes run. The image built with `qemu-stack-overflow-test`
+/// recurses without end in `init`: the report comes, the image restarts, and it comes again.
+#[test]
+#[cfg_attr(
+    not(has_qemu),
+    ignore = "needs qemu-system-arm, flip-link and the thumbv7em-none-eabihf target (.ci/run installs them)"
+)]
+fn qemu_a_stack_overflow_ends_in_the_safe_state() {
+    if let Some(missing) = missing_prerequisite() {
+        if std::env::var_os("CI").is_some() {
+            panic!("{missing}");
+        }
+        eprintln!("qemu_a_stack_overflow_ends_in_the_safe_state NOT RUN: {missing}");
+        return;
+    }
+    let image = build_image("qemu-stack-overflow-test");
+    let qemu = Qemu::boot(&image);
+    const REPORT: &str = "\nsafe state (HardFault): enable low, pwm 0\n";
+    let mut seen = Vec::new();
+    let started = Instant::now();
+    let text = loop {
+        let text = String::from_utf8_lossy(&seen).into_owned();
+        if text.matches(REPORT).count() >= 2 {
+            break text;
+        }
+        assert!(started.elapsed() < SESSION_LIMIT, "no second report after {:?}: {text:?}", started.elapsed());
+        match qemu.bytes.recv_timeout(Duration::from_millis(10)) {
+            Ok(bytes) => seen.extend(bytes),
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => panic!("qemu exited: {text:?}"),
+        }
+    };
+    assert!(text.starts_with(&REPORT.repeat(2)), "{text:?}");
+    eprintln!("qemu: the stack overflow's safe state twice after {:?}", started.elapsed());
+}
