@@ -439,6 +439,48 @@ fn a_trip_during_the_ramp_down_whose_fault_is_lost_is_seen_in_the_motor_reports(
     );
 }
 
+/// Issue 28: a second Ctrl-C during the heartbeaten ramp-down is the operator insisting: the
+/// host leaves at once with one line saying what follows (the rig's link watchdog cuts the
+/// drive, 2 s after the last heartbeat), exit 1.
+#[test]
+fn a_second_interrupt_leaves_at_once() {
+    let mut bench = LockstepBench::start("sig-twice", &[]);
+    let dir = scratch("sig-twice");
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let mut session = bench.host_with(
+        &["calibrate", "--sensor", "SN-SIG", "--yes", "--rates-dps", "360", "--out-dir", dir.to_str().unwrap()]
+            .into_iter()
+            .chain(["--db", &db])
+            .collect::<Vec<_>>(),
+        std::process::Stdio::null(),
+    );
+    let log = bench.log.clone();
+    let mut start_ns = None;
+    let mut sent = 0;
+    bench.relay(&mut session, |now_ns, host| {
+        if start_ns.is_none() && log.lock().unwrap().iter().any(|l| l.starts_with("virtual rig: received Start")) {
+            start_ns = Some(now_ns);
+        }
+        // At speed (4 s of ramp to 360 °/s), then 0.5 s into the ramp-down.
+        let due = start_ns.map(|t| t + 5 * NS + sent * NS / 2);
+        if sent < 2 && due.is_some_and(|d| now_ns >= d) {
+            host.signal("INT");
+            sent += 1;
+            thread::sleep(Duration::from_millis(50));
+        }
+    });
+    let (status, err, _) = session.finish();
+    bench.settle("Stop");
+    bench.advance(5 * NS);
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        "error: interrupted again: leaving without waiting for the table to stop (the rig cuts the drive 2 s after the last heartbeat)"
+    );
+    // What the operator was told: the rig cut the drive.
+    assert!(bench.log().iter().any(|l| l.starts_with("virtual rig: sent Fault HostLinkLost")), "{:?}", bench.log());
+}
+
 /// Where in the session a signal is sent.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum When {
