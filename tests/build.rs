@@ -16,6 +16,9 @@ fn qemu_missing() -> Option<String> {
     if Command::new("qemu-system-arm").arg("--version").output().map_or(true, |o| !o.status.success()) {
         return Some("qemu-system-arm is not runnable".into());
     }
+    if Command::new("flip-link").output().is_err() {
+        return Some("flip-link (the firmware's linker) is not installed: cargo install flip-link --locked".into());
+    }
     let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
     let out = Command::new(rustc).args(["--print", "target-libdir", "--target", "thumbv7em-none-eabihf"]).output();
     match out {
@@ -29,7 +32,9 @@ fn main() {
     println!("cargo:rerun-if-env-changed=PATH");
     match qemu_missing() {
         None => println!("cargo:rustc-cfg=has_qemu"),
-        Some(why) if ci() => panic!("{why}: CI must boot the firmware image (.ci/run installs QEMU and the target)"),
+        Some(why) if ci() => {
+            panic!("{why}: CI must boot the firmware image (.ci/run installs QEMU, flip-link and the target)")
+        }
         Some(why) => println!("cargo:warning={why}: the QEMU boot test is ignored"),
     }
     let dir =

@@ -52,6 +52,14 @@ pub fn force_motor_safe() {
     unsafe { (*pac::TIM1::ptr()).bdtr().modify(|_, w| w.moe().clear_bit()) };
 }
 
+/// A trip outside the control task (the data-ready interrupt): the bridge disabled and the duty
+/// at 0 now, through the same two writes as [`force_motor_safe`] but with TIM1's main output
+/// left on, so the next `Start` drives again. The control task applies the same OFF at its next
+/// tick.
+pub fn cut_drive() {
+    firmware::safe_state::make_motor_safe(&mut RawEnable, &mut RawPwm);
+}
+
 /// The bridge enable (PE11) through GPIOE's BSRR, without owning the pin.
 struct RawEnable;
 

@@ -22,7 +22,9 @@ pub const INDEX_CHATTER_COUNTS: u32 = 90;
 /// ([`crate::input_filter::INDEX_FILTER_NS`]).
 pub const INDEX_FILTER_US: f32 = crate::input_filter::INDEX_FILTER_NS as f32 / 1e3;
 
-/// Builds index edges, rejects chatter and counts edges that went missing.
+/// Builds index edges, rejects chatter and counts edges that went missing. The counts are totals
+/// since reset that wrap modulo 2^32, like every counter of the protocol's `Counters` (readers
+/// take differences): at the fastest rate, 2 edges per turn at 1 Hz, 68 years to wrap.
 #[derive(Debug, Default, Clone)]
 pub struct IndexTracker {
     last: Option<Edge>,
@@ -45,7 +47,7 @@ impl IndexTracker {
         if let Some(last) = self.last_encoder {
             // Either direction of rotation: the angle travelled since the last accepted edge.
             if (encoder.wrapping_sub(last) as i32).unsigned_abs() < INDEX_CHATTER_COUNTS {
-                self.chatter += 1;
+                self.chatter = self.chatter.wrapping_add(1);
                 return None;
             }
         }
@@ -53,10 +55,10 @@ impl IndexTracker {
         let edge = if level_after { Edge::Rising } else { Edge::Falling };
         // Edges alternate; two alike in a row mean one was lost in between.
         if self.last == Some(edge) || overcaptured {
-            self.missed += 1;
+            self.missed = self.missed.wrapping_add(1);
         }
         self.last = Some(edge);
-        self.edges += 1;
+        self.edges = self.edges.wrapping_add(1);
         Some(IndexEdge { t_us, encoder, edge })
     }
 
@@ -87,6 +89,16 @@ mod tests {
         assert_eq!(e, Some(IndexEdge { t_us: u32::MAX, encoder: 7, edge: Edge::Rising }));
         assert_eq!(ix.capture(55_000, 9_007, false, false).unwrap().edge, Edge::Falling);
         assert_eq!((ix.edges(), ix.missed()), (2, 0));
+    }
+
+    /// Issue 28: the counters wrap explicitly (a plain `+=` panics on overflow in a debug build
+    /// and wraps silently in a release one).
+    #[test]
+    fn the_counters_wrap() {
+        let mut ix = IndexTracker { edges: u32::MAX, missed: u32::MAX, chatter: u32::MAX, ..IndexTracker::new() };
+        ix.capture(0, 0, true, true);
+        ix.capture(1, 10, false, false);
+        assert_eq!((ix.edges(), ix.missed(), ix.chatter()), (0, 0, 0));
     }
 
     #[test]

@@ -95,6 +95,15 @@ impl Measurement {
     pub fn fresh(&self) -> bool {
         self.status & status::ZYXDA != 0
     }
+
+    /// Every byte of the burst read 0xFF: a MISO line stuck high (or no chip driving it against
+    /// a pull-up). A real sample reads so only if OUT_TEMP, STATUS_REG and all three outputs
+    /// are 0xFF at once (−1 LSB on every axis, every overrun bit set): with the datasheet's rate
+    /// noise (≈ 18 LSB RMS at ±500 °/s and 800 Hz) never twice in a row, let alone
+    /// [`crate::rig::GYRO_BAD_READS`] times.
+    pub fn bus_stuck_high(&self) -> bool {
+        self.temp_raw == -1 && self.status == 0xFF && self.rate_counts == [-1; 3]
+    }
 }
 
 /// CTRL_REG1 ..= CTRL_REG5 for `config`, in register order.

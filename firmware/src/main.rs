@@ -57,26 +57,44 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[cfg(not(target_os = "none"))]
 fn main() {}
 
+/// HardFault's entry, on a fresh stack: the stack pointer is set back to the top of the stack
+/// region (`_stack_start`) before any code pushes, then [`hard_fault`] runs. A stack overflow
+/// (flip-link puts the stack at the bottom of RAM, so an overflow faults at 0x2000_0000) enters
+/// HardFault with the stack pointer below RAM; a handler that pushed there would fault again
+/// and lock the core up (measured in QEMU: "Lockup: can't escalate 3 to HardFault"), with the
+/// bridge as it was until the watchdog's reset. HardFault never returns: the old stack is not
+/// needed.
+#[cfg(target_os = "none")]
+#[unsafe(naked)]
+#[unsafe(no_mangle)]
+unsafe extern "C" fn HardFault() -> ! {
+    core::arch::naked_asm!(
+        "ldr r0, =_stack_start",
+        "msr msp, r0",
+        "b {handler}",
+        handler = sym hard_fault,
+    )
+}
+
 /// A fault (and every panic, which ends here): the motor is made safe
 /// before anything else, then the watchdog resets the MCU. Without this the bridge kept its
 /// last duty until the reset (34-94 ms: the LSI is 17-47 kHz).
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+extern "C" fn hard_fault() -> ! {
     board::force_motor_safe();
     loop {
         cortex_m::asm::nop();
     }
 }
 
-/// The QEMU image's HardFault: the same safe action, reported on USART1.
+/// The QEMU image's HardFault: the same safe action, reported on USART1, then a system reset:
+/// QEMU 7.2 models no IWDG, so the reset the board's watchdog would make 34-94 ms later is
+/// requested here (SYSRESETREQ, which QEMU does model), and the boot test sees the image start
+/// again after a panic in `init` or a stack overflow.
 #[cfg(all(target_os = "none", feature = "qemu"))]
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+extern "C" fn hard_fault() -> ! {
     qemu::force_motor_safe("HardFault");
-    loop {
-        cortex_m::asm::nop();
-    }
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 #[cfg(all(target_os = "none", not(feature = "qemu")))]
@@ -144,6 +162,15 @@ mod app {
         // halted core does not leave the motor driven.
         dp.DBGMCU.apb1_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
         dp.DBGMCU.apb2_fz().modify(|_, w| w.dbg_tim1_stop().set_bit());
+
+        // The watchdog before anything that can panic or hang (clock start-up, the gyro probe,
+        // USB): a panic in init ends in the HardFault loop with the motor safe, and the watchdog
+        // then resets the MCU instead of leaving the rig dead until a power cycle. The bridge
+        // is off until the pins are set up below (EN pulled down out of reset). Everything up
+        // to the first feed (the first control tick) takes a few ms, well inside the 34 ms the
+        // fastest LSI (47 kHz) leaves of WATCHDOG_MS.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(WATCHDOG_MS.millis());
 
         // 8 MHz HSE crystal → 168 MHz core, 48 MHz for USB; APB1 timers 84 MHz, APB2 168 MHz.
         let mut rcc = dp.RCC.freeze(Config::hse(8.MHz()).sysclk(168.MHz()).require_pll48clk());
@@ -224,8 +251,7 @@ mod app {
         let mut rig = Rig::new(config);
         rig.power_up(counters.now_us(), probe, watchdog_reset);
 
-        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-        watchdog.start(WATCHDOG_MS.millis());
+        watchdog.feed();
         defmt::info!("rig up; watchdog reset: {}", watchdog_reset);
 
         (Shared { rig, gyro }, Local { captures, counters, clock: counters, tim3, motor, watchdog, usb_dev, serial })
@@ -245,7 +271,11 @@ mod app {
         let captures = cx.local.captures;
         if let Some(c) = captures.data_ready() {
             let read = gyro.lock(|g| g.read());
-            rig.lock(|r| r.data_ready(c.t_us, c.encoder, read));
+            // A read that trips the run cuts the bridge here, not up to 1 ms later at the next
+            // control tick (which applies the same OFF).
+            if rig.lock(|r| r.data_ready(c.t_us, c.encoder, read)).is_some() {
+                board::cut_drive();
+            }
         }
         if let Some(c) = captures.index() {
             let level = board::index_level();
@@ -261,11 +291,13 @@ mod app {
         let t_us = cx.local.counters.now_us();
         let encoder = cx.local.counters.encoder();
         let drdy_high = board::drdy_level();
-        let (cmd, release, feed) = cx
-            .shared
-            .rig
-            .lock(|r| (r.control_tick(t_us, encoder), r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us)));
-        cx.local.motor.apply(cmd);
+        let motor = cx.local.motor;
+        // Applied under the lock: a data-ready trip cannot fall between computing the command
+        // and applying it, and be undone by a command computed before it.
+        let (release, feed) = cx.shared.rig.lock(|r| {
+            motor.apply(r.control_tick(t_us, encoder));
+            (r.needs_drdy_release(drdy_high), r.watchdog_may_feed(t_us))
+        });
         if release {
             let _ = cx.shared.gyro.lock(|g| g.read());
         }

@@ -85,6 +85,17 @@ mod app {
             w.rxneie().set_bit()
         });
 
+        // Test only: a panic in init, once USART1 can report it (the boot test then sees the
+        // reset that follows, and the same report again).
+        if cfg!(feature = "qemu-init-panic-test") {
+            panic!("qemu-init-panic-test: a deliberate panic in init");
+        }
+
+        // Test only: a stack overflow (flip-link: it faults at the bottom of RAM).
+        if cfg!(feature = "qemu-stack-overflow-test") {
+            overflow(0);
+        }
+
         // The prototype: TIM5 and the encoder counter start seconds before their 32-bit wrap,
         // so every stream crosses both.
         let mut rig = VirtualRig::prototype();
@@ -106,6 +117,14 @@ mod app {
         let rx_usart = unsafe { USART1::steal() };
         defmt::info!("qemu rig up");
         (Shared {}, Local { tim3, rig, uart: Uart { usart, rx: consumer }, rx_usart, rx })
+    }
+
+    /// Recursion without end, each frame 256 bytes of stack.
+    #[allow(unconditional_recursion)]
+    #[inline(never)]
+    fn overflow(n: u32) -> u32 {
+        let frame = core::hint::black_box([n; 64]);
+        overflow(n + 1).wrapping_add(frame[usize::from(n as u8 & 63)])
     }
 
     #[idle]

@@ -7,7 +7,7 @@ use crate::l3g4200d::{self, L3g4200d, Measurement};
 use crate::link::Link;
 use crate::pwm::{MotorCommand, PwmModulator};
 use crate::speed_loop::{Gains, SpeedLoop, LOOP_HZ};
-use crate::supervisor::Supervisor;
+use crate::supervisor::{Supervisor, NOMINAL_PERIOD_US};
 use crate::{FIRMWARE_VERSION, GEAR_RATIO};
 use embedded_hal::spi::SpiDevice;
 use protocol::{
@@ -22,7 +22,11 @@ pub use protocol::timing::HOST_LINK_TIMEOUT_US;
 pub const GYRO_SILENT_US: u32 = 50_000;
 
 /// Consecutive failed or stale reads (data-ready seen, STATUS_REG ZYXDA clear) that make a dead
-/// bus: a MISO stuck low reads all zeros, so a dead bus shows up as stale data, not as an error.
+/// bus: a MISO stuck low reads all zeros, so a dead bus shows up as stale data, not as an error;
+/// a MISO stuck high reads all 0xFF ([`crate::l3g4200d::Measurement::bus_stuck_high`]), counted
+/// as a failed read. Eight is 10 ms at 800 Hz (80 ms at 100 Hz): engineering judgement, long
+/// enough that a single glitched transfer never trips a run, short against the table's
+/// dynamics (it turns ≤ 3.6° in 10 ms at 360 °/s).
 pub const GYRO_BAD_READS: u8 = 8;
 
 /// A run ends once the ramp is at zero and the table has moved at most one count per period
@@ -193,10 +197,11 @@ impl Rig {
         self.last_encoder = Some(encoder);
         // Δcount/Δt: the period as measured, not as assumed; an implausible one (a stalled or
         // restarted timer) falls back to the nominal period.
-        self.period_s = match self.last_tick_us.map(|last| elapsed_us(t_us, last)) {
-            Some(d) if (MIN_PERIOD_US..=MAX_PERIOD_US).contains(&d) => d as f32 * 1e-6,
-            _ => 1.0 / LOOP_HZ as f32,
+        let period_us = match self.last_tick_us.map(|last| elapsed_us(t_us, last)) {
+            Some(d) if (MIN_PERIOD_US..=MAX_PERIOD_US).contains(&d) => d as u32,
+            _ => NOMINAL_PERIOD_US,
         };
+        self.period_s = period_us as f32 * 1e-6;
         self.last_tick_us = Some(t_us);
 
         // Signed differences: a higher-priority task (data-ready, USB) may stamp its event a tick
@@ -207,7 +212,7 @@ impl Rig {
         if self.run.tag().is_some() {
             if elapsed_us(t_us, self.last_host_us) > HOST_LINK_TIMEOUT_US as i32 {
                 self.trip(t_us, Fault::HostLinkLost);
-            } else if let Some(fault) = self.supervisor.check(self.applied.duty(), delta) {
+            } else if let Some(fault) = self.supervisor.check(self.applied.duty(), delta, period_us) {
                 self.trip(t_us, fault);
             }
         }
@@ -246,13 +251,22 @@ impl Rig {
     }
 
     /// A data-ready edge: `t_us` and `encoder` as latched by TIM5 and TIM2 input capture, and
-    /// the burst read that followed.
-    pub fn data_ready<E>(&mut self, t_us: u32, encoder: u32, read: Result<Measurement, E>) {
+    /// the burst read that followed. Returns `Some(MotorCommand::OFF)` when this read ended a
+    /// run (a dead bus trips it): the platform must apply it at once, in the data-ready
+    /// interrupt, rather than at the next control tick up to a loop period later.
+    pub fn data_ready<E>(&mut self, t_us: u32, encoder: u32, read: Result<Measurement, E>) -> Option<MotorCommand> {
+        let running = self.run.tag().is_some();
         self.last_sample_us = t_us;
         if self.gyro_fault == Some(Fault::GyroSilent) {
             self.gyro_fault = None;
         }
         let fresh = match read {
+            // A MISO stuck high reads 0xFF everywhere, which passes for a fresh sample with
+            // every overrun bit set: counted as a failed read, never streamed as a sample.
+            Ok(m) if m.bus_stuck_high() => {
+                self.spi_errors = self.spi_errors.wrapping_add(1);
+                false
+            }
             Ok(m) => {
                 self.samples_read = self.samples_read.wrapping_add(1);
                 let mut status = 0;
@@ -276,6 +290,7 @@ impl Rig {
         if self.bad_reads >= GYRO_BAD_READS && self.gyro_fault.is_none() {
             self.gyro_failed(t_us, Fault::GyroSpi);
         }
+        (running && self.run.tag().is_none()).then_some(MotorCommand::OFF)
     }
 
     /// An index edge: time and count latched by capture, level read after it, and whether the

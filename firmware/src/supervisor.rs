@@ -2,6 +2,9 @@
 //! evaluated every loop period on the same encoder delta.
 
 use crate::speed_loop::{design, LOOP_HZ};
+
+/// The nominal loop period, µs.
+pub const NOMINAL_PERIOD_US: u32 = 1_000_000 / LOOP_HZ;
 use protocol::Fault;
 
 /// Above this |duty| the table must turn: 10 % of 24 V is ≈ 40 °/s at the table unloaded
@@ -42,13 +45,17 @@ impl Supervisor {
         self.still_periods = 0;
     }
 
-    /// One period: the duty that was applied during it and how far the encoder moved.
-    pub fn check(&mut self, applied_duty: f32, delta_counts: i32) -> Option<Fault> {
-        if delta_counts.saturating_mul(LOOP_HZ as i32).saturating_abs() > OVER_SPEED_CPS {
+    /// One period: the duty that was applied during it, how far the encoder moved, and how long
+    /// the period was, µs, as measured on TIM5 (nominally 1 000). The speed is the distance over
+    /// the measured period: a tick that comes late (delayed by a higher-priority task) carries
+    /// more counts, and divided by the nominal period it would read as an over-speed.
+    pub fn check(&mut self, applied_duty: f32, delta_counts: i32, period_us: u32) -> Option<Fault> {
+        let period_us = i64::from(period_us.max(1));
+        if i64::from(delta_counts).abs() * 1_000_000 > i64::from(OVER_SPEED_CPS) * period_us {
             return Some(Fault::OverSpeed);
         }
         if delta_counts == 0 && applied_duty.abs() >= STALL_DUTY {
-            self.still_periods += 1;
+            self.still_periods = self.still_periods.saturating_add(1);
             if self.still_periods >= STALL_PERIODS {
                 return Some(Fault::Stall);
             }
@@ -67,21 +74,21 @@ mod tests {
     fn stall_needs_the_full_window_of_driven_stillness() {
         let mut s = Supervisor::new();
         for _ in 0..STALL_PERIODS - 1 {
-            assert_eq!(s.check(0.5, 0), None);
+            assert_eq!(s.check(0.5, 0, NOMINAL_PERIOD_US), None);
         }
         // One count of motion restarts the window.
-        assert_eq!(s.check(0.5, 1), None);
+        assert_eq!(s.check(0.5, 1, NOMINAL_PERIOD_US), None);
         for _ in 0..STALL_PERIODS - 1 {
-            assert_eq!(s.check(-0.5, 0), None);
+            assert_eq!(s.check(-0.5, 0, NOMINAL_PERIOD_US), None);
         }
-        assert_eq!(s.check(-0.5, 0), Some(Fault::Stall));
+        assert_eq!(s.check(-0.5, 0, NOMINAL_PERIOD_US), Some(Fault::Stall));
     }
 
     #[test]
     fn low_duty_standstill_is_not_a_stall() {
         let mut s = Supervisor::new();
         for _ in 0..10 * STALL_PERIODS {
-            assert_eq!(s.check(STALL_DUTY * 0.99, 0), None);
+            assert_eq!(s.check(STALL_DUTY * 0.99, 0, NOMINAL_PERIOD_US), None);
         }
     }
 
@@ -89,8 +96,23 @@ mod tests {
     fn over_speed_in_either_direction() {
         let mut s = Supervisor::new();
         let limit_counts = OVER_SPEED_CPS / LOOP_HZ as i32;
-        assert_eq!(s.check(0.9, limit_counts), None);
-        assert_eq!(s.check(0.9, limit_counts + 1), Some(Fault::OverSpeed));
-        assert_eq!(s.check(-0.9, -limit_counts - 1), Some(Fault::OverSpeed));
+        assert_eq!(s.check(0.9, limit_counts, NOMINAL_PERIOD_US), None);
+        assert_eq!(s.check(0.9, limit_counts + 1, NOMINAL_PERIOD_US), Some(Fault::OverSpeed));
+        assert_eq!(s.check(-0.9, -limit_counts - 1, NOMINAL_PERIOD_US), Some(Fault::OverSpeed));
+    }
+
+    /// Issue 28: a tick 500 µs late at 360 °/s (324 000 cps) carries 486 counts; over the
+    /// nominal 1 ms that read as 486 000 cps, beyond the 405 000 cps limit, a false trip. Over
+    /// the measured 1.5 ms it is the true 324 000 cps. A true over-speed in a late tick still trips.
+    #[test]
+    fn a_late_tick_is_not_an_over_speed() {
+        let mut s = Supervisor::new();
+        assert_eq!(s.check(0.9, 486, 1_500), None);
+        // The limit over 1.5 ms is 607.5 counts.
+        assert_eq!(s.check(0.9, 607, 1_500), None);
+        assert_eq!(s.check(0.9, 608, 1_500), Some(Fault::OverSpeed));
+        // An early tick is judged over its own, shorter, period.
+        assert_eq!(Supervisor::new().check(0.9, 203, 500), Some(Fault::OverSpeed));
+        assert_eq!(Supervisor::new().check(0.9, 202, 500), None);
     }
 }

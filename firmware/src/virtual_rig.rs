@@ -186,7 +186,11 @@ impl VirtualRig {
             let t_us = self.timer_us(self.now_ns);
             let encoder = self.plant.encoder_count();
             let read = self.gyro.read();
-            self.rig.data_ready(t_us, encoder, read);
+            // A trip here cuts the bridge now, as the firmware's data-ready interrupt does.
+            if let Some(off) = self.rig.data_ready(t_us, encoder, read) {
+                self.motor = off;
+                self.plant.set_drive(off);
+            }
         }
         self.drdy = self.gyro.spi_mut().drdy();
     }

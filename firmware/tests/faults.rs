@@ -114,6 +114,45 @@ fn miso_stuck_low_is_a_dead_bus() {
     assert_eq!(s.ack_for(accepted), Some(CmdResult::Ok));
 }
 
+/// Issue 28: a MISO stuck high reads 0xFF everywhere, which looks like a fresh sample (ZYXDA
+/// set); it must trip `GyroSpi` within N = `GYRO_BAD_READS` = 8 samples (+ the next control
+/// tick), and no all-0xFF burst is streamed as a sample.
+#[test]
+fn miso_stuck_high_is_a_dead_bus_within_eight_samples() {
+    assert_eq!(GYRO_BAD_READS, 8);
+    let mut s = running();
+    let t = s.vr.now_ns();
+    s.vr.gyro.spi_mut().fault = BusFault::MisoStuckHigh;
+    s.run(S);
+    // Eight bad reads at 809.6 Hz, then the next control tick: < 11 ms.
+    let window = (u64::from(GYRO_BAD_READS) + 1) * 1_000_000_000 / 809 + MS;
+    assert_tripped(&s, Fault::GyroSpi, motor_faults::INTERLOCK, t, window);
+    let garbage = s.msgs().filter(|m| matches!(m, RigMsg::Sample(x) if x.rate_counts == [-1; 3])).count();
+    assert_eq!(garbage, 0, "an all-0xFF burst was streamed as a sample");
+}
+
+/// Issue 28: a trip in the data-ready interrupt (here a dead bus) cuts the bridge at that
+/// sample, not at the next control tick up to 1 ms later: looked at every 20 µs, the drive is
+/// never on once the fault is in force.
+#[test]
+fn a_trip_at_data_ready_cuts_the_drive_at_once() {
+    let mut s = running();
+    s.vr.gyro.spi_mut().fault = BusFault::MisoStuckLow;
+    let mut driven_after_trip_ns = 0;
+    let mut tripped = false;
+    for _ in 0..1_000 {
+        s.vr.run_until(s.vr.now_ns() + 20_000, &mut s.wire, |_| {});
+        if s.vr.rig.gyro_fault().is_some() {
+            tripped = true;
+            if s.vr.plant.driven() {
+                driven_after_trip_ns += 20_000;
+            }
+        }
+    }
+    assert!(tripped);
+    assert_eq!(driven_after_trip_ns, 0, "the drive stayed on after the trip");
+}
+
 #[test]
 fn spi_errors_are_counted_and_trip_the_run() {
     let mut s = running();

@@ -74,6 +74,8 @@ pub struct Link<P: Read + Write> {
     tx_seq: u16,
     rx: StreamDecoder,
     record: Option<Box<dyn Write>>,
+    /// Where `record` writes, for messages.
+    record_name: String,
     clock: Box<dyn Clock>,
     last_tx: Duration,
     last_rx: Duration,
@@ -96,6 +98,7 @@ impl<P: Read + Write> Link<P> {
             tx_seq: 0,
             rx: StreamDecoder::new(),
             record: None,
+            record_name: String::new(),
             clock,
             last_tx,
             last_rx: last_tx,
@@ -127,10 +130,17 @@ impl<P: Read + Write> Link<P> {
 
     /// Starts writing every received byte to `sink` (flushed per read), replacing any previous sink.
     pub fn record_to(&mut self, sink: Option<Box<dyn Write>>) -> Result<()> {
+        self.record_to_named(sink, "the capture")
+    }
+
+    /// [`Self::record_to`], `name` (the file's path) said in every error of the sink, so a full
+    /// disk names the file it could not write.
+    pub fn record_to_named(&mut self, sink: Option<Box<dyn Write>>, name: impl Into<String>) -> Result<()> {
         if let Some(mut old) = self.record.take() {
-            old.flush().context("flushing capture")?;
+            old.flush().with_context(|| format!("cannot write the capture {}", self.record_name))?;
         }
         self.record = sink;
+        self.record_name = name.into();
         Ok(())
     }
 
@@ -140,10 +150,7 @@ impl<P: Read + Write> Link<P> {
         self.tx_seq = self.tx_seq.wrapping_add(1);
         let mut frame = [0u8; MAX_FRAME_LEN];
         let n = encode_frame(seq, cmd, &mut frame).expect("every command fits in a frame");
-        self.port
-            .write_all(&frame[..n])
-            .and_then(|()| self.port.flush())
-            .with_context(|| format!("writing to {}", self.name))?;
+        self.port.write_all(&frame[..n]).and_then(|()| self.port.flush()).map_err(|e| self.link_error(e, "writing"))?;
         self.last_tx = self.clock.now();
         Ok(seq)
     }
@@ -176,11 +183,16 @@ impl<P: Read + Write> Link<P> {
                 }
                 return Ok(0);
             }
-            Err(e) => return Err(e).with_context(|| format!("reading from {}", self.name)),
+            Err(e) => return Err(self.link_error(e, "reading")),
         };
         self.last_rx = self.clock.now();
         if let Some(rec) = self.record.as_mut() {
-            rec.write_all(&self.buf[..n]).and_then(|()| rec.flush()).context("writing capture")?;
+            if let Err(e) = rec.write_all(&self.buf[..n]).and_then(|()| rec.flush()) {
+                // Recording stops (the file keeps what was written), the link does not: the
+                // caller still has a table to stop, and heartbeats to send while it ramps down.
+                self.record = None;
+                return Err(e).with_context(|| format!("cannot write the capture {}", self.record_name));
+            }
         }
         self.rx.feed::<RigMsg>(&self.buf[..n], |ev| {
             if let Event::Frame { msg, .. } = ev {
@@ -188,6 +200,22 @@ impl<P: Read + Write> Link<P> {
             }
         });
         Ok(n)
+    }
+
+    /// A failed read or write on the port, in words a bench engineer can act on: a pulled USB
+    /// cable or a rig that lost power shows as a hang-up (`BrokenPipe` from the serial port's
+    /// poll, `EIO` from the tty, `ENXIO`/`ENODEV` once the device node is gone).
+    fn link_error(&self, e: std::io::Error, doing: &str) -> anyhow::Error {
+        let gone = matches!(e.kind(), ErrorKind::BrokenPipe | ErrorKind::UnexpectedEof | ErrorKind::ConnectionReset)
+            || matches!(e.raw_os_error(), Some(5 | 6 | 19));
+        if gone {
+            anyhow::anyhow!(
+                "the link to the rig on {} was lost ({doing} failed: {e}): check the cable and the rig's power, then start again",
+                self.name
+            )
+        } else {
+            anyhow::anyhow!("{doing} {} failed: {e}", self.name)
+        }
     }
 
     /// Forgets how long the link has been quiet (after a deliberate pause in reading).
@@ -249,5 +277,78 @@ pub fn command_name(cmd: &Command) -> &'static str {
         Command::ConfigureGyro(_) => "ConfigureGyro",
         Command::Heartbeat => "Heartbeat",
         Command::ConfigureDrive(_) => "ConfigureDrive",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A port that answers every read with `read` and swallows every write.
+    struct Port(fn() -> std::io::Result<usize>);
+
+    impl Read for Port {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = (self.0)()?;
+            buf[..n].fill(0);
+            Ok(n)
+        }
+    }
+
+    impl Write for Port {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// A disk with no space left.
+    struct Full;
+
+    impl Write for Full {
+        fn write(&mut self, _: &[u8]) -> std::io::Result<usize> {
+            Err(std::io::Error::from_raw_os_error(28))
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// Issue 28: a full disk names the capture it could not write.
+    #[test]
+    fn a_full_disk_names_the_capture() {
+        let mut link = Link::new(Port(|| Ok(3)), "/dev/ttyACM0");
+        link.record_to_named(Some(Box::new(Full)), "/data/pose1-p180dps.cap").unwrap();
+        let e = link.poll(|_| {}).unwrap_err();
+        assert_eq!(
+            format!("{e:#}"),
+            "cannot write the capture /data/pose1-p180dps.cap: No space left on device (os error 28)"
+        );
+        // The link itself goes on (the table must still be stopped), without the capture.
+        assert_eq!(link.poll(|_| {}).unwrap(), 3);
+    }
+
+    /// Issue 28: a pulled cable (the serial port's hang-up, `EIO` from a tty whose other end
+    /// is gone, the device node removed) is said as a lost link on the named port; another
+    /// error keeps its own words.
+    #[test]
+    fn a_pulled_cable_is_a_lost_link_on_the_named_port() {
+        let lost = |e: fn() -> std::io::Result<usize>| {
+            format!("{:#}", Link::new(Port(e), "/dev/ttyACM0").poll(|_| {}).unwrap_err())
+        };
+        assert_eq!(
+            lost(|| Err(std::io::Error::new(ErrorKind::BrokenPipe, "Broken pipe"))),
+            "the link to the rig on /dev/ttyACM0 was lost (reading failed: Broken pipe): check the cable and the rig's power, then start again"
+        );
+        assert_eq!(
+            lost(|| Err(std::io::Error::from_raw_os_error(5))),
+            "the link to the rig on /dev/ttyACM0 was lost (reading failed: Input/output error (os error 5)): check the cable and the rig's power, then start again"
+        );
+        assert_eq!(
+            lost(|| Err(std::io::Error::from_raw_os_error(13))),
+            "reading /dev/ttyACM0 failed: Permission denied (os error 13)"
+        );
     }
 }

@@ -400,8 +400,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         eprintln!("warning: the records database is not usable now ({e:#}); the session runs anyway");
                     }
                     let serial = identity.sensor_serial.clone().unwrap_or_default();
-                    let mut manifest = start_manifest(&out_dir, identity)?;
+                    // The port first: a port that cannot be opened must not leave a manifest
+                    // behind, or the retry in the same --out-dir would be refused.
                     let mut link = open_link(&port, baud, lockstep_clock.as_deref())?;
+                    let mut manifest = start_manifest(&out_dir, identity)?;
                     link.watch_interrupt(interrupted.clone());
                     let mut operator: Box<dyn session::Operator> =
                         if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
@@ -565,7 +567,19 @@ fn read_capture_by_run(
 fn interrupt_flag() -> Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
     let f = flag.clone();
-    ctrlc::set_handler(move || f.store(true, Ordering::SeqCst)).context("installing the Ctrl-C handler")?;
+    ctrlc::set_handler(move || {
+        // The first signal stops the run and waits (bounded) for the table to stop; a second one
+        // is the operator insisting: leave now, the rig's link watchdog cuts the drive 2 s later.
+        if f.swap(true, Ordering::SeqCst) {
+            use std::io::Write as _;
+            let _ = writeln!(
+                std::io::stderr(),
+                "\nerror: interrupted again: leaving without waiting for the table to stop (the rig cuts the drive 2 s after the last heartbeat)"
+            );
+            std::process::exit(1);
+        }
+    })
+    .context("installing the Ctrl-C handler")?;
     Ok(flag)
 }
 
@@ -598,7 +612,7 @@ fn record(
             session::record_run(&mut link, &run, out, &progress, &interrupted)?;
         }
         None => {
-            link.record_to(Some(Box::new(session::create_capture(out)?)))?;
+            link.record_to_named(Some(Box::new(session::create_capture(out)?)), out.display().to_string())?;
             session::identify(&mut link)?;
             let start = link.now();
             while (link.now() - start).as_secs_f64() < duration_s && !interrupted.load(Ordering::SeqCst) {
@@ -790,6 +804,16 @@ fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>)
     }
     let path = capture_path.expect("clap requires --counts or --capture");
     let cap = read_capture(path)?;
+    let samples: usize = cap.runs.iter().map(|r| r.samples.len()).sum();
+    if samples == 0 {
+        bail!(
+            "{} holds no sample of any run ({} bytes, {} valid frames, {} runs): nothing to apply the calibration to",
+            path.display(),
+            cap.loss.bytes,
+            cap.loss.frames_ok,
+            cap.runs.len()
+        );
+    }
     if let Some(run) = cap.runs.iter().find(|r| r.gyro.full_scale != cal.full_scale) {
         bail!(
             "{} was recorded at ±{} °/s but the calibration is for ±{} °/s",

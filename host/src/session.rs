@@ -84,9 +84,6 @@ const SPIN_UP_TIMEOUT: Duration = ms(timing::SPIN_UP_TIMEOUT_MS);
 const SAMPLE_TIMEOUT: Duration = ms(timing::SAMPLE_TIMEOUT_MS);
 /// How long to wait for the motor to stop after the Stop is acknowledged.
 const STOP_TIMEOUT: Duration = ms(timing::STOP_TIMEOUT_MS);
-/// After an interrupt, how long to keep reading (and recording) once Stop is sent: the host
-/// must be gone within 1 s of Ctrl-C.
-const INTERRUPT_DRAIN: Duration = Duration::from_millis(300);
 /// Speed within this fraction of the setpoint counts as "at speed".
 const AT_SPEED_TOLERANCE: f64 = 0.01;
 
@@ -137,6 +134,26 @@ pub fn describe_fault(f: Fault) -> String {
         Fault::HostLinkLost => "HostLinkLost: it heard nothing from this host for 2 s and cut the drive".into(),
         Fault::Stall => "Stall: the table did not move while driven".into(),
         Fault::OverSpeed => "OverSpeed".into(),
+    }
+}
+
+/// `Motor.faults` bits in words, for the operator.
+pub fn describe_motor_faults(bits: u8) -> String {
+    use protocol::motor_faults as mf;
+    let names: Vec<&str> = [
+        (mf::STALL, "Stall"),
+        (mf::OVER_SPEED, "OverSpeed"),
+        (mf::HOST_LINK_LOST, "HostLinkLost"),
+        (mf::INTERLOCK, "Interlock: a gyro or watchdog fault"),
+    ]
+    .into_iter()
+    .filter(|(bit, _)| bits & bit != 0)
+    .map(|(_, name)| name)
+    .collect();
+    if names.is_empty() {
+        "no fault bit set".into()
+    } else {
+        format!("fault bits {bits:#04x}: {}", names.join(", "))
     }
 }
 
@@ -315,20 +332,55 @@ pub fn record_run<P: Read + Write>(
     progress: &ProgressBar,
     interrupted: &AtomicBool,
 ) -> Result<()> {
-    link.record_to(Some(Box::new(create_capture(path)?)))?;
+    link.record_to_named(Some(Box::new(create_capture(path)?)), path.display().to_string())?;
     let outcome = stream_run(link, run, path, progress, interrupted);
     if outcome.is_err() {
-        // Best effort: the motor must not keep spinning because the host gave up.
-        let _ = link.send(&Command::Stop);
-        let until = link.now() + INTERRUPT_DRAIN;
-        while link.now() < until {
-            if link.poll(|_| {}).is_err() {
-                break;
-            }
+        // The motor must not keep spinning because the host gave up, nor coast because it left:
+        // the rig trips `HostLinkLost` 2 s after the last host frame, and a ramp-down lasts up
+        // to 4 s. So: `Stop`, then heartbeats until the rig says the table has stopped.
+        if let Err(e) = wait_stopped(link, run.start().run_tag) {
+            let _ = writeln!(std::io::stderr(), "warning: {e:#}");
         }
     }
     link.record_to(None)?;
     outcome
+}
+
+/// After a failed or interrupted run: sends `Stop` and keeps reading (and recording) and
+/// heartbeating until the rig reports the run over (`RunStopped` of `tag`, or a `Motor` report
+/// without the tag), sending `Stop` again every second until it is acknowledged, for at most
+/// [`STOP_TIMEOUT`] (the protocol's bound on a ramp-down's
+/// confirmation). A `Stop` while idle is harmless; an idle rig's next `Motor` report (100 ms)
+/// ends the wait. Errors say why the stop was not confirmed.
+fn wait_stopped<P: Read + Write>(link: &mut Link<P>, tag: u8) -> Result<()> {
+    let deadline = link.now() + STOP_TIMEOUT;
+    let mut last_stop: Option<(u16, Duration)> = None;
+    let (mut acked, mut stopped) = (false, false);
+    while !stopped {
+        // Again every ACK_TIMEOUT until the rig acknowledges it: a `Stop` lost on the line must
+        // not leave the table at speed (`Stop` is idempotent).
+        if !acked && last_stop.is_none_or(|(_, t)| link.now().saturating_sub(t) >= crate::link::ACK_TIMEOUT) {
+            let seq = link.send(&Command::Stop).context("sending Stop")?;
+            last_stop = Some((seq, link.now()));
+        }
+        if link.now() > deadline {
+            bail!(
+                "the rig on {} did not report the table stopped within {} s of the Stop",
+                link.name(),
+                STOP_TIMEOUT.as_secs()
+            );
+        }
+        link.keep_alive().context("heartbeating the ramp-down")?;
+        let stop_seq = last_stop.map(|(seq, _)| seq);
+        link.poll(|m| match m {
+            RigMsg::RunStopped(r) if r.run_tag == tag => stopped = true,
+            RigMsg::Motor(ms) if ms.run_tag != tag => stopped = true,
+            RigMsg::Ack(a) if Some(a.cmd_seq) == stop_seq => acked = true,
+            _ => {}
+        })
+        .context("waiting for the table to stop")?;
+    }
+    Ok(())
 }
 
 fn stream_run<P: Read + Write>(
@@ -367,6 +419,11 @@ fn stream_run<P: Read + Write>(
     let mut now_us = 0i64;
     let mut fault: Option<Fault> = None;
     let mut stopped_early = false;
+    // A trip whose `Fault` and `RunStopped` frames were both lost still shows in the 10 Hz
+    // `Motor` reports: after the `Ack` of the `Start` every report of this run carries its tag
+    // and no fault bit (the rig clears them at `Start`), so a report without the tag, or with a
+    // fault bit, means the rig ended the run by itself.
+    let mut motor_ended: Option<u8> = None;
     loop {
         if interrupted.load(Ordering::SeqCst) {
             bail!("interrupted during {where_}");
@@ -379,6 +436,9 @@ fn stream_run<P: Read + Write>(
                 sampled = true;
             }
             RigMsg::Motor(ms) => {
+                if ms.run_tag != tag || ms.faults != 0 {
+                    motor_ended.get_or_insert(ms.faults);
+                }
                 let t = clock.unwrap(ms.t_us);
                 let setpoint = f64::from(ms.setpoint_cps);
                 let ramp_done = (setpoint.abs() - target_cps).abs() <= target_cps * AT_SPEED_TOLERANCE;
@@ -399,6 +459,12 @@ fn stream_run<P: Read + Write>(
         }
         if stopped_early {
             bail!("the rig stopped the run by itself during {where_}");
+        }
+        if let Some(bits) = motor_ended {
+            bail!(
+                "the rig's motor reports show the run ended by the rig ({}) during {where_}; its Fault and RunStopped frames were lost",
+                describe_motor_faults(bits)
+            );
         }
         if link.now().saturating_sub(last_sample) > SAMPLE_TIMEOUT {
             bail!(
@@ -435,8 +501,10 @@ fn stream_run<P: Read + Write>(
 fn stop_run<P: Read + Write>(link: &mut Link<P>, tag: u8, interrupted: &AtomicBool) -> Result<()> {
     let stopped = std::cell::Cell::new(false);
     let fault = std::cell::Cell::new(None);
+    let motor_faults = std::cell::Cell::new(0u8);
     let watch = |m: &RigMsg| match m {
         RigMsg::RunStopped(r) if r.run_tag == tag => stopped.set(true),
+        RigMsg::Motor(ms) if ms.faults != 0 => motor_faults.set(ms.faults),
         RigMsg::Motor(ms) if ms.run_tag == 0 => stopped.set(true),
         RigMsg::Fault(f) => fault.set(Some(f.fault)),
         _ => {}
@@ -446,6 +514,12 @@ fn stop_run<P: Read + Write>(link: &mut Link<P>, tag: u8, interrupted: &AtomicBo
     loop {
         if let Some(f) = fault.get() {
             bail!("the rig reported {} while ramping down", describe_fault(f));
+        }
+        if motor_faults.get() != 0 {
+            bail!(
+                "the rig's motor reports show a trip ({}) while ramping down; its Fault frame was lost",
+                describe_motor_faults(motor_faults.get())
+            );
         }
         if stopped.get() {
             return Ok(());

@@ -14,7 +14,9 @@
 //! `Counters`, `Temperature`, `Fault`), repeatable. `--seed` fixes the randomness (default 1).
 //! `--watchdog-reset` starts the rig as after a watchdog reset (it reports `WatchdogReset`).
 //! Every command but `Heartbeat` that reaches the rig intact is logged on standard error,
-//! `virtual rig: received Stop (seq 12) at 14.210 s` (simulated time).
+//! `virtual rig: received Stop (seq 12) at 14.210 s` (simulated time), and so is every `Fault`
+//! and `RunStopped` the rig sends, before the line may lose it (`virtual rig: sent Fault
+//! HostLinkLost at 9.001 s`, `virtual rig: sent RunStopped (run tag 1) at 9.001 s`).
 //!
 //! `--lockstep` hands the clock to the client (tests): simulated time only advances when a line
 //! `step <ns> <bytes>` arrives on standard input; the rig first waits until it has received
@@ -397,6 +399,16 @@ impl Line {
             let mut scratch = [0u8; MAX_FRAME_LEN];
             if let Ok((_, msg)) = decode_frame::<RigMsg>(&frame[..frame.len() - 1], &mut scratch) {
                 let k = kind(&msg);
+                // What ends a run, logged as the rig sends it (before the line may lose it): how
+                // a test sees a trip the host never heard of.
+                let now_s = now_ns as f64 * 1e-9;
+                match msg {
+                    RigMsg::Fault(f) => eprintln!("virtual rig: sent Fault {:?} at {now_s:.3} s", f.fault),
+                    RigMsg::RunStopped(r) => {
+                        eprintln!("virtual rig: sent RunStopped (run tag {}) at {now_s:.3} s", r.run_tag)
+                    }
+                    _ => {}
+                }
                 let n = self.seen.entry(k).or_insert(0);
                 *n += 1;
                 let n = *n;

@@ -103,6 +103,54 @@ fn simulate_refuses_a_rate_the_rig_refuses() {
     assert!(!out.exists());
 }
 
+/// Issue 28: `--duration 1e12` wrote 4.27 GB in 57 s before it was killed; a run is now at most
+/// 6 h (`sim::MAX_RUN_S`), refused before any file is created.
+#[test]
+fn simulate_refuses_a_run_longer_than_six_hours() {
+    let tmp = scratch("long");
+    let out = tmp.path().join("long.cap");
+    for duration in ["1e12", "21600.5"] {
+        let o = host(&["simulate", "--duration", duration, "--out", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{duration}");
+        assert_eq!(
+            stderr(&o),
+            "error: invalid simulation: runs[0].duration_s must be > 0 and at most 21600 s (6 h: ≈ 400 MB of capture per run)\n"
+        );
+        assert!(!out.exists());
+    }
+}
+
+/// Issue 28: a live session whose port cannot be opened leaves nothing in its --out-dir (no
+/// `session.json`), so the same command succeeds once the port is there: the retry gets the
+/// same one line, not "already holds a session".
+#[test]
+fn a_port_that_cannot_be_opened_leaves_no_session_behind() {
+    let tmp = scratch("noport");
+    let dir = tmp.path().join("session");
+    let db = format!("sqlite:{}", tmp.path().join("records.sqlite").display());
+    for attempt in 1..=2 {
+        let o = host(&[
+            "calibrate",
+            "--port",
+            "/dev/ttyNOPE9",
+            "--sensor",
+            "SN-1",
+            "--yes",
+            "--out-dir",
+            dir.to_str().unwrap(),
+            "--db",
+            &db,
+        ]);
+        assert_eq!(o.status.code(), Some(1), "attempt {attempt}");
+        assert_eq!(
+            stderr(&o),
+            "error: cannot open serial port /dev/ttyNOPE9: No such file or directory\n",
+            "attempt {attempt}"
+        );
+        assert!(!dir.join("session.json").exists(), "attempt {attempt}");
+    }
+}
+
 /// A fresh directory for one test, removed when dropped (also when the test fails).
 fn scratch(name: &str) -> tempfile::TempDir {
     tempfile::Builder::new().prefix(&format!("host-cli-{name}-")).tempdir().expect("temporary directory")
@@ -268,6 +316,22 @@ fn simulate_inspect_calibrate_apply() {
         assert!((got[i] - w[i]).abs() < 0.05, "axis {i}: {got:?} vs {w:?}");
     }
 
+    // Issue 28: a file that holds no sample (garbage, or an empty capture) is refused with one
+    // line, exit 1, instead of a header-only CSV and exit 0.
+    let garbage = tmp.path().join("garbage.cap");
+    std::fs::write(&garbage, (0..5000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect::<Vec<_>>())
+        .unwrap();
+    let o = host(&["apply", "--cal", cal.to_str().unwrap(), "--capture", garbage.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.stdout, b"");
+    assert_eq!(
+        stderr(&o),
+        format!(
+            "error: {} holds no sample of any run (5000 bytes, 0 valid frames, 0 runs): nothing to apply the calibration to\n",
+            garbage.display()
+        )
+    );
+
     // The same calibration over a whole capture: one CSV line per sample, plus the header.
     let o = host(&["apply", "--cal", cal.to_str().unwrap(), "--capture", cap.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0));
@@ -399,7 +463,7 @@ fn a_bad_simulation_config_is_a_usage_error_naming_the_field() {
             format!(
                 r#"{{"seed":1,"runs":[{{"pose":"One","rate_dps":180.0,"duration_s":-1.0}}],{gyro},"noise_dps_per_sqrt_hz":0.03,"effects":{{}},"spin_up_s":1.0,"gap_s":0.5,"start_t_us":0,"start_encoder":0,"index_plate_width_deg":10.0}}"#
             ),
-            "error: invalid simulation: runs[0].duration_s must be > 0\n".to_string(),
+            "error: invalid simulation: runs[0].duration_s must be > 0 and at most 21600 s (6 h: ≈ 400 MB of capture per run)\n".to_string(),
         ),
         (
             r#"{"seed":1,"runs":[]}"#.to_string(),

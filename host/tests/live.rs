@@ -3,61 +3,13 @@
 //! /dev/ttyACM0. Every test that runs a session does so in lockstep ([`LockstepBench`]): the
 //! host's clock is the rig's simulated time, so no test depends on the machine being idle.
 
-use host::capture;
+mod common;
+
+use common::{decode, host, scratch, spawn_virtual_rig, LockstepBench, Running, Scratch, NS};
 use serialport::{SerialPort, TTYPort};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-use std::sync::Arc;
+use std::path::Path;
 use std::thread;
 use std::time::Duration;
-
-fn host(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
-}
-
-/// A test's scratch directory under the temp dir, with the files named after it beside it (its
-/// records database, the lockstep clock's socket): removed when the test passes, kept for
-/// inspection when it fails (the guard drops while the test panics).
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if thread::panicking() {
-            return;
-        }
-        let _ = std::fs::remove_dir_all(&self.0);
-        let (Some(parent), Some(name)) = (self.0.parent(), self.0.file_name()) else { return };
-        let beside = format!("{}.", name.to_string_lossy());
-        for entry in std::fs::read_dir(parent).into_iter().flatten().flatten() {
-            if entry.file_name().to_string_lossy().starts_with(&beside) {
-                let _ = std::fs::remove_file(entry.path());
-            }
-        }
-    }
-}
-
-fn scratch_path(name: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("host-live-{}-{name}", std::process::id()))
-}
-
-fn scratch(name: &str) -> Scratch {
-    let d = scratch_path(name);
-    let _ = std::fs::remove_dir_all(&d);
-    Scratch(d)
-}
 
 /// The captures of a default live session (`--rates-dps 180,90,-180` in both poses), in order.
 const DEFAULT_FILES: [&str; 6] = [
@@ -68,10 +20,6 @@ const DEFAULT_FILES: [&str; 6] = [
     "pose2-p90dps.cap",
     "pose2-m180dps.cap",
 ];
-
-fn decode(path: &Path) -> capture::Capture {
-    capture::decode(&std::fs::read(path).unwrap())
-}
 
 #[test]
 fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
@@ -214,78 +162,38 @@ fn a_rig_that_does_not_answer_is_one_line_and_exit_1() {
     assert!(dir.join("pose1-p180dps.cap").exists());
 }
 
-/// `host` running with its standard error read line by line, so a test can act when a line
-/// appears. Killed when dropped.
-struct Running {
-    child: std::process::Child,
-    lines: std::sync::mpsc::Receiver<String>,
-    seen: Vec<String>,
-}
-
-impl Running {
-    fn start(args: &[&str], stdin: std::process::Stdio) -> Self {
-        use std::io::BufRead;
-        let mut child = Command::new(env!("CARGO_BIN_EXE_host"))
-            .args(args)
-            .stdin(stdin)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .expect("host runs");
-        let err = child.stderr.take().unwrap();
-        let (tx, lines) = std::sync::mpsc::channel();
-        thread::spawn(move || {
-            // The prompt ends without a newline: split at "\n" and at the prompt's final space.
-            let mut r = std::io::BufReader::new(err);
-            let mut buf = Vec::new();
-            while r.read_until(b' ', &mut buf).map(|n| n > 0).unwrap_or(false) {
-                if buf.ends_with(b"\n") || buf.ends_with(b"abort) ") {
-                    let _ = tx.send(String::from_utf8_lossy(&buf).into_owned());
-                    buf.clear();
-                }
-            }
-            let _ = tx.send(String::from_utf8_lossy(&buf).into_owned());
-        });
-        Self { child, lines, seen: Vec::new() }
+/// Issue 28: a pulled cable (the rig's end of the pty closed while the host reads) is one line
+/// naming the port and saying the link to the rig was lost, exit 1; before, `error: reading from
+/// /dev/pts/1: Broken pipe`.
+#[test]
+fn a_pulled_cable_is_one_line_naming_the_port_and_the_lost_link() {
+    // A rig in real time, killed while the host records from it: its end of the pty closes, as
+    // when the USB cable is pulled (the host's read sees the hang-up).
+    let (mut rig, path) = spawn_virtual_rig(&["--speedup", "1"]);
+    let dir = scratch("pulled");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("idle.cap");
+    let host = Running::start(
+        &["record", "--port", &path, "--out", out.to_str().unwrap(), "--duration", "60"],
+        std::process::Stdio::null(),
+    );
+    // Waits (bounded) for the first recorded bytes: the host has the port open and reads it.
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0) == 0 {
+        assert!(t0.elapsed() < Duration::from_secs(60), "the host recorded nothing");
+        thread::sleep(Duration::from_millis(10));
     }
-
-    /// Lines of standard error that arrived since the last call (never blocks).
-    fn drain(&mut self) -> Vec<String> {
-        let new: Vec<String> = self.lines.try_iter().collect();
-        self.seen.extend(new.iter().cloned());
-        new
-    }
-
-    fn signal(&self, name: &str) {
-        let ok = Command::new("kill").args([&format!("-{name}"), &self.child.id().to_string()]).status().unwrap();
-        assert!(ok.success());
-    }
-
-    /// Waits for the exit; returns the status, everything on standard error, and the wall time
-    /// it took (reported, not asserted: a loaded machine may take longer; the in-process tests
-    /// assert the 1 s in the rig's time).
-    fn finish(mut self) -> (std::process::ExitStatus, String, Duration) {
-        let t0 = std::time::Instant::now();
-        let status = loop {
-            if let Some(s) = self.child.try_wait().unwrap() {
-                break s;
-            }
-            assert!(t0.elapsed() < Duration::from_secs(60), "host did not exit: {:?}", self.seen);
-            thread::sleep(Duration::from_millis(5));
-        };
-        let took = t0.elapsed();
-        while let Ok(l) = self.lines.recv_timeout(Duration::from_secs(5)) {
-            self.seen.push(l);
-        }
-        (status, self.seen.concat(), took)
-    }
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+    rig.kill().unwrap();
+    rig.wait().unwrap();
+    let (status, err, _) = host.finish();
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        format!(
+            "error: the link to the rig on {path} was lost (reading failed: Broken pipe): check the cable and the rig's power, then start again"
+        )
+    );
+    assert!(std::fs::metadata(&out).unwrap().len() > 0, "the capture so far is kept");
 }
 
 /// F10: end of standard input at a prompt is an abort, not the operator's Enter.
@@ -301,21 +209,6 @@ fn end_of_input_at_the_prompt_is_an_abort() {
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.lines().last().unwrap().starts_with("error: standard input ended at the prompt"), "{err}");
     assert!(!dir.join("pose1-p180dps.cap").exists(), "no run was started");
-}
-
-/// Starts `host virtual-rig ARGS` and returns it with the pty path it prints first.
-fn spawn_virtual_rig(args: &[&str]) -> (std::process::Child, String) {
-    use std::io::BufRead;
-    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
-        .arg("virtual-rig")
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    std::io::BufReader::new(rig.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    (rig, line.trim().to_string())
 }
 
 /// `host virtual-rig`: the pty path is the first line of standard output, and the rig behind it
@@ -349,170 +242,6 @@ fn virtual_rig_subcommand_refuses_bad_options() {
         assert!(String::from_utf8_lossy(&o.stderr).starts_with("error: invalid value"), "{args:?}");
     }
 }
-
-/// `host virtual-rig --lockstep` and the Unix socket through which a `host` run with the hidden
-/// `--lockstep-clock` asks it for time: the test relays every `step` line to the rig and every
-/// `at` answer back, so it knows the simulated time the host lives in and can act at a given
-/// moment of it (answer a prompt, send a signal).
-///
-/// Why nothing here can race the wall clock: the rig's time advances only when the host, finding
-/// nothing to read, asks for the next 5 ms, after the rig has received every byte the host wrote
-/// before asking; the host's timeouts, heartbeats and retries are measured in that same time
-/// (`LockstepPort::clock`). A descheduled host, rig or test stops the simulation with it: a
-/// loaded machine makes the test slower, never different. The operator's delays are counted in
-/// simulated time from the `at` answer current when the test sees the prompt, which is never
-/// earlier than the host's time when it printed it, so every answer comes ≥ 30 s after its
-/// question. Wall time is only measured (and bounded generously) for the signal tests' exit.
-struct LockstepBench {
-    rig: std::process::Child,
-    control_in: std::process::ChildStdin,
-    control_out: std::io::BufReader<std::process::ChildStdout>,
-    path: String,
-    /// The rig's standard error: its command log (`virtual rig: received Stop (seq 9) at 4.125 s`).
-    log: Arc<std::sync::Mutex<Vec<String>>>,
-    socket: PathBuf,
-    listener: std::os::unix::net::UnixListener,
-}
-
-impl LockstepBench {
-    fn start(name: &str, args: &[&str]) -> Self {
-        use std::io::BufRead;
-        let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
-            .args(["virtual-rig", "--lockstep"])
-            .args(args)
-            .stdin(std::process::Stdio::piped())
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let control_in = rig.stdin.take().unwrap();
-        let mut control_out = std::io::BufReader::new(rig.stdout.take().unwrap());
-        let mut path = String::new();
-        control_out.read_line(&mut path).unwrap();
-        let log = Arc::new(std::sync::Mutex::new(Vec::new()));
-        let sink = log.clone();
-        let err = rig.stderr.take().unwrap();
-        thread::spawn(move || {
-            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
-                sink.lock().unwrap().push(line);
-            }
-        });
-        let socket = scratch_path(name).with_extension("clock.sock");
-        let _ = std::fs::remove_file(&socket);
-        let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
-        Self { rig, control_in, control_out, path: path.trim().to_string(), log, socket, listener }
-    }
-
-    /// `host ARGS --port PTY --lockstep-clock SOCKET`, standard input piped.
-    fn host(&self, args: &[&str]) -> Running {
-        self.host_with(args, std::process::Stdio::piped())
-    }
-
-    fn host_with(&self, args: &[&str], stdin: std::process::Stdio) -> Running {
-        let mut all = args.to_vec();
-        all.extend(["--port", &self.path, "--lockstep-clock", self.socket.to_str().unwrap()]);
-        Running::start(&all, stdin)
-    }
-
-    /// Runs `host ARGS` against the rig to its end; its exit status and standard error.
-    fn run(&mut self, args: &[&str], stdin: std::process::Stdio) -> Output {
-        let mut running = self.host_with(args, stdin);
-        self.relay(&mut running, |_, _| {});
-        let (status, err, _) = running.finish();
-        Output { status, stdout: Vec::new(), stderr: err.into_bytes() }
-    }
-
-    /// Relays the host's time requests until it closes the socket (it exited); `at_step` is
-    /// called with the simulated time (ns) after every step, before the host hears of it.
-    /// Returns the simulated time of the host's last step.
-    fn relay(&mut self, host: &mut Running, mut at_step: impl FnMut(u64, &mut Running)) -> u64 {
-        use std::io::{BufRead, Write};
-        self.listener.set_nonblocking(true).unwrap();
-        let t0 = std::time::Instant::now();
-        let stream = loop {
-            match self.listener.accept() {
-                Ok((s, _)) => break s,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                    if host.child.try_wait().unwrap().is_some() {
-                        return 0; // exited before asking for time
-                    }
-                    assert!(t0.elapsed() < Duration::from_secs(120), "the host never connected");
-                    thread::sleep(Duration::from_millis(5));
-                }
-                Err(e) => panic!("accept: {e}"),
-            }
-        };
-        stream.set_nonblocking(false).unwrap();
-        // A hang guard: a host that stops asking for time has stopped reading the port (the rig's
-        // time advances only through its reads), e.g. blocked at a prompt (F2).
-        stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
-        let mut from_host = std::io::BufReader::new(stream.try_clone().unwrap());
-        let mut to_host = stream;
-        let mut now_ns = 0;
-        loop {
-            let mut step = String::new();
-            match from_host.read_line(&mut step) {
-                Ok(0) => return now_ns,
-                Ok(_) => {}
-                Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
-                    panic!(
-                        "the host stopped asking for time at {now_ns} ns (blocked, not reading the port): {:?}",
-                        host.seen
-                    )
-                }
-                Err(_) => return now_ns,
-            }
-            self.control_in.write_all(step.as_bytes()).and_then(|()| self.control_in.flush()).unwrap();
-            let mut at = String::new();
-            assert!(self.control_out.read_line(&mut at).unwrap() > 0, "the virtual rig ended: {:?}", self.log());
-            now_ns = at.split_whitespace().nth(1).and_then(|t| t.parse().ok()).expect("at <ns> <bytes>");
-            at_step(now_ns, host);
-            if to_host.write_all(at.as_bytes()).is_err() {
-                return now_ns;
-            }
-        }
-    }
-
-    fn log(&self) -> Vec<String> {
-        self.log.lock().unwrap().clone()
-    }
-
-    /// After the host has gone: one more step of rig time, so that bytes the host wrote just
-    /// before exiting (a `Stop` at the prompt, sent 0 s of rig time before the exit) are handled
-    /// rather than left in the pty, then waits (wall time, bounded) until the rig's log shows
-    /// `command` or the rig answered. Without it the check below raced the rig's reading.
-    fn settle(&mut self, command: &str) {
-        use std::io::{BufRead, Write};
-        if writeln!(self.control_in, "step {} 0", 5_000_000).and_then(|()| self.control_in.flush()).is_ok() {
-            let mut at = String::new();
-            let _ = self.control_out.read_line(&mut at);
-        }
-        let t0 = std::time::Instant::now();
-        while self.received(command).is_empty() && t0.elapsed() < Duration::from_secs(10) {
-            thread::sleep(Duration::from_millis(10));
-        }
-    }
-
-    /// Simulated times (s) at which the rig received `command`.
-    fn received(&self, command: &str) -> Vec<f64> {
-        let prefix = format!("virtual rig: received {command} (");
-        self.log()
-            .iter()
-            .filter(|l| l.starts_with(&prefix))
-            .filter_map(|l| l.rsplit(" at ").next()?.strip_suffix(" s")?.parse().ok())
-            .collect()
-    }
-}
-
-impl Drop for LockstepBench {
-    fn drop(&mut self) {
-        let _ = self.rig.kill();
-        let _ = self.rig.wait();
-        let _ = std::fs::remove_file(&self.socket);
-    }
-}
-
-const NS: u64 = 1_000_000_000;
 
 /// What issue 8 asks of the live path, through the `host` binary: `host virtual-rig` on a line
 /// as hostile as a real bench (a byte in a thousand lost both ways, a burst of garbage every
@@ -616,6 +345,142 @@ fn hostile_bench_through_the_host_binary_completes_and_replays_to_the_same_calib
     assert_eq!(live, replayed);
 }
 
+/// Issue 28: a trip the host never hears of. The host stalls 3 s mid-run (the rig hears nothing
+/// for longer than its 2 s link timeout and trips `HostLinkLost`), and the line loses both the
+/// `Fault` and the `RunStopped` of that trip. The 10 Hz `Motor` reports still say it (run tag 0,
+/// the host-link-lost bit): the host stops the session with one line naming the trip, exit 1,
+/// instead of recording the coast as data and exiting 0.
+#[test]
+fn a_trip_whose_fault_and_run_stopped_are_lost_is_seen_in_the_motor_reports() {
+    let mut bench = LockstepBench::start("lost-trip", &["--drop", "Fault:1", "--drop", "RunStopped:1"]);
+    let dir = scratch("lost-trip");
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let mut session = bench.host_with(
+        &["calibrate", "--sensor", "SN-TRIP", "--yes", "--duration", "8", "--rates-dps", "180"]
+            .into_iter()
+            .chain(["--out-dir", dir.to_str().unwrap(), "--db", &db])
+            .collect::<Vec<_>>(),
+        std::process::Stdio::null(),
+    );
+    let (log, stall) = (bench.log.clone(), bench.stall_ns.clone());
+    let mut start_ns = None;
+    let mut stalled = false;
+    bench.relay(&mut session, |now_ns, _| {
+        if start_ns.is_none() && log.lock().unwrap().iter().any(|l| l.starts_with("virtual rig: received Start")) {
+            start_ns = Some(now_ns);
+        }
+        // 4 s after the Start: the table at speed (2 s ramp), recording.
+        if !stalled && start_ns.is_some_and(|t| now_ns >= t + 4 * NS) {
+            stall.store(3 * NS, std::sync::atomic::Ordering::SeqCst);
+            stalled = true;
+        }
+    });
+    let (status, err, _) = session.finish();
+    let log = bench.log();
+    assert!(log.iter().any(|l| l == "virtual rig: dropped Fault #1"), "{log:?}");
+    assert!(log.iter().any(|l| l == "virtual rig: dropped RunStopped #1"), "{log:?}");
+    assert_eq!(status.code(), Some(1), "{err}");
+    let file = dir.join("pose1-p180dps.cap");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        format!(
+            "error: the rig's motor reports show the run ended by the rig (fault bits 0x04: HostLinkLost) during \
+             pose 1, +180.0 °/s (capture kept in {}); its Fault and RunStopped frames were lost",
+            file.display()
+        )
+    );
+    // The capture holds the run and the reports that show its end; no second run was started.
+    let cap = decode(&file);
+    let run = &cap.runs[0];
+    assert!(run.motor.iter().any(|(_, m)| m.faults == protocol::motor_faults::HOST_LINK_LOST), "{:?}", run.motor);
+    assert!(!dir.join("pose1-p90dps.cap").exists() && !dir.join("pose2-p180dps.cap").exists());
+}
+
+/// Issue 28: the same during the ramp-down after the host's own `Stop`: the host stalls 3 s, the
+/// rig trips `HostLinkLost` mid-ramp and its `Fault` and `RunStopped` are lost. A `Motor` report
+/// with run tag 0 used to count as the stop confirmed (exit 0); its fault bit now says the ramp
+/// ended in a trip.
+#[test]
+fn a_trip_during_the_ramp_down_whose_fault_is_lost_is_seen_in_the_motor_reports() {
+    let mut bench = LockstepBench::start("lost-trip-ramp", &["--drop", "Fault:1", "--drop", "RunStopped:1"]);
+    let dir = scratch("lost-trip-ramp");
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let mut session = bench.host_with(
+        &["calibrate", "--sensor", "SN-TRIP", "--yes", "--duration", "3", "--rates-dps", "180"]
+            .into_iter()
+            .chain(["--out-dir", dir.to_str().unwrap(), "--db", &db])
+            .collect::<Vec<_>>(),
+        std::process::Stdio::null(),
+    );
+    let (log, stall) = (bench.log.clone(), bench.stall_ns.clone());
+    let mut stop_ns = None;
+    let mut stalled = false;
+    bench.relay(&mut session, |now_ns, _| {
+        if stop_ns.is_none() && log.lock().unwrap().iter().any(|l| l.starts_with("virtual rig: received Stop")) {
+            stop_ns = Some(now_ns);
+        }
+        // 0.2 s into the 2 s ramp-down.
+        if !stalled && stop_ns.is_some_and(|t| now_ns >= t + NS / 5) {
+            stall.store(3 * NS, std::sync::atomic::Ordering::SeqCst);
+            stalled = true;
+        }
+    });
+    let (status, err, _) = session.finish();
+    let log = bench.log();
+    assert!(log.iter().any(|l| l == "virtual rig: dropped Fault #1"), "{log:?}");
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        format!(
+            "error: stopping pose 1, +180.0 °/s (capture kept in {}): the rig's motor reports show a trip (fault bits \
+             0x04: HostLinkLost) while ramping down; its Fault frame was lost",
+            dir.join("pose1-p180dps.cap").display()
+        )
+    );
+}
+
+/// Issue 28: a second Ctrl-C during the heartbeaten ramp-down is the operator insisting: the
+/// host leaves at once with one line saying what follows (the rig's link watchdog cuts the
+/// drive, 2 s after the last heartbeat), exit 1.
+#[test]
+fn a_second_interrupt_leaves_at_once() {
+    let mut bench = LockstepBench::start("sig-twice", &[]);
+    let dir = scratch("sig-twice");
+    let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
+    let mut session = bench.host_with(
+        &["calibrate", "--sensor", "SN-SIG", "--yes", "--rates-dps", "360", "--out-dir", dir.to_str().unwrap()]
+            .into_iter()
+            .chain(["--db", &db])
+            .collect::<Vec<_>>(),
+        std::process::Stdio::null(),
+    );
+    let log = bench.log.clone();
+    let mut start_ns = None;
+    let mut sent = 0;
+    bench.relay(&mut session, |now_ns, host| {
+        if start_ns.is_none() && log.lock().unwrap().iter().any(|l| l.starts_with("virtual rig: received Start")) {
+            start_ns = Some(now_ns);
+        }
+        // At speed (4 s of ramp to 360 °/s), then 0.5 s into the ramp-down.
+        let due = start_ns.map(|t| t + 5 * NS + sent * NS / 2);
+        if sent < 2 && due.is_some_and(|d| now_ns >= d) {
+            host.signal("INT");
+            sent += 1;
+            thread::sleep(Duration::from_millis(50));
+        }
+    });
+    let (status, err, _) = session.finish();
+    bench.settle("Stop");
+    bench.advance(5 * NS);
+    assert_eq!(status.code(), Some(1), "{err}");
+    assert_eq!(
+        err.lines().last().unwrap(),
+        "error: interrupted again: leaving without waiting for the table to stop (the rig cuts the drive 2 s after the last heartbeat)"
+    );
+    // What the operator was told: the rig cut the drive.
+    assert!(bench.log().iter().any(|l| l.starts_with("virtual rig: sent Fault HostLinkLost")), "{:?}", bench.log());
+}
+
 /// Where in the session a signal is sent.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum When {
@@ -625,16 +490,29 @@ enum When {
     MidRun,
 }
 
-/// Ctrl-C or SIGTERM sent to `host calibrate --port` (lockstep: see [`LockstepBench`]); returns
-/// the bench, the output directory, the host's standard error, and the simulated and wall time
-/// from the signal to the host's exit. The operator answers every prompt at once.
-fn signal_the_session(sig: &str, when: When) -> (LockstepBench, Scratch, String, f64, Duration) {
+/// Ctrl-C or SIGTERM sent to `host calibrate --port --rates-dps RATE` (lockstep: see
+/// [`LockstepBench`]); returns the bench, the output directory, the host's standard error, and
+/// the simulated time from the signal to the rig's receipt of `Stop` and from that `Stop` to the
+/// host's exit. The operator answers every prompt at once. After the host's exit the rig runs 5 s
+/// more of its time (longer than its 2 s link timeout), so a trip the host's exit would cause
+/// shows in its log.
+fn signal_the_session(sig: &str, when: When, rate: &str) -> (LockstepBench, Scratch, String, f64, f64) {
     use std::io::Write;
-    let name = format!("sig-{sig}-{when:?}");
+    let name = format!("sig-{sig}-{when:?}-{rate}");
     let mut bench = LockstepBench::start(&name, &[]);
     let dir = scratch(&name);
     let db = format!("sqlite:{}", dir.with_extension("records.sqlite").display());
-    let mut host = bench.host(&["calibrate", "--sensor", "SN-SIG", "--out-dir", dir.to_str().unwrap(), "--db", &db]);
+    let mut host = bench.host(&[
+        "calibrate",
+        "--sensor",
+        "SN-SIG",
+        "--rates-dps",
+        rate,
+        "--out-dir",
+        dir.to_str().unwrap(),
+        "--db",
+        &db,
+    ]);
     let mut stdin = host.child.stdin.take().unwrap();
     let log = bench.log.clone();
     let mut prompts = 0;
@@ -659,8 +537,7 @@ fn signal_the_session(sig: &str, when: When) -> (LockstepBench, Scratch, String,
             host.signal(sig);
             signalled = Some((now_ns, std::time::Instant::now()));
             // Lets the handler thread run before the host hears of the next step, so the
-            // simulated figure measures the host's reaction rather than the scheduler's (it has
-            // 0.7 s of rig time, 140 steps, of margin; the Stop-to-exit figure has none to need).
+            // simulated figure measures the host's reaction rather than the scheduler's.
             thread::sleep(Duration::from_millis(50));
         }
     });
@@ -668,68 +545,72 @@ fn signal_the_session(sig: &str, when: When) -> (LockstepBench, Scratch, String,
     let (signal_ns, signal_wall) = signalled.unwrap_or_else(|| panic!("never signalled: {err}"));
     let wall = signal_wall.elapsed();
     bench.settle("Stop");
-    let sim_s = (end_ns - signal_ns) as f64 * 1e-9;
-    eprintln!("SIG{sig} {when:?}: the host exited {sim_s:.3} s of rig time and {wall:.2?} of wall time after it");
+    bench.advance(5 * NS);
     assert_eq!(status.code(), Some(1), "{err}");
-    // Within 1 s of the rig's time; within 5 s of wall time, however loaded the machine.
-    assert!(sim_s < 1.0, "SIG{sig} {when:?}: {sim_s} s");
-    assert!(wall < Duration::from_secs(5), "SIG{sig} {when:?}: {wall:?}");
-    // The rig received Stop after the signal.
+    // The rig received Stop after the signal, within 1 s of its time.
     let stops = bench.received("Stop");
-    assert!(
-        stops.iter().any(|t| *t >= signal_ns as f64 * 1e-9 - 0.01),
-        "SIG{sig} {when:?}: Stop at {stops:?} s, signal at {} s: {:?}",
-        signal_ns as f64 * 1e-9,
-        bench.log()
-    );
-    // From the Stop to the exit the host only drains what the rig still sends: 0.3 s of rig time
-    // mid-run (`INTERRUPT_DRAIN`), none at the prompt. This figure, unlike the one from the
-    // signal, does not depend on when the scheduler runs the host's signal-handling thread.
-    let stop_s = stops.last().copied().unwrap_or_default();
+    let signal_s = signal_ns as f64 * 1e-9;
+    let first_stop = stops.iter().copied().find(|t| *t >= signal_s - 0.01);
+    let stop_s = first_stop
+        .unwrap_or_else(|| panic!("SIG{sig} {when:?}: Stop at {stops:?} s, signal at {signal_s} s: {:?}", bench.log()));
+    let reaction_s = stop_s - signal_s;
     let drained_s = end_ns as f64 * 1e-9 - stop_s;
-    let expected_s = if when == When::MidRun { 0.300 } else { 0.0 };
-    assert!((drained_s - expected_s).abs() < 0.006, "SIG{sig} {when:?}: exit {drained_s:.3} s after the Stop");
-    (bench, dir, err, sim_s, wall)
+    eprintln!(
+        "SIG{sig} {when:?} at {rate} °/s: Stop {reaction_s:.3} s of rig time after the signal, exit {drained_s:.3} s after the Stop ({wall:.2?} of wall time after the signal)"
+    );
+    assert!(reaction_s < 1.0, "SIG{sig} {when:?}: {reaction_s} s");
+    // However loaded the machine (the 4 s ramp-down included).
+    assert!(wall < Duration::from_secs(30), "SIG{sig} {when:?}: {wall:?}");
+    // No trip after the host's stop, the 5 s after its exit included (issue 28).
+    let trips: Vec<String> = bench.log().into_iter().filter(|l| l.starts_with("virtual rig: sent Fault")).collect();
+    assert_eq!(trips, Vec::<String>::new(), "SIG{sig} {when:?} at {rate} °/s");
+    (bench, dir, err, reaction_s, drained_s)
 }
 
-/// F3/F9: Ctrl-C, SIGTERM or SIGHUP at the mounting prompt: Stop sent, exit 1 within 1 s (rig
-/// time) with one line, and no run was started.
+/// F3/F9: Ctrl-C, SIGTERM or SIGHUP at the mounting prompt: Stop sent, exit 1 at once (the motor
+/// is off between runs) with one line, and no run was started.
 #[test]
 fn a_signal_at_the_prompt_through_the_host_binary_stops_within_a_second() {
     for sig in ["INT", "TERM", "HUP"] {
-        let (bench, dir, err, _, _) = signal_the_session(sig, When::AtThePrompt);
+        let (bench, dir, err, _, drained_s) = signal_the_session(sig, When::AtThePrompt, "180");
         let last = err.lines().last().unwrap();
         assert_eq!(last, "error: interrupted at the prompt; the rig was sent Stop", "SIG{sig}: {err}");
+        assert!(drained_s.abs() < 0.006, "SIG{sig}: the host leaves as it sends Stop, not {drained_s} s later");
         assert_eq!(bench.received("Start"), Vec::<f64>::new(), "SIG{sig}");
         assert!(!dir.join("pose1-p180dps.cap").exists(), "SIG{sig}");
     }
 }
 
-/// F3/F9: Ctrl-C, SIGTERM and SIGHUP mid-run: Stop sent, exit 1 within 1 s (rig time), and the capture
-/// so far intact: every byte decodes, no frame missing, no fault, the table was ramping down
-/// when the host left, and `host inspect` reads it.
+/// F3/F9, issue 28: Ctrl-C, SIGTERM and SIGHUP mid-run at 180 °/s, and SIGINT at 360 °/s (the
+/// longest ramp-down, 4 s): Stop sent, then the host heartbeats the ramp-down until the rig
+/// reports the table stopped, so no `HostLinkLost` trip follows (before issue 28 the host left
+/// 0.3 s after the Stop and the rig cut the drive 2 s later, mid-ramp). Exit 1, and the capture
+/// intact: every byte decodes, no frame missing, no fault, the run ends with `RunStopped`, and
+/// `host inspect` reads it.
 #[test]
 fn a_signal_mid_run_through_the_host_binary_stops_and_keeps_the_capture() {
-    for sig in ["INT", "TERM", "HUP"] {
-        let (_bench, dir, err, _, _) = signal_the_session(sig, When::MidRun);
+    for (sig, rate) in [("INT", "180"), ("TERM", "180"), ("HUP", "180"), ("INT", "360")] {
+        let (_bench, dir, err, _, drained_s) = signal_the_session(sig, When::MidRun, rate);
+        let file = dir.join(format!("pose1-p{rate}dps.cap"));
         // The answered prompt has no newline of its own (a terminal echoes the operator's Enter).
         let last = err.lines().last().unwrap();
-        let expected = format!(
-            "error: interrupted during pose 1, +180.0 °/s (capture kept in {})",
-            dir.join("pose1-p180dps.cap").display()
-        );
+        let expected = format!("error: interrupted during pose 1, +{rate}.0 °/s (capture kept in {})", file.display());
         assert!(last.ends_with(&expected), "{err}");
-        let file = dir.join("pose1-p180dps.cap");
         let cap = decode(&file);
         // Every byte a frame, no frame missing (the few samples before RunStarted belong to no run).
         assert!(cap.loss.errors.is_empty() && cap.loss.seq_gaps.is_empty(), "SIG{sig}: {:?}", cap.loss);
         assert_eq!(cap.runs.len(), 1);
         let run = &cap.runs[0];
         assert!(run.faults.is_empty() && cap.faults.is_empty(), "SIG{sig}: {:?}", run.faults);
-        // 5 s after the Start: 2 s of ramp and 3 s at speed, 800 Hz.
+        assert!(run.stopped, "SIG{sig} {rate}: the capture ends with the run's RunStopped");
+        // The ramp-down at 90 °/s² (2 s from 180 °/s, 4 s from 360 °/s), 50 ms of stillness.
+        let ramp_s = rate.parse::<f64>().unwrap() / 90.0;
+        assert!(
+            drained_s > ramp_s && drained_s < ramp_s + 0.5,
+            "SIG{sig} {rate}: exit {drained_s:.3} s after the Stop"
+        );
+        // 5 s after the Start: 2 s of ramp and 3 s at speed (180 °/s), 800 Hz.
         assert!(run.samples.len() > 3_000, "SIG{sig}: {} samples", run.samples.len());
-        let setpoints: Vec<i32> = run.motor.iter().map(|(_, m)| m.setpoint_cps).collect();
-        assert!(setpoints.last() < setpoints.iter().max(), "SIG{sig}: the ramp-down began: {setpoints:?}");
         let o = host(&["inspect", file.to_str().unwrap()]);
         assert_eq!(o.status.code(), Some(0), "SIG{sig}: {}", String::from_utf8_lossy(&o.stderr));
         assert!(!String::from_utf8_lossy(&o.stdout).contains("FAULT"));

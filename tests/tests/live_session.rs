@@ -241,9 +241,11 @@ fn f3_ctrl_c_at_the_prompt_stops_within_a_second() {
     assert_eq!(b.stops_sent(), 1);
 }
 
-/// F3/F9: an interrupt mid-run (Ctrl-C, SIGTERM and SIGHUP set the same flag): Stop sent and the
-/// host gone within 1 s of the rig's time, the capture holding the run up to the interrupt and
-/// the start of the ramp-down.
+/// F3/F9, issue 28: an interrupt mid-run (Ctrl-C, SIGTERM and SIGHUP set the same flag): Stop
+/// sent once, and the host heartbeats the ramp-down (2 s from 180 °/s) until the rig reports the
+/// table stopped, then leaves: the capture holds the run up to the interrupt, the ramp-down and
+/// its RunStopped, and no fault (a host gone before the table stopped made the rig trip
+/// HostLinkLost mid-ramp).
 #[test]
 fn f9_interrupt_mid_run_sends_stop_and_keeps_the_capture() {
     // At 5 s the table is at speed.
@@ -256,11 +258,15 @@ fn f9_interrupt_mid_run_sends_stop_and_keeps_the_capture() {
         .expect_err("interrupted");
     assert!(format!("{e:#}").contains("interrupted during"), "{e:#}");
     let gone_at = b.clock.now();
-    assert!(gone_at < Duration::from_secs(6), "host gone at {gone_at:?}, interrupt at 5 s");
+    assert!(
+        gone_at > Duration::from_secs(7) && gone_at < Duration::from_millis(7_500),
+        "host gone at {gone_at:?}, interrupt at 5 s, 2 s of ramp-down"
+    );
     assert_eq!(b.stops_sent(), 1);
     let cap = capture::decode(&std::fs::read(&path).unwrap());
     assert!(cap.loss.errors.is_empty() && cap.loss.seq_gaps.is_empty(), "{:?}", cap.loss);
     let r = &cap.runs[0];
+    assert!(r.stopped && r.faults.is_empty() && cap.faults.is_empty(), "{:?} {:?}", r.faults, cap.faults);
     assert!(r.samples.len() > 3_000, "{} samples kept", r.samples.len());
     // The rig received the Stop: its setpoint ramps down in the recorded motor status.
     let setpoints: Vec<i32> = r.motor.iter().map(|(_, m)| m.setpoint_cps).collect();

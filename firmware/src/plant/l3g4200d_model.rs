@@ -29,6 +29,9 @@ pub enum BusFault {
     Error,
     /// MISO stuck low: the chip works and sees every transfer, the MCU reads only zeros.
     MisoStuckLow,
+    /// MISO stuck high (shorted to 3.3 V, or the chip gone and the line pulled up): the MCU
+    /// reads only 0xFF.
+    MisoStuckHigh,
 }
 
 /// The error the model's bus reports under [`BusFault::Error`].
@@ -249,14 +252,14 @@ impl SpiDevice for L3g4200dModel {
     fn transaction(&mut self, operations: &mut [Operation<'_, u8>]) -> Result<(), BusError> {
         // CS falls: a new command byte is expected.
         self.phase = Phase::Command;
-        let stuck = self.fault == BusFault::MisoStuckLow;
+        let stuck = match self.fault {
+            BusFault::MisoStuckLow => Some(0x00),
+            BusFault::MisoStuckHigh => Some(0xFF),
+            _ => None,
+        };
         let mut clock = |mosi: u8| {
             let miso = self.clock(mosi);
-            if stuck {
-                0
-            } else {
-                miso
-            }
+            stuck.unwrap_or(miso)
         };
         for op in operations.iter_mut() {
             match op {

@@ -102,6 +102,11 @@ impl Plant {
         self.volts = cmd.enable.then(|| f64::from(cmd.duty()) * self.motor.params.vbus_v);
     }
 
+    /// Whether the bridge drives the motor now (enabled), as last set by [`Self::set_drive`].
+    pub fn driven(&self) -> bool {
+        self.volts.is_some()
+    }
+
     /// Sensor-table angle θ2: the 1:1 magnetic gears turn it with the base.
     pub fn theta2_rad(&self) -> f64 {
         self.motor.theta_rad + self.theta2_offset_rad

@@ -90,6 +90,12 @@ pub const DEFAULT_INDEX_PLATE_WIDTH_DEG: f64 = 4.0;
 /// Rate of [`SimConfig::standard`]: 0.5 Hz, the paper's first run (EXCITER.md).
 pub const STANDARD_RATE_DPS: f64 = 180.0;
 
+/// The longest simulated run, s. Engineering judgement: 6 h is enough for an Allan deviation to
+/// τ ≈ 2 000 s with ten clusters (bias instability of a MEMS gyro lies at τ of 10-1 000 s), and
+/// writes ≈ 400 MB (the stream's ≈ 18.5 kB/s, protocol/README.md "Link budget"); beyond it a typo
+/// (`--duration 1e12`) would fill the disk.
+pub const MAX_RUN_S: f64 = 21_600.0;
+
 impl SimConfig {
     /// Pose 1 then pose 2, each at +180 °/s (0.5 Hz) for `duration_s`, datasheet noise, default
     /// gyro settings, no effects.
@@ -146,7 +152,11 @@ impl SimConfig {
                 &format!("runs[{i}].rate_dps"),
                 &format!("must be within ±{max_dps} °/s, the rig's limit (0: a static run, for noise figures)"),
             )?;
-            check(r.duration_s.is_finite() && r.duration_s > 0.0, &format!("runs[{i}].duration_s"), "must be > 0")?;
+            check(
+                r.duration_s.is_finite() && r.duration_s > 0.0 && r.duration_s <= MAX_RUN_S,
+                &format!("runs[{i}].duration_s"),
+                &format!("must be > 0 and at most {MAX_RUN_S} s (6 h: ≈ 400 MB of capture per run)"),
+            )?;
         }
         let e = &self.effects;
         if let Some(f) = e.filter_delay {
