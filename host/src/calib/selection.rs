@@ -117,12 +117,18 @@ fn in_situation<R>(data: &LoopData, current: &[Effect], evidence: &Evidence, f: 
 }
 
 /// Whether the loop would try `effect` on top of `current` had the residual pointed at it (every
-/// kind of evidence): what it has not tried, no test has ruled out. Earth rotation is tried
-/// without evidence wherever the runs separate it (`closure`).
+/// kind of evidence, and the phase a 1× harmonic first brings in: a delay and an index offset
+/// where the runs separate them, their combined phase where not): what it would not try, no
+/// test has ruled out. Earth rotation is tried without evidence wherever the runs separate it
+/// (`closure`).
 pub fn tried(data: &LoopData, current: &[Effect], effect: Effect) -> bool {
     let all = Evidence { phase: true, drift: true, rate_scale: true, orders: [true; MAX_ORDER + 1] };
-    (effect.is_earth() && separates_delay_and_index(data))
-        || in_situation(data, current, &all, |s| effect.behaviour(|b| b.candidate(s)))
+    let phase: &[Effect] =
+        if separates_delay_and_index(data) { &[Effect::Delay, Effect::IndexOffset] } else { &[Effect::Phase] };
+    let mut after_phase = current.to_vec();
+    after_phase.extend(phase.iter().filter(|e| !current.contains(e)));
+    let fires = |model: &[Effect]| in_situation(data, model, &all, |s| effect.behaviour(|b| b.candidate(s)));
+    (effect.is_earth() && separates_delay_and_index(data)) || fires(current) || fires(&after_phase)
 }
 
 /// The candidates applicable to a model, among those the evidence points to: every effect of
