@@ -269,6 +269,22 @@ fn a_random_walk_a_curve_took_first_goes_to_the_free_drift() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
+/// A random walk three times the simulator's default (0.006 °/s/√s) leaves run offsets between
+/// 40-s knots; 20-s knots take their place (scored in their place, as the free drift is on a
+/// curve), and the result is at the floor within 3σ. (Before, flagged on both seeds of the
+/// trust bench's cell.)
+#[test]
+fn finer_knots_replace_coarser_ones_that_leave_a_random_walk() {
+    let (runs, truth) =
+        capture_with(1, &[180.0, 90.0, -180.0], BAR_DURATION_S, &["bias_random_walk=0.006"], FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let effects = r.effects();
+    assert!(effects.iter().any(|e| matches!(e, Effect::DriftKnots(s) if *s < 40)), "{}", r.summary());
+    assert_eq!(effects.iter().filter(|e| e.is_free_drift()).count(), 1, "{effects:?}");
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk 3×");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
 /// A candidates' pass sums only the pairs a test needs (the model's columns with every column,
 /// each candidate's with its own): those are the full pass's sums bit for bit, the rest are 0.
 /// Every catalogued candidate of a model with a delay, the free drift's sparse knots among them.

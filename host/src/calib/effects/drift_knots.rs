@@ -3,7 +3,7 @@
 use super::terms::{
     AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
 };
-use super::{Behaviour, Layout};
+use super::{Behaviour, Effect, Layout};
 
 /// Offsets that wander with no assumed shape (a rate random walk on top of a warm-up that lags
 /// the die temperature): linear between knots about this many seconds apart, one continuous
@@ -75,8 +75,11 @@ impl Behaviour for DriftKnots {
     }
 
     /// On top of a drift curve whose residual still drifts (a random walk, a warm-up that lags
-    /// the die), or as a drift model of its own.
+    /// the die), as a drift model of its own, or in place of coarser knots whose residual still
+    /// drifts (a random walk three times the default left run offsets between 40-s knots,
+    /// flagged on both seeds of the trust bench's default-design cell). It replaces what it
+    /// holds (`selection::replaced_by_free_drift`).
     fn candidate(&self, s: &Situation) -> bool {
-        s.evidence.drift && !s.has_free_drift()
+        s.evidence.drift && !s.current.iter().any(|e| matches!(e, Effect::DriftKnots(sp) if *sp <= self.0))
     }
 }
