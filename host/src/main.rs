@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use host::calib;
 use host::capture::{self, Capture, Samples as _};
 use host::export;
+use host::files;
 use host::geometry::Pose;
 use host::link::{self, Link};
 use host::provenance::{self, Identity, Provenance, SessionManifest};
@@ -100,6 +101,10 @@ enum Cmd {
         /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
         #[arg(long)]
         db: Option<String>,
+        /// Store the result in no records database (the files are still written): for demos,
+        /// trials and tests.
+        #[arg(long, conflicts_with = "db")]
+        no_db: bool,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -378,6 +383,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             operator,
             rig,
             db,
+            no_db,
             yes,
             latitude_deg,
             consider,
@@ -389,15 +395,20 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 considered.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
             }
             // Resolved first: a wrong --db must not cost a session.
-            let db = records::DbSpec::resolve(db.as_deref())?;
+            let db = if no_db { None } else { Some(records::DbSpec::resolve(db.as_deref())?) };
+            // Held until the process ends: a second calibration into this directory is refused
+            // before it records or computes anything.
+            let _lock = files::DirLock::acquire(&out_dir)?;
             let identity = Identity { sensor_serial: sensor, operator, rig };
             let (files, identity, started) = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
                     // Checked now so the operator hears of it before the runs; the record is
                     // still attempted (and the files kept) at the end.
-                    if let Err(e) = db.open() {
-                        eprintln!("warning: the records database is not usable now ({e:#}); the session runs anyway");
+                    if let Some(Err(e)) = db.as_ref().map(|db| db.open()) {
+                        note(&format!(
+                            "warning: the records database is not usable now ({e:#}); the session runs anyway"
+                        ));
                     }
                     let serial = identity.sensor_serial.clone().unwrap_or_default();
                     let mut manifest = start_manifest(&out_dir, identity)?;
@@ -420,7 +431,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
                     Some(m) => {
                         for w in m.verify(&replay)? {
-                            eprintln!("warning: {w}");
+                            note(&format!("warning: {w}"));
                         }
                         (replay, identity.or(m.identity), Some(m.started_utc))
                     }
@@ -428,7 +439,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
             };
             let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-            calibrate(&files, &out_dir, truth.as_deref(), identity, started, &db, &opts)
+            calibrate(&files, &out_dir, truth.as_deref(), identity, started, db.as_ref(), &opts)
         }
         Cmd::Noise { capture, cal, json } => {
             let cap = read_capture(&capture)?;
@@ -436,9 +447,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let report = host::allan::capture_noise(&cap, cal.as_ref())
                 .map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
             } else {
-                print!("{report}");
+                files::stdout(&report.to_string())?;
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -451,10 +462,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let rendered = e.render(format)?;
             match out {
                 Some(path) => {
-                    fs::write(&path, rendered).with_context(|| format!("cannot write {}", path.display()))?;
-                    eprintln!("wrote {}", path.display());
+                    files::write_atomic(&path, rendered)?;
+                    note(&format!("wrote {}", path.display()));
                 }
-                None => print!("{rendered}"),
+                None => files::stdout(&rendered)?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -496,9 +507,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 &mut link,
                 protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v),
             )?;
-            eprintln!(
+            note(&format!(
                 "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
-            );
+            ));
             Ok(ExitCode::SUCCESS)
         }
         Cmd::Inspect { files, json } => {
@@ -506,9 +517,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 let cap = read_capture(f)?;
                 let report = host::inspect::inspect(&f.display().to_string(), &cap);
                 if json {
-                    println!("{}", serde_json::to_string_pretty(&report)?);
+                    files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
                 } else {
-                    print!("{report}");
+                    files::stdout(&report.to_string())?;
                 }
             }
             Ok(ExitCode::SUCCESS)
@@ -529,14 +540,13 @@ fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
         RecordsCmd::Summary { html } => {
             let latest = store::latest_per_sensor(c.as_mut())?;
             if let Some(path) = html {
-                fs::write(&path, views::summary_html(&latest))
-                    .with_context(|| format!("cannot write {}", path.display()))?;
-                eprintln!("wrote {}", path.display());
+                files::write_atomic(&path, views::summary_html(&latest))?;
+                note(&format!("wrote {}", path.display()));
             }
             views::summary(&latest)
         }
     };
-    print!("{text}");
+    files::stdout(&text)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -607,7 +617,7 @@ fn record(
             link.record_to(None)?;
         }
     }
-    eprintln!("saved {}", out.display());
+    note(&format!("saved {}", out.display()));
     if interrupted.load(Ordering::SeqCst) {
         bail!("interrupted; capture so far kept in {}", out.display());
     }
@@ -639,7 +649,7 @@ fn calibrate(
     truth_path: Option<&Path>,
     identity: Identity,
     session_started: Option<String>,
-    db: &records::DbSpec,
+    db: Option<&records::DbSpec>,
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
     let mut caps = Vec::new();
@@ -673,14 +683,14 @@ fn calibrate(
             }
         }
         let l = &cap.loss;
-        eprintln!(
+        note(&format!(
             "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
             f.display(),
             cap.runs.len(),
             l.bytes,
             l.frames_missing(),
             l.bytes_skipped()
-        );
+        ));
         if let Some(h) = cap.hello.filter(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
             bail!(
                 "{} was recorded with protocol v{}, this host reads v{}",
@@ -697,15 +707,15 @@ fn calibrate(
             );
         }
         if cap.loss.hello_assumed {
-            eprintln!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display());
+            note(&format!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display()));
         }
         for (t, fault) in &cap.faults {
-            eprintln!(
+            note(&format!(
                 "{}: the rig reported {:?} outside any run at {:.3} s",
                 f.display(),
                 fault.fault,
                 *t as f64 * 1e-6
-            );
+            ));
         }
         caps.push((digest, cap));
     }
@@ -719,29 +729,23 @@ fn calibrate(
         runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
-    print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
     let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
-    if let Some(n) = &noise {
-        let mut text = n.to_string();
-        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
-        print!("\nNoise figures:\n{text}");
-    }
+    // Files and the record first, the summary last: a closed or full standard output must not
+    // cost the result.
     let json = out_dir.join("calibration.json");
     let mut value = prov.attach(serde_json::to_value(lr.final_report())?);
     if let (Some(n), Some(obj)) = (&noise, value.as_object_mut()) {
         obj.insert("noise".into(), serde_json::to_value(n)?);
     }
     let json_text = serde_json::to_string_pretty(&value)?;
-    fs::write(&json, &json_text).with_context(|| format!("cannot write {}", json.display()))?;
+    files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
-    fs::write(&loop_json, serde_json::to_string(&lr)?)
-        .with_context(|| format!("cannot write {}", loop_json.display()))?;
-    let html = calib::write_report(out_dir, &lr)
+    files::write_atomic(&loop_json, serde_json::to_string(&lr)?)?;
+    let html = write_report(out_dir, &lr, &prov, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
-    prov.insert_into_report(&html, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())?;
-    eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
+    note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",
         calib::Verdict::UnexplainedStructure if lr.unvouched.is_some() => "not vouched for",
@@ -749,14 +753,60 @@ fn calibrate(
     };
     let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
     rec.noise = noise.iter().flat_map(|n| &n.axes).map(records::NoiseRow::from).collect();
-    match records::store_record(db, &rec) {
-        Ok(id) => eprintln!("recorded as {id} in {db}"),
-        Err(e) => bail!("the calibration is saved in {} but was not recorded in {db}: {e:#}", out_dir.display()),
+    let recorded = match db {
+        None => {
+            note("not recorded (--no-db)");
+            Ok(())
+        }
+        Some(db) => match records::store_record(db, &rec) {
+            Ok(id) => {
+                note(&format!("recorded as {id} in {db}"));
+                Ok(())
+            }
+            Err(e) => Err(anyhow::anyhow!(
+                "the calibration is saved in {} but was not recorded in {db}: {e:#}",
+                out_dir.display()
+            )),
+        },
+    };
+    let mut summary = format!("{prov}\n{}", lr.summary());
+    if let Some(n) = &noise {
+        let mut text = n.to_string();
+        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
+        summary.push_str(&format!("\nNoise figures:\n{text}"));
     }
+    files::stdout(&summary)?;
+    recorded?;
     Ok(match lr.verdict() {
         calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
         calib::Verdict::UnexplainedStructure => ExitCode::from(3),
     })
+}
+
+/// Writes `out_dir/report.html`, with the provenance block and `extra` under its title, and its
+/// figures `report-figN.svg`. The loop's report is drawn into a private temporary directory, the
+/// page completed in memory, and every file renamed into `out_dir` whole.
+fn write_report(out_dir: &Path, lr: &calib::LoopReport, prov: &Provenance, extra: &str) -> Result<PathBuf> {
+    let tmp = tempfile::Builder::new().prefix(".report.").tempdir_in(out_dir)?;
+    let drawn = calib::write_report(tmp.path(), lr)?;
+    let page = fs::read_to_string(&drawn)?;
+    let html = out_dir.join("report.html");
+    for svg in fs::read_dir(tmp.path())? {
+        let svg = svg?.path();
+        if svg != drawn {
+            let name = svg.file_name().context("a figure without a name")?;
+            files::write_atomic(&out_dir.join(name), fs::read(&svg)?)?;
+        }
+    }
+    files::write_atomic(&html, prov.into_report(&page, extra))?;
+    Ok(html)
+}
+
+/// An informational line on standard error. Not `eprintln!`, which panics when standard error
+/// is closed: a line nobody can read must not fail a calibration whose files are written.
+fn note(line: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{line}");
 }
 
 /// The truth of a simulated capture: `--truth`, or `x.truth.json` beside a single `x.cap`.
@@ -768,7 +818,7 @@ fn load_truth(files: &[PathBuf], explicit: Option<&Path>) -> Result<Option<sim::
     };
     let text = fs::read_to_string(&path).with_context(|| format!("cannot read truth {}", path.display()))?;
     let truth = serde_json::from_str(&text).with_context(|| format!("{} is not a simulation truth", path.display()))?;
-    eprintln!("comparing with the simulated truth in {}", path.display());
+    note(&format!("comparing with the simulated truth in {}", path.display()));
     Ok(Some(truth))
 }
 
@@ -785,7 +835,7 @@ fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>)
     let cal = load_calibration(cal_path)?;
     if let Some(c) = counts {
         let w = cal.apply(c);
-        println!("{:.4},{:.4},{:.4}", w[0], w[1], w[2]);
+        files::stdout(&format!("{:.4},{:.4},{:.4}\n", w[0], w[1], w[2]))?;
         return Ok(ExitCode::SUCCESS);
     }
     let path = capture_path.expect("clap requires --counts or --capture");
@@ -822,7 +872,7 @@ fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {
     let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file))
         .with_context(|| format!("writing {}", out.display()))?;
     let tp = truth_path(out);
-    fs::write(&tp, serde_json::to_string_pretty(&truth)?).with_context(|| format!("cannot write {}", tp.display()))?;
-    eprintln!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display());
+    files::write_atomic(&tp, serde_json::to_string_pretty(&truth)?)?;
+    note(&format!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display()));
     Ok(ExitCode::SUCCESS)
 }

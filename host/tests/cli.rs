@@ -4,7 +4,7 @@
 use std::process::{Command, Output};
 
 fn host(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
+    host_command().args(args).output().expect("host runs")
 }
 
 fn stderr(o: &Output) -> String {
@@ -494,4 +494,12 @@ fn duplicate_runs_are_refused_naming_both() {
             a.display()
         )
     );
+}
+
+/// `host`, with the records database's default kept out of the user's data folder: a run
+/// without `--db` records under the temporary directory, never in ~/.local/share.
+fn host_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host"));
+    c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
+    c
 }

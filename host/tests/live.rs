@@ -12,7 +12,7 @@ use std::thread;
 use std::time::Duration;
 
 fn host(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
+    host_command().args(args).output().expect("host runs")
 }
 
 /// A test's scratch directory under the temp dir, with the files named after it beside it (its
@@ -225,7 +225,7 @@ struct Running {
 impl Running {
     fn start(args: &[&str], stdin: std::process::Stdio) -> Self {
         use std::io::BufRead;
-        let mut child = Command::new(env!("CARGO_BIN_EXE_host"))
+        let mut child = host_command()
             .args(args)
             .stdin(stdin)
             .stdout(std::process::Stdio::null())
@@ -306,7 +306,7 @@ fn end_of_input_at_the_prompt_is_an_abort() {
 /// Starts `host virtual-rig ARGS` and returns it with the pty path it prints first.
 fn spawn_virtual_rig(args: &[&str]) -> (std::process::Child, String) {
     use std::io::BufRead;
-    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+    let mut rig = host_command()
         .arg("virtual-rig")
         .args(args)
         .stdout(std::process::Stdio::piped())
@@ -377,7 +377,7 @@ struct LockstepBench {
 impl LockstepBench {
     fn start(name: &str, args: &[&str]) -> Self {
         use std::io::BufRead;
-        let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+        let mut rig = host_command()
             .args(["virtual-rig", "--lockstep"])
             .args(args)
             .stdin(std::process::Stdio::piped())
@@ -809,4 +809,12 @@ fn max_z_like_check_py(json: &str, m_true: &[[f64; 3]; 3]) -> f64 {
         });
     }
     z.into_iter().map(|v| if v.is_nan() { f64::INFINITY } else { v }).fold(0.0, f64::max)
+}
+
+/// `host`, with the records database's default kept out of the user's data folder: a run
+/// without `--db` records under the temporary directory, never in ~/.local/share.
+fn host_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host"));
+    c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
+    c
 }
