@@ -739,6 +739,9 @@ fn calibrate(
     if let (Some(n), Some(obj)) = (&noise, value.as_object_mut()) {
         obj.insert("noise".into(), serde_json::to_value(n)?);
     }
+    if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
+        obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
+    }
     let json_text = serde_json::to_string_pretty(&value)?;
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
@@ -781,6 +784,20 @@ fn calibrate(
         calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
         calib::Verdict::UnexplainedStructure => ExitCode::from(3),
     })
+}
+
+/// The fitted g-sensitivity of the final model, row = gyro axis, column = package axis of the
+/// specific force, °/s per g; `None` when the model does not hold it. Read from the effect's
+/// reported parameters, `g-sensitivity along package K, A` (calib's `GSensitivity::reported`).
+fn g_sensitivity(lr: &calib::LoopReport) -> Option<[[f64; 3]; 3]> {
+    use calib::axes::AXES;
+    let params = &lr.steps.last()?.effect_params;
+    let find = |a: usize, k: usize| {
+        let name = format!("g-sensitivity along package {}, {}", AXES[k], AXES[a]);
+        params.iter().find(|p| p.name == name).map(|p| p.estimate.value)
+    };
+    let rows: Option<Vec<[f64; 3]>> = (0..3).map(|a| Some([find(a, 0)?, find(a, 1)?, find(a, 2)?])).collect();
+    rows.map(|r| [r[0], r[1], r[2]])
 }
 
 /// Writes `out_dir/report.html`, with the provenance block and `extra` under its title, and its

@@ -503,3 +503,52 @@ fn host_command() -> Command {
     c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
     c
 }
+
+/// A fitted g-sensitivity leaves the loop: into calibration.json (°/s per g, row = gyro axis)
+/// and from there into Kalibr's A; without one, calibration.json has no such key.
+#[test]
+fn a_fitted_g_sensitivity_reaches_calibration_json_and_the_kalibr_export() {
+    let tmp = scratch("gsens");
+    let dir = tmp.path();
+    let cap = dir.join("g.cap");
+    let o = host(&[
+        "simulate",
+        "--out",
+        cap.to_str().unwrap(),
+        "--seed",
+        "3",
+        "--duration",
+        "12",
+        "--rates-dps",
+        "180,90",
+        "--effect",
+        "g_sensitivity=0.05",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = dir.join("cal");
+    let o = host(&["calibrate", "--replay", cap.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let cal = out.join("calibration.json");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+    // The loop's own figure for gyro y from gravity along package z (loop.json's final step).
+    let lr: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("loop.json")).unwrap()).unwrap();
+    let steps = lr["steps"].as_array().unwrap();
+    let params = steps.last().unwrap()["effect_params"].as_array().unwrap();
+    let fitted = |name: &str| params.iter().find(|p| p["name"] == name).unwrap()["value"].as_f64().unwrap();
+    let g = &v["g_sensitivity_dps_per_g"];
+    assert_eq!(g[1][2].as_f64().unwrap(), fitted("g-sensitivity along package z, y"), "{g}");
+    let g00 = fitted("g-sensitivity along package x, x");
+    assert_eq!(g[0][0].as_f64().unwrap(), g00);
+    let o = host(&["export", "--cal", cal.to_str().unwrap(), "--format", "kalibr"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let yaml = String::from_utf8_lossy(&o.stdout);
+    let a00 = g00 * std::f64::consts::PI / 180.0 / 9.80665;
+    assert!(yaml.contains(&format!("\n  A:\n  - - {a00}\n")), "{yaml}");
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/demo.cap");
+    let plain = dir.join("plain");
+    let o = host(&["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", plain.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(plain.join("calibration.json")).unwrap()).unwrap();
+    assert!(v.get("g_sensitivity_dps_per_g").is_none());
+}
