@@ -105,6 +105,10 @@ enum Cmd {
         /// trials and tests.
         #[arg(long, conflicts_with = "db")]
         no_db: bool,
+        /// Record this calibration even if one of its captures is already in a record (by
+        /// SHA-256); without it such a capture is refused, naming the record.
+        #[arg(long)]
+        again: bool,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -187,9 +191,12 @@ enum Cmd {
     /// The records database: every calibration stored, listed, compared, summarised.
     Records {
         /// sqlite:PATH or postgres://… (default: $GYROCAL_DB, else
-        /// sqlite:~/.local/share/gyrocal/records.sqlite).
-        #[arg(long)]
+        /// sqlite:~/.local/share/gyrocal/records.sqlite). Before or after the subcommand.
+        #[arg(long, global = true)]
         db: Option<String>,
+        /// Output of list, show and compare: text, json or csv.
+        #[arg(long, global = true, value_enum, default_value_t = records::views::Format::Text)]
+        format: records::views::Format,
         #[command(subcommand)]
         command: RecordsCmd,
     },
@@ -384,6 +391,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             rig,
             db,
             no_db,
+            again,
             yes,
             latitude_deg,
             consider,
@@ -439,7 +447,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
             };
             let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-            calibrate(&files, &out_dir, truth.as_deref(), identity, started, db.as_ref(), &opts)
+            let record_to = RecordTo { db: db.as_ref(), again };
+            calibrate(&files, &out_dir, truth.as_deref(), identity, started, record_to, &opts)
         }
         Cmd::Noise { capture, cal, json } => {
             let cap = read_capture(&capture)?;
@@ -453,7 +462,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Cmd::Records { db, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, command),
+        Cmd::Records { db, format, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, format, command),
         Cmd::Export { cal, format, out } => {
             let text =
                 fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
@@ -527,16 +536,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
+fn records_cmd(spec: &records::DbSpec, format: records::views::Format, cmd: RecordsCmd) -> Result<ExitCode> {
     use records::{store, views};
-    let mut c = spec.open()?;
+    // Reading never creates a database.
+    let mut c = spec.open_existing()?;
     let get = |c: &mut dyn records::db::Conn, id: i64| -> Result<records::Record> {
         store::get(c, id)?.with_context(|| format!("no record {id} in {spec}"))
     };
     let text = match cmd {
-        RecordsCmd::List { sensor } => views::list(&store::list(c.as_mut(), sensor.as_deref())?),
-        RecordsCmd::Show { id } => views::show(&get(c.as_mut(), id)?),
-        RecordsCmd::Compare { a, b } => views::compare(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?),
+        RecordsCmd::List { sensor } => views::list_as(&store::list(c.as_mut(), sensor.as_deref())?, format),
+        RecordsCmd::Show { id } => views::show_as(&get(c.as_mut(), id)?, format),
+        RecordsCmd::Compare { a, b } => views::compare_as(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?, format),
         RecordsCmd::Summary { html } => {
             let latest = store::latest_per_sensor(c.as_mut())?;
             if let Some(path) = html {
@@ -640,6 +650,13 @@ fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest>
     Ok(manifest)
 }
 
+/// Where `calibrate` records its result: nowhere (`--no-db`) or a database, and whether a
+/// capture already recorded there may be recorded again (`--again`).
+struct RecordTo<'a> {
+    db: Option<&'a records::DbSpec>,
+    again: bool,
+}
+
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
 /// effect models), writes `calibration.json` (with its provenance), `loop.json` and
 /// `report.html`; the exit status carries the verdict.
@@ -649,9 +666,10 @@ fn calibrate(
     truth_path: Option<&Path>,
     identity: Identity,
     session_started: Option<String>,
-    db: Option<&records::DbSpec>,
+    record_to: RecordTo<'_>,
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
+    let RecordTo { db, again } = record_to;
     let mut caps = Vec::new();
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
@@ -720,6 +738,9 @@ fn calibrate(
         caps.push((digest, cap));
     }
     let prov = Provenance::gather(identity, session_started, &caps);
+    if let (Some(db), false) = (db, again) {
+        refuse_recorded_captures(db, &prov)?;
+    }
     // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
     let mut runs = Vec::new();
     for (_, cap) in &mut caps {
@@ -784,6 +805,24 @@ fn calibrate(
         calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
         calib::Verdict::UnexplainedStructure => ExitCode::from(3),
     })
+}
+
+/// Refuses captures already in a record of `db` (same SHA-256), naming the record: the same
+/// data recorded twice would count twice in the production statistics. A database that cannot
+/// be read now is left to the record step, which keeps the files and says so.
+fn refuse_recorded_captures(db: &records::DbSpec, prov: &Provenance) -> Result<()> {
+    let Ok(mut c) = db.open_existing() else { return Ok(()) };
+    for cap in &prov.captures {
+        let ids = records::store::records_with_capture(c.as_mut(), &cap.sha256)?;
+        if let Some(id) = ids.first() {
+            bail!(
+                "{} is already in record {id} of {db} (sha256 {}…): give --again to calibrate and record it again",
+                cap.file,
+                &cap.sha256[..12.min(cap.sha256.len())]
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The fitted g-sensitivity of the final model, row = gyro axis, column = package axis of the

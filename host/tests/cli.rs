@@ -180,6 +180,7 @@ fn simulate_inspect_calibrate_apply() {
         "SIM-5",
         "--db",
         &db,
+        "--again",
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     // A third session with a static capture beside the moving one: noise figures in the result,
@@ -211,6 +212,7 @@ fn simulate_inspect_calibrate_apply() {
         "SIM-5",
         "--db",
         &db,
+        "--again",
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(
@@ -226,7 +228,7 @@ fn simulate_inspect_calibrate_apply() {
     assert!(show3.contains("axis  ARW [°/√h]"), "{show3}");
     let o = host(&["export", "--cal", third.join("calibration.json").to_str().unwrap(), "--format", "kalibr"]);
     assert!(
-        String::from_utf8_lossy(&o.stdout).contains("  gyroscope_noise_density: "),
+        String::from_utf8_lossy(&o.stdout).contains("\ngyroscope_noise_density: "),
         "{}",
         String::from_utf8_lossy(&o.stdout)
     );

@@ -59,6 +59,17 @@ impl DbSpec {
         Ok(DbSpec::Sqlite(data.join("gyrocal/records.sqlite")))
     }
 
+    /// As [`DbSpec::open`], for reading: an SQLite file that does not exist is an error, never
+    /// created (a mistyped path must not look like an empty database).
+    pub fn open_existing(&self) -> Result<Box<dyn Conn>> {
+        if let DbSpec::Sqlite(p) = self {
+            if !p.exists() {
+                anyhow::bail!("no records database at {} (check --db or ${DB_ENV})", p.display());
+            }
+        }
+        self.open()
+    }
+
     /// Opens a connection and brings the schema up to date.
     pub fn open(&self) -> Result<Box<dyn Conn>> {
         self.open_in_schema(None)
