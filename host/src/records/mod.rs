@@ -3,6 +3,7 @@
 //! both ([`db::Conn`]), and the production views: list, show, compare, summary ([`views`]).
 
 pub mod db;
+pub mod pg;
 pub mod store;
 pub mod views;
 
