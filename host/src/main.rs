@@ -767,7 +767,9 @@ fn calibrate(
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
     files::write_atomic(&loop_json, serde_json::to_string(&lr)?)?;
-    let html = write_report(out_dir, &lr, &prov, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())
+    let extra = host::certificate::html_section(lr.final_report())
+        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
+    let html = write_report(out_dir, &lr, &prov, &extra)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
     note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
     let verdict = match lr.verdict() {

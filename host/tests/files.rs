@@ -203,3 +203,48 @@ fn no_db_writes_the_files_and_records_nothing() {
     assert!(out.join("calibration.json").exists());
     assert!(!tmp.path().join("gyrocal").exists(), "no database created in the data folder");
 }
+
+/// The certificate in report.html: each result with u and U = 2u (GUM wording), the
+/// sensitivity in the datasheet's mdps/LSB too, the angles between the axes, the correction.
+#[test]
+fn the_certificate_gives_expanded_uncertainties_angles_and_the_correction() {
+    let tmp = scratch("cert");
+    let out = tmp.path().join("cal");
+    let demo = demo();
+    let o = host_cmd(tmp.path())
+        .args(["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let cal: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    let x = &cal["axes"][0];
+    let (k, u) = (f(&x["k_counts_per_dps"]), f(&x["k_sigma"]));
+    assert!(
+        html.contains(&format!(
+            "<tr><td>x</td><td>sensitivity</td><td>{k:.5}</td><td>{u:.5}</td><td>{:.5}</td><td>counts/(°/s)</td></tr>",
+            2.0 * u
+        )),
+        "{html}"
+    );
+    let mdps = 1000.0 / k;
+    assert!(html.contains(&format!("<td>sensitivity (datasheet unit)</td><td>{mdps:.5}</td>")));
+    let ut = f(&x["tilt_sigma_deg"]).hypot(f(&x["tilt_mount_sigma_deg"]));
+    assert!(html.contains(&format!(
+        "<td>tilt from the package axis</td><td>{:.4}</td><td>{ut:.4}</td><td>{:.4}</td>",
+        f(&x["tilt_deg"]),
+        2.0 * ut
+    )));
+    let xy = &cal["inter_axis"][0];
+    assert!(html.contains(&format!(
+        "<tr><td>x–y</td><td>angle between the axes</td><td>{:.4}</td><td>{:.4}</td><td>{:.4}</td><td>°</td></tr>",
+        f(&xy["angle_deg"]),
+        f(&xy["sigma_deg"]),
+        2.0 * f(&xy["sigma_deg"])
+    )));
+    assert!(html.contains("stated as the standard uncertainty of measurement multiplied by the coverage factor k = 2"));
+    assert!(html.contains("<h3>Correction applied by a firmware</h3>"));
+    assert_eq!(html.matches("<th scope=\"col\">(K S)⁻¹ [°/s per count]</th>").count(), 1);
+}
