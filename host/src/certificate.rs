@@ -8,10 +8,11 @@ use nalgebra::Matrix3;
 use std::fmt::Write as _;
 
 /// Coverage factor of the expanded uncertainty: k = 2, about 95 % for a normal distribution
-/// (JCGM 100:2008, GUM §6.2-6.3; EA-4/02 M:2022 §5 asks calibration certificates for it).
+/// (JCGM 100:2008, GUM §6.2-6.3; EA-4/02 M asks calibration certificates for it).
 pub const COVERAGE_FACTOR: f64 = 2.0;
 
-/// The statement EA-4/02 M:2022 (§5.1) gives for a certificate's expanded uncertainty.
+/// The statement EA-4/02 M (Expression of the Uncertainty of Measurement in Calibration) gives
+/// for a certificate's expanded uncertainty.
 pub const GUM_STATEMENT: &str = "The reported expanded uncertainty of measurement is stated as the standard \
 uncertainty of measurement multiplied by the coverage factor k = 2, which for a normal distribution corresponds \
 to a coverage probability of approximately 95 %. The standard uncertainty has been determined in accordance with \

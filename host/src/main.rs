@@ -23,7 +23,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 #[derive(Parser)]
-#[command(name = "host", version, about = "Gyro calibration rig: record, simulate, inspect, calibrate, apply")]
+#[command(
+    name = "host",
+    version,
+    about = "Gyro calibration rig: calibrate, record, simulate, virtual-rig, inspect, apply, export, records, noise, configure-drive"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -143,8 +147,9 @@ enum Cmd {
     },
     /// Export a calibration for a firmware or a toolchain: C header, Rust const, Kalibr YAML, JSON, CSV.
     Export {
-        /// The calibration.json written by `calibrate`.
-        #[arg(long)]
+        /// The calibration.json written by `calibrate` (default: the one `calibrate` writes
+        /// without --out-dir).
+        #[arg(long, default_value = "calibration/calibration.json")]
         cal: PathBuf,
         /// Output format.
         #[arg(long, value_enum)]

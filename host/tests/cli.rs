@@ -554,3 +554,21 @@ fn a_fitted_g_sensitivity_reaches_calibration_json_and_the_kalibr_export() {
         serde_json::from_str(&std::fs::read_to_string(plain.join("calibration.json")).unwrap()).unwrap();
     assert!(v.get("g_sensitivity_dps_per_g").is_none());
 }
+
+/// `host export` reads `calibration/calibration.json` when `--cal` is not given: right after a
+/// `calibrate` without `--out-dir` it needs only the format. `host --help` names every command.
+#[test]
+fn export_defaults_to_the_calibration_calibrate_writes_and_help_names_every_command() {
+    let tmp = scratch("export-default");
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/demo.cap");
+    let run = |args: &[&str]| host_command().current_dir(tmp.path()).args(args).output().expect("host runs");
+    let o = run(&["calibrate", "--replay", demo.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["export", "--format", "csv"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with("name,"), "{}", String::from_utf8_lossy(&o.stdout));
+    let o = run(&["--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with(
+        "Gyro calibration rig: calibrate, record, simulate, virtual-rig, inspect, apply, export, records, noise, configure-drive\n"
+    ));
+}
