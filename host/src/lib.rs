@@ -13,4 +13,5 @@ pub mod records;
 pub mod report;
 pub mod session;
 pub mod sim;
+pub mod spec;
 pub mod virtual_rig;

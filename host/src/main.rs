@@ -2,7 +2,8 @@
 //!
 //! Exit status: 0 success (for `calibrate`: calibrated, residual at the noise floor); 1 failed,
 //! with a one-line `error:` on stderr; 2 wrong usage; 3 calibrated, but with structure in the
-//! residual that no model explains, so the calibration is not to be trusted.
+//! residual that no model explains, so the calibration is not to be trusted; 4 (`calibrate
+//! --spec`) calibrated at the noise floor, but a specification limit fails.
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -113,6 +114,11 @@ enum Cmd {
         /// SHA-256); without it such a capture is refused, naming the record.
         #[arg(long)]
         again: bool,
+        /// Specification limits (JSON: sensitivity_tolerance_percent, max_tilt_deg,
+        /// max_non_orthogonality_deg, max_arw_deg_per_sqrt_h, each optional): PASS/FAIL on the
+        /// certificate, the summary and the record; exit 4 when a limit fails.
+        #[arg(long, value_name = "FILE")]
+        spec: Option<PathBuf>,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -397,6 +403,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             db,
             no_db,
             again,
+            spec,
             yes,
             latitude_deg,
             consider,
@@ -409,6 +416,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             // Resolved first: a wrong --db must not cost a session.
             let db = if no_db { None } else { Some(records::DbSpec::resolve(db.as_deref())?) };
+            // Read first too: a bad spec file must not cost a session.
+            let spec = spec.as_deref().map(host::spec::Spec::read).transpose().map_err(Usage)?;
             // Held until the process ends: a second calibration into this directory is refused
             // before it records or computes anything.
             let _lock = files::DirLock::acquire(&out_dir)?;
@@ -452,7 +461,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
             };
             let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-            let record_to = RecordTo { db: db.as_ref(), again };
+            let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
             calibrate(&files, &out_dir, truth.as_deref(), identity, started, record_to, &opts)
         }
         Cmd::Noise { capture, cal, json } => {
@@ -660,6 +669,8 @@ fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest>
 struct RecordTo<'a> {
     db: Option<&'a records::DbSpec>,
     again: bool,
+    /// `--spec`: the limits the result is checked against.
+    spec: Option<&'a host::spec::Spec>,
 }
 
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
@@ -674,7 +685,7 @@ fn calibrate(
     record_to: RecordTo<'_>,
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
-    let RecordTo { db, again } = record_to;
+    let RecordTo { db, again, spec } = record_to;
     let mut caps = Vec::new();
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
@@ -772,7 +783,9 @@ fn calibrate(
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
     files::write_atomic(&loop_json, serde_json::to_string(&lr)?)?;
-    let extra = host::certificate::html_section(lr.final_report())
+    let checks = spec.map(|s| s.check(lr.final_report(), noise.as_ref()));
+    let extra = checks.as_deref().map(host::spec::html_section).unwrap_or_default()
+        + &host::certificate::html_section(lr.final_report())
         + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
     let html = write_report(out_dir, &lr, &prov, &extra)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
@@ -784,6 +797,10 @@ fn calibrate(
     };
     let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
     rec.noise = noise.iter().flat_map(|n| &n.axes).map(records::NoiseRow::from).collect();
+    if let Some(c) = &checks {
+        let pass = if host::spec::passed(c) { 1.0 } else { 0.0 };
+        rec.params.push(records::Param { name: "spec_pass".into(), value: pass, sigma: None, unit: "1".into() });
+    }
     let recorded = match db {
         None => {
             note("not recorded (--no-db)");
@@ -806,11 +823,17 @@ fn calibrate(
         text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
         summary.push_str(&format!("\nNoise figures:\n{text}"));
     }
+    if let Some(c) = &checks {
+        summary.push('\n');
+        summary.push_str(&host::spec::text(c));
+    }
     files::stdout(&summary)?;
     recorded?;
-    Ok(match lr.verdict() {
-        calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
-        calib::Verdict::UnexplainedStructure => ExitCode::from(3),
+    Ok(match (lr.verdict(), checks.as_deref().is_some_and(|c| !host::spec::passed(c))) {
+        // A result not to be trusted says so first, whatever the limits.
+        (calib::Verdict::UnexplainedStructure, _) => ExitCode::from(3),
+        (calib::Verdict::AtNoiseFloor, true) => ExitCode::from(4),
+        (calib::Verdict::AtNoiseFloor, false) => ExitCode::SUCCESS,
     })
 }
 

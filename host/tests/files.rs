@@ -248,3 +248,50 @@ fn the_certificate_gives_expanded_uncertainties_angles_and_the_correction() {
     assert!(html.contains("<h3>Correction applied by a firmware</h3>"));
     assert_eq!(html.matches("<th scope=\"col\">(K S)⁻¹ [°/s per count]</th>").count(), 1);
 }
+
+/// `--spec`: each limit PASS or FAIL in the summary, the certificate and the record; a failed
+/// limit exits 4, all within exit 0. The demo's z axis is tilted 1.8143° (see its summary).
+#[test]
+fn spec_limits_pass_or_fail_with_exit_4() {
+    let tmp = scratch("spec");
+    let demo = demo();
+    let db = format!("sqlite:{}", tmp.path().join("r.sqlite").display());
+    let run = |name: &str, spec: &str| {
+        let file = tmp.path().join(format!("{name}.json"));
+        std::fs::write(&file, spec).unwrap();
+        let out = tmp.path().join(name);
+        let o = host_cmd(tmp.path())
+            .args(["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", out.to_str().unwrap()])
+            .args(["--db", &db, "--again", "--spec", file.to_str().unwrap()])
+            .output()
+            .unwrap();
+        (o, std::fs::read_to_string(out.join("report.html")).unwrap_or_default())
+    };
+    let (o, html) = run("strict", r#"{"max_tilt_deg": 1.5, "sensitivity_tolerance_percent": 2.0}"#);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("\nSpecification: FAIL\n"), "{text}");
+    assert!(text.contains("\n  FAIL  tilt z: 1.8143 ° > 1.5 °\n"), "{text}");
+    assert!(text.contains("\n  PASS  tilt x: 1.1035 ° ≤ 1.5 °\n"), "{text}");
+    assert!(html.contains("<h2>Specification: FAIL</h2>"));
+    assert!(html.contains("<tr><td>FAIL</td><td>tilt z</td><td>1.8143 °</td><td>1.5 °</td></tr>"), "{html}");
+    let (o, _) = run("loose", r#"{"max_tilt_deg": 2.0}"#);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("\nSpecification: PASS\n"));
+    // The record keeps the outcome: spec_pass 0, then 1.
+    for (id, pass) in [("1", "0"), ("2", "1")] {
+        let o = host_cmd(tmp.path()).args(["records", "show", id, "--db", &db, "--format", "csv"]).output().unwrap();
+        let csv = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(csv.contains(&format!("\n{id},spec_pass,{pass},,1\n")), "{csv}");
+    }
+    let (o, _) = run("bad", r#"{"max_tilt": 2.0}"#);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).starts_with(&format!(
+            "error: {} is not a spec: unknown field `max_tilt`",
+            tmp.path().join("bad.json").display()
+        )),
+        "{}",
+        stderr(&o)
+    );
+}
