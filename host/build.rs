@@ -21,4 +21,13 @@ fn main() {
     } else if ci {
         panic!("chromium is not runnable: CI must lay the report out at 1400 px (.ci/run installs it)");
     }
+    // PyYAML, the reader Kalibr loads its IMU file with: the Kalibr export's load test.
+    println!("cargo::rustc-check-cfg=cfg(has_pyyaml)");
+    let pyyaml =
+        std::process::Command::new("python3").args(["-c", "import yaml"]).output().is_ok_and(|o| o.status.success());
+    if pyyaml {
+        println!("cargo::rustc-cfg=has_pyyaml");
+    } else if ci {
+        panic!("python3 with PyYAML is not runnable: CI must load the Kalibr export (.ci/run installs python3-yaml)");
+    }
 }

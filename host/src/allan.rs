@@ -227,8 +227,11 @@ pub fn static_stretch(cap: &Capture) -> Option<(&Run, std::ops::Range<usize>)> {
 /// Stretch below which bias instability and RRW are flagged as indicative, s: an hour gives
 /// σ(τ) to τ = 20 min, past the tens to hundreds of seconds where a MEMS gyro's Allan minimum
 /// typically lies (assumed, not from a datasheet: the L3G4200D's gives no Allan figures; the
-/// part's own curve decides).
-pub const SHORT_STRETCH_S: f64 = 3600.0;
+/// part's own curve decides). Less one second: the stretch of an hour-long static run
+/// (`--static-s 3600`) measures a few tenths of a second short (it starts at the first 10-Hz
+/// motor report of zero speed, and spans first to last sample), and such a run is the hour
+/// this threshold asks for (measured 3599.9 s).
+pub const SHORT_STRETCH_S: f64 = 3600.0 - 1.0;
 
 /// Fewest samples an analysis accepts: 1000 gives clusters up to ~330 samples, two decades.
 pub const MIN_STATIC_SAMPLES: usize = 1000;
@@ -538,5 +541,27 @@ mod tests {
         for (p, q) in a.iter().zip(&b) {
             assert!((p.adev_dps / q.adev_dps - 1.0).abs() < 1e-6);
         }
+    }
+
+    /// The stretch of an hour's static run (`--static-s 3600`) measures 3599.9 s: an hour, so
+    /// bias instability and RRW are not marked indicative; ten minutes are.
+    #[test]
+    fn an_hours_static_run_is_not_marked_indicative() {
+        let report = |duration_s: f64| {
+            NoiseReport {
+                run: 1,
+                samples: 2_880_000,
+                duration_s,
+                tau0_s: 0.00125,
+                scaling: "calibration (package frame)".into(),
+                axes: Vec::new(),
+            }
+            .to_string()
+        };
+        assert!(!report(3599.9).contains("indicative"), "{}", report(3599.9));
+        assert!(!report(3600.0).contains("indicative"));
+        assert!(report(600.0).contains(
+            "(a 600 s stretch measures σ(τ) up to τ = 200 s only: ARW is firm, bias instability and RRW are indicative)"
+        ));
     }
 }

@@ -2,7 +2,9 @@
 pub mod allan;
 pub mod calib;
 pub mod capture;
+pub mod certificate;
 pub mod export;
+pub mod files;
 pub mod geometry;
 pub mod inspect;
 pub mod link;
@@ -11,4 +13,5 @@ pub mod records;
 pub mod report;
 pub mod session;
 pub mod sim;
+pub mod spec;
 pub mod virtual_rig;

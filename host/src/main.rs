@@ -2,13 +2,15 @@
 //!
 //! Exit status: 0 success (for `calibrate`: calibrated, residual at the noise floor); 1 failed,
 //! with a one-line `error:` on stderr; 2 wrong usage; 3 calibrated, but with structure in the
-//! residual that no model explains, so the calibration is not to be trusted.
+//! residual that no model explains, so the calibration is not to be trusted; 4 (`calibrate
+//! --spec`) calibrated at the noise floor, but a specification limit fails.
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use host::calib;
 use host::capture::{self, Capture, Samples as _};
 use host::export;
+use host::files;
 use host::geometry::Pose;
 use host::link::{self, Link};
 use host::provenance::{self, Identity, Provenance, SessionManifest};
@@ -22,7 +24,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 #[derive(Parser)]
-#[command(name = "host", version, about = "Gyro calibration rig: record, simulate, inspect, calibrate, apply")]
+#[command(
+    name = "host",
+    version,
+    about = "Gyro calibration rig: calibrate, record, simulate, virtual-rig, inspect, apply, export, records, noise, configure-drive"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -100,6 +106,19 @@ enum Cmd {
         /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
         #[arg(long)]
         db: Option<String>,
+        /// Store the result in no records database (the files are still written): for demos,
+        /// trials and tests.
+        #[arg(long, conflicts_with = "db")]
+        no_db: bool,
+        /// Record this calibration even if one of its captures is already in a record (by
+        /// SHA-256); without it such a capture is refused, naming the record.
+        #[arg(long)]
+        again: bool,
+        /// Specification limits (JSON: sensitivity_tolerance_percent, max_tilt_deg,
+        /// max_non_orthogonality_deg, max_arw_deg_per_sqrt_h, each optional): PASS/FAIL on the
+        /// certificate, the summary and the record; exit 4 when a limit fails.
+        #[arg(long, value_name = "FILE")]
+        spec: Option<PathBuf>,
         /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
         #[arg(long)]
         yes: bool,
@@ -134,8 +153,9 @@ enum Cmd {
     },
     /// Export a calibration for a firmware or a toolchain: C header, Rust const, Kalibr YAML, JSON, CSV.
     Export {
-        /// The calibration.json written by `calibrate`.
-        #[arg(long)]
+        /// The calibration.json written by `calibrate` (default: the one `calibrate` writes
+        /// without --out-dir).
+        #[arg(long, default_value = "calibration/calibration.json")]
         cal: PathBuf,
         /// Output format.
         #[arg(long, value_enum)]
@@ -182,9 +202,12 @@ enum Cmd {
     /// The records database: every calibration stored, listed, compared, summarised.
     Records {
         /// sqlite:PATH or postgres://… (default: $GYROCAL_DB, else
-        /// sqlite:~/.local/share/gyrocal/records.sqlite).
-        #[arg(long)]
+        /// sqlite:~/.local/share/gyrocal/records.sqlite). Before or after the subcommand.
+        #[arg(long, global = true)]
         db: Option<String>,
+        /// Output of list, show and compare: text, json or csv.
+        #[arg(long, global = true, value_enum, default_value_t = records::views::Format::Text)]
+        format: records::views::Format,
         #[command(subcommand)]
         command: RecordsCmd,
     },
@@ -378,6 +401,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             operator,
             rig,
             db,
+            no_db,
+            again,
+            spec,
             yes,
             latitude_deg,
             consider,
@@ -389,15 +415,22 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 considered.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
             }
             // Resolved first: a wrong --db must not cost a session.
-            let db = records::DbSpec::resolve(db.as_deref())?;
+            let db = if no_db { None } else { Some(records::DbSpec::resolve(db.as_deref())?) };
+            // Read first too: a bad spec file must not cost a session.
+            let spec = spec.as_deref().map(host::spec::Spec::read).transpose().map_err(Usage)?;
+            // Held until the process ends: a second calibration into this directory is refused
+            // before it records or computes anything.
+            let _lock = files::DirLock::acquire(&out_dir)?;
             let identity = Identity { sensor_serial: sensor, operator, rig };
             let (files, identity, started) = match port {
                 Some(port) => {
                     let interrupted = interrupt_flag()?;
                     // Checked now so the operator hears of it before the runs; the record is
                     // still attempted (and the files kept) at the end.
-                    if let Err(e) = db.open() {
-                        eprintln!("warning: the records database is not usable now ({e:#}); the session runs anyway");
+                    if let Some(Err(e)) = db.as_ref().map(|db| db.open()) {
+                        note(&format!(
+                            "warning: the records database is not usable now ({e:#}); the session runs anyway"
+                        ));
                     }
                     let serial = identity.sensor_serial.clone().unwrap_or_default();
                     // The port first: a port that cannot be opened must not leave a manifest
@@ -422,7 +455,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
                     Some(m) => {
                         for w in m.verify(&replay)? {
-                            eprintln!("warning: {w}");
+                            note(&format!("warning: {w}"));
                         }
                         (replay, identity.or(m.identity), Some(m.started_utc))
                     }
@@ -430,7 +463,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 },
             };
             let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-            calibrate(&files, &out_dir, truth.as_deref(), identity, started, &db, &opts)
+            let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
+            calibrate(&files, &out_dir, truth.as_deref(), identity, started, record_to, &opts)
         }
         Cmd::Noise { capture, cal, json } => {
             let cap = read_capture(&capture)?;
@@ -438,13 +472,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let report = host::allan::capture_noise(&cap, cal.as_ref())
                 .map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
             if json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
             } else {
-                print!("{report}");
+                files::stdout(&report.to_string())?;
             }
             Ok(ExitCode::SUCCESS)
         }
-        Cmd::Records { db, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, command),
+        Cmd::Records { db, format, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, format, command),
         Cmd::Export { cal, format, out } => {
             let text =
                 fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
@@ -453,10 +487,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let rendered = e.render(format)?;
             match out {
                 Some(path) => {
-                    fs::write(&path, rendered).with_context(|| format!("cannot write {}", path.display()))?;
-                    eprintln!("wrote {}", path.display());
+                    files::write_atomic(&path, rendered)?;
+                    note(&format!("wrote {}", path.display()));
                 }
-                None => print!("{rendered}"),
+                None => files::stdout(&rendered)?,
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -498,9 +532,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 &mut link,
                 protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v),
             )?;
-            eprintln!(
+            note(&format!(
                 "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
-            );
+            ));
             Ok(ExitCode::SUCCESS)
         }
         Cmd::Inspect { files, json } => {
@@ -508,9 +542,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 let cap = read_capture(f)?;
                 let report = host::inspect::inspect(&f.display().to_string(), &cap);
                 if json {
-                    println!("{}", serde_json::to_string_pretty(&report)?);
+                    files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
                 } else {
-                    print!("{report}");
+                    files::stdout(&report.to_string())?;
                 }
             }
             Ok(ExitCode::SUCCESS)
@@ -518,27 +552,27 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-fn records_cmd(spec: &records::DbSpec, cmd: RecordsCmd) -> Result<ExitCode> {
+fn records_cmd(spec: &records::DbSpec, format: records::views::Format, cmd: RecordsCmd) -> Result<ExitCode> {
     use records::{store, views};
-    let mut c = spec.open()?;
+    // Reading never creates a database.
+    let mut c = spec.open_existing()?;
     let get = |c: &mut dyn records::db::Conn, id: i64| -> Result<records::Record> {
         store::get(c, id)?.with_context(|| format!("no record {id} in {spec}"))
     };
     let text = match cmd {
-        RecordsCmd::List { sensor } => views::list(&store::list(c.as_mut(), sensor.as_deref())?),
-        RecordsCmd::Show { id } => views::show(&get(c.as_mut(), id)?),
-        RecordsCmd::Compare { a, b } => views::compare(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?),
+        RecordsCmd::List { sensor } => views::list_as(&store::list(c.as_mut(), sensor.as_deref())?, format),
+        RecordsCmd::Show { id } => views::show_as(&get(c.as_mut(), id)?, format),
+        RecordsCmd::Compare { a, b } => views::compare_as(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?, format),
         RecordsCmd::Summary { html } => {
             let latest = store::latest_per_sensor(c.as_mut())?;
             if let Some(path) = html {
-                fs::write(&path, views::summary_html(&latest))
-                    .with_context(|| format!("cannot write {}", path.display()))?;
-                eprintln!("wrote {}", path.display());
+                files::write_atomic(&path, views::summary_html(&latest))?;
+                note(&format!("wrote {}", path.display()));
             }
             views::summary(&latest)
         }
     };
-    print!("{text}");
+    files::stdout(&text)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -621,7 +655,7 @@ fn record(
             link.record_to(None)?;
         }
     }
-    eprintln!("saved {}", out.display());
+    note(&format!("saved {}", out.display()));
     if interrupted.load(Ordering::SeqCst) {
         bail!("interrupted; capture so far kept in {}", out.display());
     }
@@ -644,6 +678,15 @@ fn start_manifest(out_dir: &Path, identity: Identity) -> Result<SessionManifest>
     Ok(manifest)
 }
 
+/// Where `calibrate` records its result: nowhere (`--no-db`) or a database, and whether a
+/// capture already recorded there may be recorded again (`--again`).
+struct RecordTo<'a> {
+    db: Option<&'a records::DbSpec>,
+    again: bool,
+    /// `--spec`: the limits the result is checked against.
+    spec: Option<&'a host::spec::Spec>,
+}
+
 /// Decodes the captures, reports their losses, runs the closed loop (fit, residual diagnostics,
 /// effect models), writes `calibration.json` (with its provenance), `loop.json` and
 /// `report.html`; the exit status carries the verdict.
@@ -653,9 +696,10 @@ fn calibrate(
     truth_path: Option<&Path>,
     identity: Identity,
     session_started: Option<String>,
-    db: &records::DbSpec,
+    record_to: RecordTo<'_>,
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
+    let RecordTo { db, again, spec } = record_to;
     let mut caps = Vec::new();
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
@@ -687,14 +731,14 @@ fn calibrate(
             }
         }
         let l = &cap.loss;
-        eprintln!(
+        note(&format!(
             "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
             f.display(),
             cap.runs.len(),
             l.bytes,
             l.frames_missing(),
             l.bytes_skipped()
-        );
+        ));
         if let Some(h) = cap.hello.filter(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
             bail!(
                 "{} was recorded with protocol v{}, this host reads v{}",
@@ -711,19 +755,22 @@ fn calibrate(
             );
         }
         if cap.loss.hello_assumed {
-            eprintln!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display());
+            note(&format!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display()));
         }
         for (t, fault) in &cap.faults {
-            eprintln!(
+            note(&format!(
                 "{}: the rig reported {:?} outside any run at {:.3} s",
                 f.display(),
                 fault.fault,
                 *t as f64 * 1e-6
-            );
+            ));
         }
         caps.push((digest, cap));
     }
     let prov = Provenance::gather(identity, session_started, &caps);
+    if let (Some(db), false) = (db, again) {
+        refuse_recorded_captures(db, &prov)?;
+    }
     // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
     let mut runs = Vec::new();
     for (_, cap) in &mut caps {
@@ -733,29 +780,30 @@ fn calibrate(
         runs.extend(moving);
     }
     let truth = load_truth(files, truth_path)?;
-    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
-    print!("{prov}\n{}", lr.summary());
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
     let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
-    if let Some(n) = &noise {
-        let mut text = n.to_string();
-        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
-        print!("\nNoise figures:\n{text}");
-    }
+    // Files and the record first, the summary last: a closed or full standard output must not
+    // cost the result.
     let json = out_dir.join("calibration.json");
     let mut value = prov.attach(serde_json::to_value(lr.final_report())?);
     if let (Some(n), Some(obj)) = (&noise, value.as_object_mut()) {
         obj.insert("noise".into(), serde_json::to_value(n)?);
     }
+    if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
+        obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
+    }
     let json_text = serde_json::to_string_pretty(&value)?;
-    fs::write(&json, &json_text).with_context(|| format!("cannot write {}", json.display()))?;
+    files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
-    fs::write(&loop_json, serde_json::to_string(&lr)?)
-        .with_context(|| format!("cannot write {}", loop_json.display()))?;
-    let html = calib::write_report(out_dir, &lr)
+    files::write_atomic(&loop_json, serde_json::to_string(&lr)?)?;
+    let checks = spec.map(|s| s.check(lr.final_report(), noise.as_ref()));
+    let extra = checks.as_deref().map(host::spec::html_section).unwrap_or_default()
+        + &host::certificate::html_section(lr.final_report())
+        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
+    let html = write_report(out_dir, &lr, &prov, &extra)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
-    prov.insert_into_report(&html, &noise.as_ref().map(|n| n.html_section()).unwrap_or_default())?;
-    eprintln!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display());
+    note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",
         calib::Verdict::UnexplainedStructure if lr.unvouched.is_some() => "not vouched for",
@@ -763,14 +811,102 @@ fn calibrate(
     };
     let mut rec = records::record_from(lr.final_report(), &prov, verdict, json_text);
     rec.noise = noise.iter().flat_map(|n| &n.axes).map(records::NoiseRow::from).collect();
-    match records::store_record(db, &rec) {
-        Ok(id) => eprintln!("recorded as {id} in {db}"),
-        Err(e) => bail!("the calibration is saved in {} but was not recorded in {db}: {e:#}", out_dir.display()),
+    if let Some(c) = &checks {
+        let pass = if host::spec::passed(c) { 1.0 } else { 0.0 };
+        rec.params.push(records::Param { name: "spec_pass".into(), value: pass, sigma: None, unit: "1".into() });
     }
-    Ok(match lr.verdict() {
-        calib::Verdict::AtNoiseFloor => ExitCode::SUCCESS,
-        calib::Verdict::UnexplainedStructure => ExitCode::from(3),
+    let recorded = match db {
+        None => {
+            note("not recorded (--no-db)");
+            Ok(())
+        }
+        Some(db) => match records::store_record(db, &rec) {
+            Ok(id) => {
+                note(&format!("recorded as {id} in {db}"));
+                Ok(())
+            }
+            Err(e) => Err(anyhow::anyhow!(
+                "the calibration is saved in {} but was not recorded in {db}: {e:#}",
+                out_dir.display()
+            )),
+        },
+    };
+    let mut summary = format!("{prov}\n{}", lr.summary());
+    if let Some(n) = &noise {
+        let mut text = n.to_string();
+        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
+        summary.push_str(&format!("\nNoise figures:\n{text}"));
+    }
+    if let Some(c) = &checks {
+        summary.push('\n');
+        summary.push_str(&host::spec::text(c));
+    }
+    files::stdout(&summary)?;
+    recorded?;
+    Ok(match (lr.verdict(), checks.as_deref().is_some_and(|c| !host::spec::passed(c))) {
+        // A result not to be trusted says so first, whatever the limits.
+        (calib::Verdict::UnexplainedStructure, _) => ExitCode::from(3),
+        (calib::Verdict::AtNoiseFloor, true) => ExitCode::from(4),
+        (calib::Verdict::AtNoiseFloor, false) => ExitCode::SUCCESS,
     })
+}
+
+/// Refuses captures already in a record of `db` (same SHA-256), naming the record: the same
+/// data recorded twice would count twice in the production statistics. A database that cannot
+/// be read now is left to the record step, which keeps the files and says so.
+fn refuse_recorded_captures(db: &records::DbSpec, prov: &Provenance) -> Result<()> {
+    let Ok(mut c) = db.open_existing() else { return Ok(()) };
+    for cap in &prov.captures {
+        let ids = records::store::records_with_capture(c.as_mut(), &cap.sha256)?;
+        if let Some(id) = ids.first() {
+            bail!(
+                "{} is already in record {id} of {db} (sha256 {}…): give --again to calibrate and record it again",
+                cap.file,
+                &cap.sha256[..12.min(cap.sha256.len())]
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The fitted g-sensitivity of the final model, row = gyro axis, column = package axis of the
+/// specific force, °/s per g; `None` when the model does not hold it. Read from the effect's
+/// reported parameters, `g-sensitivity along package K, A` (calib's `GSensitivity::reported`).
+fn g_sensitivity(lr: &calib::LoopReport) -> Option<[[f64; 3]; 3]> {
+    use calib::axes::AXES;
+    let params = &lr.steps.last()?.effect_params;
+    let find = |a: usize, k: usize| {
+        let name = format!("g-sensitivity along package {}, {}", AXES[k], AXES[a]);
+        params.iter().find(|p| p.name == name).map(|p| p.estimate.value)
+    };
+    let rows: Option<Vec<[f64; 3]>> = (0..3).map(|a| Some([find(a, 0)?, find(a, 1)?, find(a, 2)?])).collect();
+    rows.map(|r| [r[0], r[1], r[2]])
+}
+
+/// Writes `out_dir/report.html`, with the provenance block and `extra` under its title, and its
+/// figures `report-figN.svg`. The loop's report is drawn into a private temporary directory, the
+/// page completed in memory, and every file renamed into `out_dir` whole.
+fn write_report(out_dir: &Path, lr: &calib::LoopReport, prov: &Provenance, extra: &str) -> Result<PathBuf> {
+    let tmp = tempfile::Builder::new().prefix(".report.").tempdir_in(out_dir)?;
+    let drawn = calib::write_report(tmp.path(), lr)?;
+    let page = fs::read_to_string(&drawn)?;
+    let html = out_dir.join("report.html");
+    for svg in fs::read_dir(tmp.path())? {
+        let svg = svg?.path();
+        if svg != drawn {
+            let name = svg.file_name().context("a figure without a name")?;
+            files::write_atomic(&out_dir.join(name), fs::read(&svg)?)?;
+        }
+    }
+    files::write_atomic(&html, prov.into_report(&page, extra))?;
+    Ok(html)
+}
+
+/// An informational line on standard error. Not `eprintln!`, which panics when standard error
+/// is closed: a line nobody can read must not fail a calibration whose files are written.
+fn note(line: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{line}");
 }
 
 /// The truth of a simulated capture: `--truth`, or `x.truth.json` beside a single `x.cap`.
@@ -782,7 +918,7 @@ fn load_truth(files: &[PathBuf], explicit: Option<&Path>) -> Result<Option<sim::
     };
     let text = fs::read_to_string(&path).with_context(|| format!("cannot read truth {}", path.display()))?;
     let truth = serde_json::from_str(&text).with_context(|| format!("{} is not a simulation truth", path.display()))?;
-    eprintln!("comparing with the simulated truth in {}", path.display());
+    note(&format!("comparing with the simulated truth in {}", path.display()));
     Ok(Some(truth))
 }
 
@@ -799,7 +935,7 @@ fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>)
     let cal = load_calibration(cal_path)?;
     if let Some(c) = counts {
         let w = cal.apply(c);
-        println!("{:.4},{:.4},{:.4}", w[0], w[1], w[2]);
+        files::stdout(&format!("{:.4},{:.4},{:.4}\n", w[0], w[1], w[2]))?;
         return Ok(ExitCode::SUCCESS);
     }
     let path = capture_path.expect("clap requires --counts or --capture");
@@ -846,7 +982,7 @@ fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {
     let truth = sim::simulate_to(cfg, &mut std::io::BufWriter::new(file))
         .with_context(|| format!("writing {}", out.display()))?;
     let tp = truth_path(out);
-    fs::write(&tp, serde_json::to_string_pretty(&truth)?).with_context(|| format!("cannot write {}", tp.display()))?;
-    eprintln!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display());
+    files::write_atomic(&tp, serde_json::to_string_pretty(&truth)?)?;
+    note(&format!("wrote {} ({} runs, seed {}) and {}", out.display(), cfg.runs.len(), cfg.seed, tp.display()));
     Ok(ExitCode::SUCCESS)
 }

@@ -76,8 +76,7 @@ impl SessionManifest {
     /// Writes `dir/session.json`.
     pub fn write(&self, dir: &Path) -> Result<PathBuf> {
         let path = dir.join(MANIFEST_FILE);
-        std::fs::write(&path, serde_json::to_string_pretty(self)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        crate::files::write_atomic(&path, serde_json::to_string_pretty(self)?)?;
         Ok(path)
     }
 
@@ -285,14 +284,12 @@ impl Provenance {
         o
     }
 
-    /// Puts [`Provenance::html_section`], then `extra` (e.g. the noise figures), right under
-    /// the report's title.
-    pub fn insert_into_report(&self, html_path: &Path, extra: &str) -> Result<()> {
-        let html =
-            std::fs::read_to_string(html_path).with_context(|| format!("cannot read {}", html_path.display()))?;
+    /// The report page `html` with [`Provenance::html_section`], then `extra` (e.g. the noise
+    /// figures), right under its title: the page is assembled whole in memory and written once
+    /// (never read back from its file, which a concurrent run could be writing).
+    pub fn into_report(&self, html: &str, extra: &str) -> String {
         let at = html.find("</h1>").map_or(0, |i| i + "</h1>".len());
-        let out = format!("{}\n{}{extra}{}", &html[..at], self.html_section(), &html[at..]);
-        std::fs::write(html_path, out).with_context(|| format!("cannot write {}", html_path.display()))
+        format!("{}\n{}{extra}{}", &html[..at], self.html_section(), &html[at..])
     }
 }
 

@@ -4,7 +4,7 @@
 use std::process::{Command, Output};
 
 fn host(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
+    host_command().args(args).output().expect("host runs")
 }
 
 fn stderr(o: &Output) -> String {
@@ -228,6 +228,7 @@ fn simulate_inspect_calibrate_apply() {
         "SIM-5",
         "--db",
         &db,
+        "--again",
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     // A third session with a static capture beside the moving one: noise figures in the result,
@@ -259,6 +260,7 @@ fn simulate_inspect_calibrate_apply() {
         "SIM-5",
         "--db",
         &db,
+        "--again",
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(
@@ -274,7 +276,7 @@ fn simulate_inspect_calibrate_apply() {
     assert!(show3.contains("axis  ARW [°/√h]"), "{show3}");
     let o = host(&["export", "--cal", third.join("calibration.json").to_str().unwrap(), "--format", "kalibr"]);
     assert!(
-        String::from_utf8_lossy(&o.stdout).contains("  gyroscope_noise_density: "),
+        String::from_utf8_lossy(&o.stdout).contains("\ngyroscope_noise_density: "),
         "{}",
         String::from_utf8_lossy(&o.stdout)
     );
@@ -558,4 +560,79 @@ fn duplicate_runs_are_refused_naming_both() {
             a.display()
         )
     );
+}
+
+/// `host`, with the records database's default kept out of the user's data folder: a run
+/// without `--db` records under the temporary directory, never in ~/.local/share.
+fn host_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host"));
+    c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
+    c
+}
+
+/// A fitted g-sensitivity leaves the loop: into calibration.json (°/s per g, row = gyro axis)
+/// and from there into Kalibr's A; without one, calibration.json has no such key.
+#[test]
+fn a_fitted_g_sensitivity_reaches_calibration_json_and_the_kalibr_export() {
+    let tmp = scratch("gsens");
+    let dir = tmp.path();
+    let cap = dir.join("g.cap");
+    let o = host(&[
+        "simulate",
+        "--out",
+        cap.to_str().unwrap(),
+        "--seed",
+        "3",
+        "--duration",
+        "12",
+        "--rates-dps",
+        "180,90",
+        "--effect",
+        "g_sensitivity=0.05",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = dir.join("cal");
+    let o = host(&["calibrate", "--replay", cap.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let cal = out.join("calibration.json");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+    // The loop's own figure for gyro y from gravity along package z (loop.json's final step).
+    let lr: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("loop.json")).unwrap()).unwrap();
+    let steps = lr["steps"].as_array().unwrap();
+    let params = steps.last().unwrap()["effect_params"].as_array().unwrap();
+    let fitted = |name: &str| params.iter().find(|p| p["name"] == name).unwrap()["value"].as_f64().unwrap();
+    let g = &v["g_sensitivity_dps_per_g"];
+    assert_eq!(g[1][2].as_f64().unwrap(), fitted("g-sensitivity along package z, y"), "{g}");
+    let g00 = fitted("g-sensitivity along package x, x");
+    assert_eq!(g[0][0].as_f64().unwrap(), g00);
+    let o = host(&["export", "--cal", cal.to_str().unwrap(), "--format", "kalibr"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let yaml = String::from_utf8_lossy(&o.stdout);
+    let a00 = g00 * std::f64::consts::PI / 180.0 / 9.80665;
+    assert!(yaml.contains(&format!("\n  A:\n  - - {a00}\n")), "{yaml}");
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/demo.cap");
+    let plain = dir.join("plain");
+    let o = host(&["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", plain.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(plain.join("calibration.json")).unwrap()).unwrap();
+    assert!(v.get("g_sensitivity_dps_per_g").is_none());
+}
+
+/// `host export` reads `calibration/calibration.json` when `--cal` is not given: right after a
+/// `calibrate` without `--out-dir` it needs only the format. `host --help` names every command.
+#[test]
+fn export_defaults_to_the_calibration_calibrate_writes_and_help_names_every_command() {
+    let tmp = scratch("export-default");
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/demo.cap");
+    let run = |args: &[&str]| host_command().current_dir(tmp.path()).args(args).output().expect("host runs");
+    let o = run(&["calibrate", "--replay", demo.to_str().unwrap(), "--no-db"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run(&["export", "--format", "csv"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with("name,"), "{}", String::from_utf8_lossy(&o.stdout));
+    let o = run(&["--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).starts_with(
+        "Gyro calibration rig: calibrate, record, simulate, virtual-rig, inspect, apply, export, records, noise, configure-drive\n"
+    ));
 }

@@ -83,7 +83,7 @@ fn calibrate_over_a_serial_port_records_both_poses_and_calibrates() {
     // the captures are checked against its fingerprints.
     let caps: Vec<String> = DEFAULT_FILES.iter().map(|f| dir.join(f).display().to_string()).collect();
     let again = dir.join("again");
-    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--replay"];
+    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--again", "--replay"];
     args.extend(caps.iter().map(String::as_str));
     let o = host(&args);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -328,7 +328,7 @@ fn hostile_bench_through_the_host_binary_completes_and_replays_to_the_same_calib
     // Replayed, the same bytes give the same calibration, to the last digit.
     let again = dir.join("again");
     let caps: Vec<String> = files.iter().map(|f| dir.join(f).display().to_string()).collect();
-    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--replay"];
+    let mut args = vec!["calibrate", "--out-dir", again.to_str().unwrap(), "--db", &db, "--again", "--replay"];
     args.extend(caps.iter().map(String::as_str));
     let o = host(&args);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));

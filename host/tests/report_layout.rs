@@ -27,7 +27,7 @@ fn report() -> &'static Path {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let host = |args: &[&str]| {
-            let o = Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs");
+            let o = host_command().args(args).output().expect("host runs");
             assert!(
                 o.status.code().is_some_and(|c| c == 0 || c == 3),
                 "{args:?}: {}",
@@ -262,4 +262,12 @@ fn every_table_fits_a_1400_px_window_in_chromium() {
     for (i, (scroll, client)) in boxes.iter().enumerate() {
         assert!(scroll <= client, "box {i} scrolls sideways: {scroll} px of content in {client} px ({layout})");
     }
+}
+
+/// `host`, with the records database's default kept out of the user's data folder: a run
+/// without `--db` records under the temporary directory, never in ~/.local/share.
+fn host_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host"));
+    c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
+    c
 }

@@ -13,6 +13,9 @@ use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Vector3};
 use protocol::GyroConfig;
 
+/// The key of the fitted g-sensitivity in `calibration.json` (written by `host calibrate`).
+pub const G_SENSITIVITY_KEY: &str = "g_sensitivity_dps_per_g";
+
 /// Output format of `host export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
@@ -43,6 +46,10 @@ pub struct Export {
     pub provenance: Option<Provenance>,
     /// Noise figures, when the calibration had a static stretch.
     pub noise: Option<crate::allan::NoiseReport>,
+    /// The fitted g-sensitivity, when the calibration's model holds it: row i is gyro axis i's
+    /// bias per g of specific force along package x, y, z, °/s per g (`calibration.json`'s
+    /// `g_sensitivity_dps_per_g`).
+    pub g_sensitivity_dps_per_g: Option<[[f64; 3]; 3]>,
 }
 
 /// 1-σ uncertainties from the report's covariance diagonal.
@@ -58,9 +65,15 @@ impl Export {
     /// Reads `calibrate`'s JSON (full report, with or without provenance) or a bare calibration.
     pub fn from_json(text: &str) -> Result<Self> {
         let provenance = Provenance::from_calibration_json(text);
-        let noise = serde_json::from_str::<serde_json::Value>(text)
-            .ok()
-            .and_then(|v| serde_json::from_value(v.get("noise")?.clone()).ok());
+        let value = serde_json::from_str::<serde_json::Value>(text).ok();
+        let field = |key: &str| value.as_ref().and_then(|v| v.get(key)).cloned();
+        let noise = field("noise").and_then(|n| serde_json::from_value(n).ok());
+        let g_sensitivity_dps_per_g = match field(G_SENSITIVITY_KEY) {
+            None => None,
+            Some(g) => {
+                Some(serde_json::from_value(g).with_context(|| format!("{G_SENSITIVITY_KEY} is not 3×3 numbers"))?)
+            }
+        };
         let (calibration, gyro, sigma) = match serde_json::from_str::<CalReport>(text) {
             Ok(report) => {
                 // cov is in param_names order: m_x (3), b_x, m_y (3), b_y, m_z (3), b_z.
@@ -91,6 +104,7 @@ impl Export {
             sigma,
             provenance,
             noise,
+            g_sensitivity_dps_per_g,
         })
     }
 

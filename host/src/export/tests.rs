@@ -335,8 +335,78 @@ fn kalibr_factors_reproduce_k_s_over_the_nominal_sensitivity() {
     // YAML carries the factors as written.
     assert!((l[(0, 0)] - (57.3f64.powi(2) + 0.81 + 0.16).sqrt() / nominal).abs() < 1e-12);
     let yaml = e.render(Format::Kalibr).unwrap();
-    assert!(yaml.contains("  update_rate: 800.0\n"), "{yaml}");
-    assert!(yaml.contains(&format!("      - [{:.12e}, {:.12e}, {:.12e}]", l[(0, 0)], 0.0, 0.0)), "{yaml}");
+    assert!(yaml.contains("\nupdate_rate: 800.0\n"), "{yaml}");
+    let m00: f64 = yaml_serde::from_str::<yaml_serde::Value>(&yaml).unwrap()["gyroscopes"]["M"][0][0].as_f64().unwrap();
+    assert_eq!(m00, l[(0, 0)]);
+}
+
+/// The Kalibr file in Kalibr's own terms: without noise figures and g-sensitivity, the required
+/// statistics are the stated placeholders (positive, as Kalibr's reader demands) and A is zero.
+#[test]
+fn kalibr_yaml_holds_every_field_kalibrs_reader_requires() {
+    let yaml = sample_export().render(Format::Kalibr).unwrap();
+    let body: Vec<&str> = yaml.lines().filter(|l| !l.starts_with('#')).take(8).collect();
+    assert_eq!(
+        body,
+        [
+            "rostopic: /imu0",
+            "update_rate: 800.0",
+            "accelerometer_noise_density: 0.00186",
+            "accelerometer_random_walk: 0.000433",
+            "gyroscope_noise_density: 0.0005235987755982988",
+            "gyroscope_random_walk: 0.00008726646259971648",
+            "model: scale-misalignment",
+            "time_offset: 0.0",
+        ]
+    );
+    assert!(yaml.contains("\n  A:\n  - - 0.0\n    - 0.0\n    - 0.0\n"), "{yaml}");
+    assert!(yaml.contains("# gyroscopes.A: zero: g-sensitivity not in this calibration's model.\n"), "{yaml}");
+}
+
+/// A fitted g-sensitivity reaches Kalibr's A, in rad/s per m/s²: 0.05 °/s/g on x from gravity
+/// along y is 0.05·π/180/9.80665.
+#[test]
+fn kalibr_a_carries_the_fitted_g_sensitivity() {
+    let mut e = sample_export();
+    e.g_sensitivity_dps_per_g = Some([[0.0, 0.05, 0.0], [0.0, 0.0, -0.02], [1e-9, 0.0, 0.0]]);
+    let yaml = e.render(Format::Kalibr).unwrap();
+    let v: yaml_serde::Value = yaml_serde::from_str(&yaml).unwrap();
+    let a = |i: usize, j: usize| v["gyroscopes"]["A"][i][j].as_f64().unwrap();
+    assert_eq!(a(0, 1), 0.05 * std::f64::consts::PI / 180.0 / 9.80665);
+    assert_eq!(a(1, 2), -0.02 * std::f64::consts::PI / 180.0 / 9.80665);
+    // 1e-9 °/s/g is 1.78e-12 in Kalibr's unit: written with a point and a signed exponent.
+    assert!(yaml.contains("\n  - - 1.7797"), "{yaml}");
+    assert!(yaml.contains("e-12\n"), "{yaml}");
+    assert!(yaml.contains("# gyroscopes.A: the fitted g-sensitivity, rad/s per m/s^2.\n"), "{yaml}");
+}
+
+/// PyYAML, which Kalibr reads with (YAML 1.1), takes every number for a number: Kalibr's
+/// `ImuParameters` checks run on the file as Python loads it.
+#[test]
+#[cfg_attr(not(has_pyyaml), ignore = "no PyYAML: apt-get install python3-yaml (.ci/run does)")]
+fn kalibr_yaml_loads_in_pyyaml_with_every_number_a_number() {
+    let mut e = sample_export();
+    e.g_sensitivity_dps_per_g = Some([[0.0, 0.05, 0.0], [0.0, 0.0, -0.02], [1e-9, 0.0, 0.0]]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("imu.yaml");
+    std::fs::write(&path, e.render(Format::Kalibr).unwrap()).unwrap();
+    // Kalibr's ImuParameters (kalibr_common/ConfigReader.py): rostopic a string, update_rate and
+    // the four statistics positive; here also every matrix entry a float.
+    let script = r#"
+import sys, yaml
+d = yaml.safe_load(open(sys.argv[1]))
+assert isinstance(d["rostopic"], str)
+for k in ["update_rate", "accelerometer_noise_density", "accelerometer_random_walk",
+          "gyroscope_noise_density", "gyroscope_random_walk"]:
+    assert isinstance(d[k], float) and d[k] > 0.0, (k, d[k])
+assert isinstance(d["time_offset"], float)
+rows = [r for m in ("M", "A", "C_gyro_i") for r in d["gyroscopes"][m]] + d["T_i_b"]
+assert all(isinstance(x, float) for r in rows for x in r), rows
+print(d["gyroscopes"]["A"][2][0], d["gyroscope_random_walk"])
+"#;
+    let o = Command::new("python3").arg("-c").arg(script).arg(&path).output().expect("python3 runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), "1.7797405352432584e-12 8.726646259971648e-05\n");
 }
 
 #[test]

@@ -158,7 +158,7 @@ impl Postgres {
     /// Connects to a `postgres://` URL; with `schema`, works inside that schema (created if
     /// missing), so tests can share one server without seeing each other's rows.
     pub fn connect(url: &str, schema: Option<&str>) -> Result<Self> {
-        let mut c = postgres::Client::connect(url, postgres::NoTls)?;
+        let mut c = super::pg::connect(url)?;
         if let Some(s) = schema {
             anyhow::ensure!(s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'), "bad schema name {s:?}");
             c.batch_execute(&format!("CREATE SCHEMA IF NOT EXISTS {s}; SET search_path TO {s}"))?;

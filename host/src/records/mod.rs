@@ -3,6 +3,7 @@
 //! both ([`db::Conn`]), and the production views: list, show, compare, summary ([`views`]).
 
 pub mod db;
+pub mod pg;
 pub mod store;
 pub mod views;
 
@@ -57,6 +58,17 @@ impl DbSpec {
                 .join(".local/share"),
         };
         Ok(DbSpec::Sqlite(data.join("gyrocal/records.sqlite")))
+    }
+
+    /// As [`DbSpec::open`], for reading: an SQLite file that does not exist is an error, never
+    /// created (a mistyped path must not look like an empty database).
+    pub fn open_existing(&self) -> Result<Box<dyn Conn>> {
+        if let DbSpec::Sqlite(p) = self {
+            if !p.exists() {
+                anyhow::bail!("no records database at {} (check --db or ${DB_ENV})", p.display());
+            }
+        }
+        self.open()
     }
 
     /// Opens a connection and brings the schema up to date.

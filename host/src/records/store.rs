@@ -100,7 +100,7 @@ pub fn schema_version(c: &mut dyn Conn) -> Result<i64> {
 }
 
 /// One parameter of a calibration.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Param {
     /// Name, e.g. `tilt_x_deg`.
     pub name: String,
@@ -113,7 +113,7 @@ pub struct Param {
 }
 
 /// Noise figures of one axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct NoiseRow {
     /// Axis name.
     pub axis: char,
@@ -268,6 +268,17 @@ pub fn list(c: &mut dyn Conn, sensor: Option<&str>) -> Result<Vec<Record>> {
         None => c.query(&format!("SELECT {COLUMNS} FROM calibration ORDER BY id"), &[])?,
     };
     rows.iter().map(|r| record_from_row(r)).collect()
+}
+
+/// Ids of the records one of whose captures has this SHA-256, oldest first.
+pub fn records_with_capture(c: &mut dyn Conn, sha256: &str) -> Result<Vec<i64>> {
+    // captures_sha256 is a comma-separated list of 64-hex digests: a digest has no LIKE
+    // wildcard, and no digest is a substring of another of the same length.
+    let rows = c.query(
+        "SELECT id FROM calibration WHERE captures_sha256 LIKE $1 ORDER BY id",
+        &[Val::Text(Some(format!("%{sha256}%")))],
+    )?;
+    rows.iter().map(|r| r[0].int().context("id")).collect()
 }
 
 /// One record with its parameters and noise figures.

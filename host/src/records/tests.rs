@@ -235,6 +235,26 @@ fn summary_names_the_outlier_among_twenty_sensors() {
     assert!(html.contains("G-BAD: tilt_x = +3.0000 deg (z +25.6)") && html.contains("<svg"), "{html}");
 }
 
+/// A TLS session to the test server (`.ci/run` starts it with TLS on): `sslmode=require` (the
+/// URL's own, or added to `GYROCAL_TEST_PG`) connects encrypted, stores and lists; the server
+/// confirms the session is TLS (`pg_stat_ssl`).
+#[test]
+#[cfg_attr(not(gyrocal_test_pg), ignore = "no PostgreSQL: set GYROCAL_TEST_PG=postgres://… (.ci/run does)")]
+fn postgres_over_tls_stores_and_lists() {
+    let plain = TestDb::postgres("tls");
+    let DbSpec::Postgres(url) = &plain.spec else { unreachable!() };
+    let sep = if url.contains('?') { '&' } else { '?' };
+    let tls = DbSpec::Postgres(format!("{url}{sep}sslmode=require"));
+    let mut c = tls.open_in_schema(plain.schema.as_deref()).expect("a TLS session to the test server");
+    let rows = c.query("SELECT ssl::text, version FROM pg_stat_ssl WHERE pid = pg_backend_pid()", &[]).unwrap();
+    assert_eq!(rows[0][0].text().as_deref(), Some("true"), "the session is not encrypted");
+    assert!(rows[0][1].text().is_some_and(|v| v.starts_with("TLSv1.")), "{:?}", rows[0][1].text());
+    let (id, new) = store::insert(c.as_mut(), &record("tls-1", "G-TLS", &[("tilt_x", 1.0, Some(0.01))])).unwrap();
+    assert!(new);
+    let listed = store::list(c.as_mut(), Some("G-TLS")).unwrap();
+    assert_eq!(listed.iter().map(|r| r.id.unwrap()).collect::<Vec<_>>(), vec![id]);
+}
+
 #[test]
 fn db_specs_parse_and_passwords_are_hidden() {
     assert_eq!(DbSpec::parse("sqlite:/tmp/x.sqlite").unwrap(), DbSpec::Sqlite("/tmp/x.sqlite".into()));

@@ -5,6 +5,160 @@ use super::store::Record;
 use statrs::statistics::{Data, OrderStatistics, Statistics};
 use std::fmt::Write as _;
 
+/// Output format of `host records list|show|compare`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Aligned columns for a terminal.
+    Text,
+    /// JSON, for scripts.
+    Json,
+    /// CSV with a header line, for spreadsheets.
+    Csv,
+}
+
+/// A record's identity fields as JSON (what `list` gives per record).
+fn record_json(r: &Record) -> serde_json::Value {
+    serde_json::json!({
+        "id": r.id,
+        "uid": r.uid,
+        "sensor_serial": r.sensor_serial,
+        "operator": r.operator,
+        "rig": r.rig,
+        "calibrated_utc": r.calibrated_utc,
+        "host_version": r.host_version,
+        "rig_firmware": r.rig_firmware,
+        "full_scale_dps": r.full_scale_dps,
+        "captures_sha256": r.captures_sha256.split(',').filter(|s| !s.is_empty()).collect::<Vec<_>>(),
+        "verdict": r.verdict,
+    })
+}
+
+const LIST_CSV_HEADER: [&str; 10] = [
+    "id",
+    "sensor_serial",
+    "calibrated_utc",
+    "operator",
+    "rig",
+    "verdict",
+    "full_scale_dps",
+    "host_version",
+    "rig_firmware",
+    "captures_sha256",
+];
+
+fn csv_text(rows: impl IntoIterator<Item = Vec<String>>) -> String {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    for row in rows {
+        w.write_record(&row).expect("writing CSV to memory");
+    }
+    String::from_utf8(w.into_inner().expect("flushing CSV to memory")).expect("CSV of UTF-8 strings")
+}
+
+fn opt(v: &Option<String>) -> String {
+    v.clone().unwrap_or_default()
+}
+
+fn num(v: Option<f64>) -> String {
+    v.map_or(String::new(), |v| v.to_string())
+}
+
+/// `list` in `format`.
+pub fn list_as(records: &[Record], format: Format) -> String {
+    match format {
+        Format::Text => list(records),
+        Format::Json => {
+            let v: Vec<_> = records.iter().map(record_json).collect();
+            serde_json::to_string_pretty(&v).expect("JSON of plain values") + "\n"
+        }
+        Format::Csv => {
+            csv_text(std::iter::once(LIST_CSV_HEADER.map(String::from).to_vec()).chain(records.iter().map(|r| {
+                vec![
+                    r.id.unwrap_or(0).to_string(),
+                    opt(&r.sensor_serial),
+                    r.calibrated_utc.clone(),
+                    opt(&r.operator),
+                    opt(&r.rig),
+                    r.verdict.clone(),
+                    r.full_scale_dps.to_string(),
+                    r.host_version.clone(),
+                    opt(&r.rig_firmware),
+                    r.captures_sha256.clone(),
+                ]
+            })))
+        }
+    }
+}
+
+/// `show` in `format`: JSON holds the identity, every parameter, the noise figures and the
+/// stored calibration.json; CSV one line per parameter.
+pub fn show_as(r: &Record, format: Format) -> String {
+    match format {
+        Format::Text => show(r),
+        Format::Json => {
+            let mut v = record_json(r);
+            v["parameters"] = serde_json::to_value(&r.params).expect("JSON of plain values");
+            v["noise"] = serde_json::to_value(&r.noise).expect("JSON of plain values");
+            v["calibration"] = serde_json::from_str(&r.result_json).unwrap_or(serde_json::Value::Null);
+            serde_json::to_string_pretty(&v).expect("JSON of plain values") + "\n"
+        }
+        Format::Csv => csv_text(
+            std::iter::once(vec!["id".into(), "name".into(), "value".into(), "sigma".into(), "unit".into()]).chain(
+                r.params.iter().map(|p| {
+                    vec![
+                        r.id.unwrap_or(0).to_string(),
+                        p.name.clone(),
+                        p.value.to_string(),
+                        num(p.sigma),
+                        p.unit.clone(),
+                    ]
+                }),
+            ),
+        ),
+    }
+}
+
+/// `compare` in `format`: one entry per parameter with both values, the change and z.
+pub fn compare_as(a: &Record, b: &Record, format: Format) -> String {
+    let ch = changes(a, b);
+    let changed = |c: &Change| c.z.is_some_and(|z| z.abs() > CHANGED_Z);
+    match format {
+        Format::Text => compare(a, b),
+        Format::Json => {
+            let params: Vec<_> = ch
+                .iter()
+                .map(|c| {
+                    serde_json::json!({
+                        "name": c.name, "unit": c.unit, "a": c.a, "b": c.b, "change": c.b - c.a,
+                        "z": c.z, "changed": changed(c),
+                    })
+                })
+                .collect();
+            let v = serde_json::json!({
+                "a": record_json(a),
+                "b": record_json(b),
+                "changed_beyond_sigma": CHANGED_Z,
+                "parameters": params,
+            });
+            serde_json::to_string_pretty(&v).expect("JSON of plain values") + "\n"
+        }
+        Format::Csv => csv_text(
+            std::iter::once(["name", "unit", "a", "b", "change", "z", "changed"].map(String::from).to_vec()).chain(
+                ch.iter().map(|c| {
+                    vec![
+                        c.name.clone(),
+                        c.unit.clone(),
+                        c.a.to_string(),
+                        c.b.to_string(),
+                        (c.b - c.a).to_string(),
+                        num(c.z),
+                        changed(c).to_string(),
+                    ]
+                }),
+            ),
+        ),
+    }
+}
+
 /// One line per record.
 pub fn list(records: &[Record]) -> String {
     let mut o = String::from("   id  sensor            calibrated (UTC)      operator      rig           verdict\n");

@@ -11,7 +11,7 @@ use std::thread;
 use std::time::Duration;
 
 pub fn host(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_host")).args(args).output().expect("host runs")
+    host_command().args(args).output().expect("host runs")
 }
 
 /// A test's scratch directory under the temp dir, with the files named after it beside it (its
@@ -80,10 +80,11 @@ impl Running {
     pub fn start_via(wrapper: &[&str], args: &[&str], stdin: std::process::Stdio) -> Self {
         use std::io::BufRead;
         let mut command = match wrapper {
-            [] => Command::new(env!("CARGO_BIN_EXE_host")),
+            [] => host_command(),
             [program, rest @ ..] => {
                 let mut c = Command::new(program);
                 c.args(rest).arg(env!("CARGO_BIN_EXE_host"));
+                keep_out_of_the_users_data(&mut c);
                 c
             }
         };
@@ -153,7 +154,7 @@ impl Drop for Running {
 /// Starts `host virtual-rig ARGS` and returns it with the pty path it prints first.
 pub fn spawn_virtual_rig(args: &[&str]) -> (std::process::Child, String) {
     use std::io::BufRead;
-    let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+    let mut rig = host_command()
         .arg("virtual-rig")
         .args(args)
         .stdout(std::process::Stdio::piped())
@@ -197,7 +198,7 @@ pub struct LockstepBench {
 impl LockstepBench {
     pub fn start(name: &str, args: &[&str]) -> Self {
         use std::io::BufRead;
-        let mut rig = Command::new(env!("CARGO_BIN_EXE_host"))
+        let mut rig = host_command()
             .args(["virtual-rig", "--lockstep"])
             .args(args)
             .stdin(std::process::Stdio::piped())
@@ -396,3 +397,15 @@ impl Drop for LockstepBench {
 }
 
 pub const NS: u64 = 1_000_000_000;
+
+/// `host`, with the records database's default kept out of the user's data folder: a run
+/// without `--db` records under the temporary directory, never in ~/.local/share.
+pub fn host_command() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_host"));
+    keep_out_of_the_users_data(&mut c);
+    c
+}
+
+fn keep_out_of_the_users_data(c: &mut Command) {
+    c.env_remove("GYROCAL_DB").env("XDG_DATA_HOME", std::env::temp_dir().join("gyrocal-tests-data"));
+}
