@@ -192,12 +192,7 @@ fn a_kill_at_any_point_of_a_rerun_leaves_a_whole_calibration_json() {
 #[test]
 fn no_db_writes_the_files_and_records_nothing() {
     let tmp = scratch("nodb");
-    let out = tmp.path().join("cal");
-    let demo = demo();
-    let o = host_cmd(tmp.path())
-        .args(["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"])
-        .output()
-        .unwrap();
+    let (o, out) = calibrate_demo_without_a_record(tmp.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stderr(&o).lines().any(|l| l == "not recorded (--no-db)"), "{}", stderr(&o));
     assert!(out.join("calibration.json").exists());
@@ -209,12 +204,7 @@ fn no_db_writes_the_files_and_records_nothing() {
 #[test]
 fn the_certificate_gives_expanded_uncertainties_angles_and_the_correction() {
     let tmp = scratch("cert");
-    let out = tmp.path().join("cal");
-    let demo = demo();
-    let o = host_cmd(tmp.path())
-        .args(["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"])
-        .output()
-        .unwrap();
+    let (o, out) = calibrate_demo_without_a_record(tmp.path());
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let cal: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
@@ -294,4 +284,15 @@ fn spec_limits_pass_or_fail_with_exit_4() {
         "{}",
         stderr(&o)
     );
+}
+
+/// `host calibrate --replay demo.cap --no-db` into `dir/cal`: its output and that directory.
+fn calibrate_demo_without_a_record(dir: &std::path::Path) -> (std::process::Output, std::path::PathBuf) {
+    let out = dir.join("cal");
+    let demo = demo();
+    let o = host_cmd(dir)
+        .args(["calibrate", "--replay", demo.to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-db"])
+        .output()
+        .unwrap();
+    (o, out)
 }

@@ -442,20 +442,8 @@ fn qemu_a_panic_in_init_ends_in_a_reset() {
     const REPORT: &str =
         "\nsafe state (panic): enable low, pwm 0\npanic: qemu-init-panic-test: a deliberate panic in init\n\
                           \nsafe state (HardFault): enable low, pwm 0\n";
-    let mut seen = Vec::new();
     let started = Instant::now();
-    let text = loop {
-        let text = String::from_utf8_lossy(&seen).into_owned();
-        if text.matches(REPORT).count() >= 2 {
-            break text;
-        }
-        assert!(started.elapsed() < SESSION_LIMIT, "no second report after {:?}: {text:?}", started.elapsed());
-        match qemu.bytes.recv_timeout(Duration::from_millis(10)) {
-            Ok(bytes) => seen.extend(bytes),
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => panic!("qemu exited: {text:?}"),
-        }
-    };
+    let text = until_reported_twice(&qemu, REPORT);
     // Nothing but the reports (a third may be on its way): init never got as far as the protocol.
     assert!(text.starts_with(&REPORT.repeat(2)), "{text:?}");
     eprintln!("qemu: the init panic's report twice after {:?}", started.elapsed());
@@ -483,12 +471,20 @@ fn qemu_a_stack_overflow_ends_in_the_safe_state() {
     let image = build_image("qemu-stack-overflow-test");
     let qemu = Qemu::boot(&image);
     const REPORT: &str = "\nsafe state (HardFault): enable low, pwm 0\n";
+    let started = Instant::now();
+    let text = until_reported_twice(&qemu, REPORT);
+    assert!(text.starts_with(&REPORT.repeat(2)), "{text:?}");
+    eprintln!("qemu: the stack overflow's safe state twice after {:?}", started.elapsed());
+}
+
+/// What `qemu` printed until `report` is in it twice (the image restarted after it once).
+fn until_reported_twice(qemu: &Qemu, report: &str) -> String {
     let mut seen = Vec::new();
     let started = Instant::now();
-    let text = loop {
+    loop {
         let text = String::from_utf8_lossy(&seen).into_owned();
-        if text.matches(REPORT).count() >= 2 {
-            break text;
+        if text.matches(report).count() >= 2 {
+            return text;
         }
         assert!(started.elapsed() < SESSION_LIMIT, "no second report after {:?}: {text:?}", started.elapsed());
         match qemu.bytes.recv_timeout(Duration::from_millis(10)) {
@@ -496,7 +492,5 @@ fn qemu_a_stack_overflow_ends_in_the_safe_state() {
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => panic!("qemu exited: {text:?}"),
         }
-    };
-    assert!(text.starts_with(&REPORT.repeat(2)), "{text:?}");
-    eprintln!("qemu: the stack overflow's safe state twice after {:?}", started.elapsed());
+    }
 }
