@@ -129,6 +129,7 @@ pub fn serve(opts: &Options) -> Result<()> {
     let (mut master, slave) = TTYPort::pair().context("cannot allocate a pseudo-terminal")?;
     let path = slave.name().context("the pty has no device name")?;
     master.set_timeout(Duration::from_millis(0)).ok();
+    never_block(&master)?;
 
     let mut plant = Plant::prototype();
     if !opts.ideal_gyro {
@@ -274,6 +275,21 @@ impl Server {
         }
         Ok(())
     }
+}
+
+/// Makes the pty master's reads and writes return at once (`WouldBlock`) rather than wait.
+/// `serialport`'s zero timeout only polls before the call: a poll that finds room for one byte
+/// is followed by a blocking write of the whole backlog, which waits until a host that is not
+/// reading (in lockstep: waiting for the rig's `at`, which this write holds up) makes room.
+/// `serialport` has no non-blocking mode, hence rustix's `fcntl` here.
+fn never_block(master: &TTYPort) -> Result<()> {
+    use rustix::fs::{fcntl_getfl, fcntl_setfl, OFlags};
+    use std::os::fd::{AsRawFd, BorrowedFd};
+    // SAFETY: `master` owns the descriptor and outlives this borrow (`TTYPort` has no `AsFd`).
+    let fd = unsafe { BorrowedFd::borrow_raw(master.as_raw_fd()) };
+    fcntl_getfl(fd)
+        .and_then(|flags| fcntl_setfl(fd, flags | OFlags::NONBLOCK))
+        .context("cannot make the pseudo-terminal non-blocking")
 }
 
 /// Simulated time on the client's command (module documentation).

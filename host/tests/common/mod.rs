@@ -193,6 +193,37 @@ pub struct LockstepBench {
     /// rig runs this many ns more in one step, with no byte from the host, before the host hears
     /// the time, as when a loaded machine deschedules the host.
     pub stall_ns: Arc<std::sync::atomic::AtomicU64>,
+    /// Cleared when the bench is dropped; until then [`hang_guard`] may end the rig.
+    alive: Arc<std::sync::Mutex<bool>>,
+}
+
+/// Wall time after which a lockstep bench is taken to be deadlocked. Every lockstep test ends
+/// in seconds of wall time; a loaded CI machine may take ten times that. A deadlock (the rig,
+/// the host and the test each waiting for another) would otherwise hold CI for its whole budget.
+const HANG_GUARD: Duration = Duration::from_secs(300);
+
+/// Kills the rig `pid` if the bench is still alive after [`HANG_GUARD`]: its standard output
+/// then ends, so the test's reads return and the test fails on what it asserts, with the rig's
+/// log, instead of hanging.
+fn hang_guard(pid: u32, alive: Arc<std::sync::Mutex<bool>>) {
+    thread::spawn(move || {
+        let t0 = std::time::Instant::now();
+        loop {
+            let alive = alive.lock().unwrap();
+            if !*alive {
+                return;
+            }
+            if t0.elapsed() > HANG_GUARD {
+                eprintln!("lockstep bench: no end after {HANG_GUARD:?} of wall time: the virtual rig is killed");
+                // SAFETY: `pid` is the rig, still a child of this process: the bench reaps it only
+                // after clearing `alive`, which waits for this lock, so no reused id is hit.
+                unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+                return;
+            }
+            drop(alive);
+            thread::sleep(Duration::from_millis(100));
+        }
+    });
 }
 
 impl LockstepBench {
@@ -222,6 +253,8 @@ impl LockstepBench {
         let _ = std::fs::remove_file(&socket);
         let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
         let stall_ns = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let alive = Arc::new(std::sync::Mutex::new(true));
+        hang_guard(rig.id(), alive.clone());
         Self {
             rig,
             control_in: Some(control_in),
@@ -231,6 +264,7 @@ impl LockstepBench {
             socket,
             listener,
             stall_ns,
+            alive,
         }
     }
 
@@ -390,6 +424,7 @@ impl LockstepBench {
 
 impl Drop for LockstepBench {
     fn drop(&mut self) {
+        *self.alive.lock().unwrap_or_else(|e| e.into_inner()) = false;
         let _ = self.rig.kill();
         let _ = self.rig.wait();
         let _ = std::fs::remove_file(&self.socket);
