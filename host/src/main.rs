@@ -781,7 +781,8 @@ fn calibrate(
     }
     let truth = load_truth(files, truth_path)?;
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
-    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref()).context("calibration failed")?;
+    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref().map(sim::Truth::sensor))
+        .context("calibration failed")?;
     let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
     // Files and the record first, the summary last: a closed or full standard output must not
     // cost the result.

@@ -19,7 +19,7 @@ use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, 
 use super::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
-use super::truth_check::TruthErrors;
+use super::truth_check::{SensorTruth, TruthErrors};
 use super::wire::ParamMoveJson;
 use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
@@ -382,19 +382,14 @@ struct Context<'a> {
     cutoff_hz: f64,
     nominal: f64,
     full_scale_dps: f64,
-    truth: Option<&'a crate::sim::Truth>,
+    truth: Option<SensorTruth>,
     labels: Vec<String>,
     run_numbers: Vec<usize>,
     run_poses: Vec<crate::geometry::Pose>,
 }
 
 impl<'a> Context<'a> {
-    fn new(
-        data: &'a LoopData,
-        opts: &'a LoopOptions,
-        gyro: protocol::GyroConfig,
-        truth: Option<&'a crate::sim::Truth>,
-    ) -> Self {
+    fn new(data: &'a LoopData, opts: &'a LoopOptions, gyro: protocol::GyroConfig, truth: Option<SensorTruth>) -> Self {
         Context {
             data,
             opts,
@@ -517,7 +512,7 @@ impl<'a> Context<'a> {
             held_out_excess_dps: (!excess.is_empty())
                 .then(|| (excess.iter().map(|e| e * e).sum::<f64>() / excess.len() as f64).sqrt()),
             held_out,
-            truth: self.truth.map(|t| TruthErrors::of(&s.estimate.axes, t)),
+            truth: self.truth.map(|t| TruthErrors::of(&s.estimate.axes, &t)),
             findings: s.diag.findings.clone(),
             passes: s.fitted.passes,
             dropped: Vec::new(),
@@ -781,7 +776,7 @@ pub fn calibrate(runs: &[Run], cal: &CalOptions) -> Result<CalReport, CalError> 
 }
 
 /// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
-pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<&crate::sim::Truth>) -> Result<LoopReport, CalError> {
+pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<SensorTruth>) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
     loop_on(kin, runs[0].gyro, opts, truth).and_then(super::sanity::vouch)
@@ -796,7 +791,7 @@ pub fn close_loop_reconstructed(
     runs: &[Run],
     rec: kinematics::Reconstruction,
     opts: &LoopOptions,
-    truth: Option<&crate::sim::Truth>,
+    truth: Option<SensorTruth>,
 ) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = rec.finish(runs)?;
@@ -808,89 +803,124 @@ fn loop_on(
     kin: kinematics::Kinematics,
     gyro: protocol::GyroConfig,
     opts: &LoopOptions,
-    truth: Option<&crate::sim::Truth>,
+    truth: Option<SensorTruth>,
 ) -> Result<LoopReport, CalError> {
     let data = LoopData::new(kin);
     super::sanity::enough_samples(&data)?;
     let ctx = Context::new(&data, opts, gyro, truth);
-    // Earth rotation is in every lab. With the latitude known its vertical part is known, and
-    // the model holds it from the start. Without, a fitted vertical part trades off against
-    // the drift models and costs 10-20 ppm of σ in every sensitivity, so it is a candidate like
-    // the others, and while it is not in the model the σ of every k carries what it may do
-    // (`earth_type_b_rel`). Its Jacobian goes through M, so it starts from the fitted linear model.
     let linear = ctx.linear_fit()?;
-    let first = match opts.latitude_deg {
-        Some(lat) => {
-            let mut with_earth = linear.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
-            with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();
-            fit(&data, with_earth, [1.0; 3])?
-        }
-        None => linear.clone(),
-    };
-    let mut state = ctx.state(first);
+    let mut state = ctx.state(ctx.start_from(&linear)?);
     let paper = ctx.paper_check(&linear, &state.diag);
     drop(linear);
     let initial = state.diag.clone();
-    let mut steps = vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())];
-    let mut asks = Vec::new();
-    let mut skipped: Vec<Skipped> = Vec::new();
+    let mut trail =
+        Trail { steps: vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())], skipped: Vec::new() };
     while state.fitted.model.effects.len() < opts.max_effects {
-        let outcome = step(&data, &state.fitted, &state.diag, opts.alpha)?;
-        for sk in outcome.skipped {
-            if !skipped.contains(&sk) {
-                skipped.push(sk);
+        match ctx.next_state(&state, &mut trail)? {
+            Some(next) => state = next,
+            None => break,
+        }
+    }
+    if let Some(next) = ctx.with_earth(&state, &mut trail) {
+        state = next;
+    }
+    Ok(ctx.conclude(state, trail, paper, initial))
+}
+
+/// What the loop has done so far: a report per step, and the candidates it could not fit.
+struct Trail {
+    steps: Vec<StepReport>,
+    skipped: Vec<Skipped>,
+}
+
+impl Trail {
+    fn skip(&mut self, sk: Skipped) {
+        if !self.skipped.contains(&sk) {
+            self.skipped.push(sk);
+        }
+    }
+}
+
+impl Context<'_> {
+    /// The model the loop starts from. Earth rotation is in every lab. With the latitude known
+    /// its vertical part is known, and the model holds it from the start. Without, a fitted
+    /// vertical part trades off against the drift models and costs 10-20 ppm of σ in every
+    /// sensitivity, so it is a candidate like the others, and while it is not in the model the σ
+    /// of every k carries what it may do (`earth_type_b_rel`). Its Jacobian goes through M, so it
+    /// starts from the fitted linear model.
+    fn start_from(&self, linear: &Fitted) -> Result<Fitted, CalError> {
+        match self.opts.latitude_deg {
+            Some(lat) => {
+                let mut with_earth =
+                    linear.model.with(Effect::EarthRotationAtLatitude, Default::default(), vec![0.0; 2]);
+                with_earth.earth_vertical_known_dps = earth_rate_dps() * lat.to_radians().sin();
+                fit(self.data, with_earth, [1.0; 3])
             }
+            None => Ok(linear.clone()),
+        }
+    }
+
+    /// One step of the loop: the best candidate that passes its test, fitted, then whatever it
+    /// made redundant dropped. `None` when no candidate passes.
+    fn next_state(&self, state: &State, trail: &mut Trail) -> Result<Option<State>, CalError> {
+        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha)?;
+        for sk in outcome.skipped {
+            trail.skip(sk);
         }
         let Some((bi, mut fitted)) = outcome.accepted else {
-            break;
+            return Ok(None);
         };
         let score = outcome.scores[bi].clone();
         let mut dropped = Vec::new();
         let replaced: Vec<Effect> =
             state.fitted.model.effects.iter().copied().filter(|e| !fitted.model.effects.contains(e)).collect();
-        while let Some((effect, wald_chi2, threshold)) = least_needed(&fitted, opts.alpha, score.effect) {
-            match fit(&data, fitted.model.without(effect), state.diag.weights()) {
+        while let Some((effect, wald_chi2, threshold)) = least_needed(&fitted, self.opts.alpha, score.effect) {
+            match fit(self.data, fitted.model.without(effect), state.diag.weights()) {
                 Ok(f) => {
                     dropped.push(Dropped { effect, after: score.effect, wald_chi2, threshold });
                     fitted = f;
                 }
                 Err(e) => {
-                    skipped.push(Skipped { effect, why: format!("could not be dropped when redundant: {e}") });
+                    trail.skip(Skipped { effect, why: format!("could not be dropped when redundant: {e}") });
                     break;
                 }
             }
         }
-        let next = ctx.state(fitted);
+        let next = self.state(fitted);
         let mut report =
-            ctx.report(steps.len(), &next, Some(&state), Some(score), outcome.scores, outcome.drift_choice);
+            self.report(trail.steps.len(), &next, Some(state), Some(score), outcome.scores, outcome.drift_choice);
         report.dropped = dropped;
         report.replaced = replaced;
-        steps.push(report);
-        state = next;
+        trail.steps.push(report);
+        Ok(Some(next))
     }
-    // Earth rotation is in every lab: once the loop has explained what it can, a model without
-    // it gets it (fitted freely: only the lab's orientation is unknown), when the runs separate
-    // its vertical part from the sensitivities (two speeds or directions): its σ then replaces
-    // its consider term. It is added without a test because it is there whatever the test says:
-    // kept only on a test (threshold 16.3 for 3 parameters), it was left out of
-    // realistic-2speed-s101 (Δχ² 7.1), whose lab turns at a mid latitude, and the sensitivities
-    // ended 31.9 ppm off the truth rather than 17.8. Its cost where the lab does not turn (a
-    // simulator): with 180 and 90 °/s in one direction the gyro filter's droop rides on its
-    // vertical part (README round trip, seed 7: 21 → 46 ppm, max |z| 2.1 → 3.0, within σ); with
-    // the default 180, 90, −180 °/s, which separates the two, nothing (10.3 → 11.0 ppm).
-    // With g-sensitivity in the model its vertical part cannot be told from that term, which
-    // holds it (`Effect::EarthRotationHorizontal`): only the horizontal part is added.
-    if !state.fitted.model.effects.iter().any(|e| e.is_earth()) && separates_delay_and_index(&data) {
+
+    /// Earth rotation is in every lab: once the loop has explained what it can, a model without
+    /// it gets it (fitted freely: only the lab's orientation is unknown), when the runs separate
+    /// its vertical part from the sensitivities (two speeds or directions): its σ then replaces
+    /// its consider term. It is added without a test because it is there whatever the test
+    /// says: kept only on a test (threshold 16.3 for 3 parameters), it was left out of
+    /// realistic-2speed-s101 (Δχ² 7.1), whose lab turns at a mid latitude, and the sensitivities
+    /// ended 31.9 ppm off the truth rather than 17.8. Its cost where the lab does not turn (a
+    /// simulator): with 180 and 90 °/s in one direction the gyro filter's droop rides on its
+    /// vertical part (README round trip, seed 7: 21 → 46 ppm, max |z| 2.1 → 3.0, within σ); with
+    /// the default 180, 90, −180 °/s, which separates the two, nothing (10.3 → 11.0 ppm).
+    /// With g-sensitivity in the model its vertical part cannot be told from that term, which
+    /// holds it (`Effect::EarthRotationHorizontal`): only the horizontal part is added.
+    fn with_earth(&self, state: &State, trail: &mut Trail) -> Option<State> {
+        if state.fitted.model.effects.iter().any(|e| e.is_earth()) || !separates_delay_and_index(self.data) {
+            return None;
+        }
         let weights = state.diag.weights();
         let earth = if state.fitted.model.effects.contains(&Effect::GSensitivity) {
             Effect::EarthRotationHorizontal
         } else {
             Effect::EarthRotation
         };
-        let dof = earth.params(&data.layout).1.len();
+        let dof = earth.params(&self.data.layout).1.len();
         let start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
         let before = state.fitted.model.clone();
-        match (fit(&data, start, weights), fit(&data, before, weights)) {
+        match (fit(self.data, start, weights), fit(self.data, before, weights)) {
             (Ok(fitted), Ok(without)) => {
                 let delta_chi2 = without.solution.chi2 - fitted.solution.chi2;
                 let score = Score {
@@ -902,64 +932,96 @@ fn loop_on(
                     significance_sigma: super::stats::chi2_to_sigma(dof, delta_chi2),
                     known_physics: true,
                 };
-                let next = ctx.state(fitted);
-                steps.push(ctx.report(steps.len(), &next, Some(&state), Some(score), Vec::new(), Vec::new()));
-                state = next;
+                let next = self.state(fitted);
+                trail.steps.push(self.report(
+                    trail.steps.len(),
+                    &next,
+                    Some(state),
+                    Some(score),
+                    Vec::new(),
+                    Vec::new(),
+                ));
+                Some(next)
             }
-            (Err(e), _) | (_, Err(e)) => skipped.push(Skipped { effect: earth, why: e.to_string() }),
+            (Err(e), _) | (_, Err(e)) => {
+                trail.skipped.push(Skipped { effect: earth, why: e.to_string() });
+                None
+            }
         }
     }
-    let effects = &state.fitted.model.effects;
-    let mut notes = Vec::new();
+
+    /// The final model's report: what the runs cannot separate (the consider covariance), the
+    /// error against a simulated truth, the consistency between runs, and the verdict.
+    fn conclude(
+        &self,
+        mut state: State,
+        mut trail: Trail,
+        paper: Option<PaperCheck>,
+        initial: Diagnostics,
+    ) -> LoopReport {
+        let (asks, mut notes) = closing_advice(self.data, &state.fitted, self.opts.latitude_deg);
+        let considered = self.consider(&state);
+        state.estimate = base_estimate_with(&state.fitted, self.nominal, Some(&considered.cov));
+        // The final model's error against a simulated truth, in the σ it is reported with.
+        if let (Some(last), Some(t)) = (trail.steps.last_mut(), self.truth) {
+            last.truth = Some(TruthErrors::of(&state.estimate.axes, &t));
+        }
+        notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
+        let earth_excess = earth_implausible(&state.fitted);
+        let consistency = consistency(
+            self.data,
+            &state.fitted,
+            state.diag.weights(),
+            sensitivities(&state.fitted.model),
+            self.opts.alpha,
+        );
+        let disagree = consistency.as_ref().is_some_and(Consistency::disagrees);
+        let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree {
+            Verdict::UnexplainedStructure
+        } else {
+            Verdict::AtNoiseFloor
+        };
+        let mut final_report = self.cal_report(&state, paper);
+        final_report.consider = considered.terms;
+        let added = trail.steps.len() > 1;
+        LoopReport {
+            steps: trail.steps,
+            verdict,
+            alpha: self.opts.alpha,
+            earth_excess,
+            consistency,
+            asks,
+            notes,
+            skipped: trail.skipped,
+            initial,
+            final_diagnostics: added.then_some(state.diag),
+            final_report,
+            unvouched: None,
+        }
+    }
+}
+
+/// What the final model asks of the next session, and the notes on it.
+fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -> (Vec<Ask>, Vec<Note>) {
+    let effects = &fitted.model.effects;
+    let (mut asks, mut notes) = (Vec::new(), Vec::new());
     if effects.contains(&Effect::Phase) {
         asks.push(Ask::SecondSpeed { rate_dps: data.kin.runs[0].steady_rate_dps });
-    } else if separates_delay_and_index(&data) {
+    } else if separates_delay_and_index(data) {
         notes.push(Note::DelayAndIndexSeparable);
     }
-    if let Some(note) = offset_reference_note(&state.fitted.model, &data) {
+    if let Some(note) = offset_reference_note(&fitted.model, data) {
         notes.push(note);
     }
     // The free drift gives each run its own level, so it never leans on the offset being shared.
-    if effects.iter().any(|e| e.is_drift()) && !effects.iter().any(|e| e.is_free_drift()) && !both_directions(&data) {
+    if effects.iter().any(|e| e.is_drift()) && !effects.iter().any(|e| e.is_free_drift()) && !both_directions(data) {
         asks.push(Ask::BothDirectionsForDrift);
     }
-    if effects.contains(&Effect::GSensitivity) && !both_directions(&data) {
+    if effects.contains(&Effect::GSensitivity) && !both_directions(data) {
         asks.push(Ask::BothDirectionsForGSensitivity);
     }
-    if let Some(note) = earth_note(&state.fitted, opts.latitude_deg) {
+    if let Some(note) = earth_note(fitted, latitude_deg) {
         notes.push(note);
     }
-    let considered = ctx.consider(&state);
-    state.estimate = base_estimate_with(&state.fitted, ctx.nominal, Some(&considered.cov));
-    // The final model's error against a simulated truth, in the σ it is reported with.
-    if let (Some(last), Some(t)) = (steps.last_mut(), ctx.truth) {
-        last.truth = Some(TruthErrors::of(&state.estimate.axes, t));
-    }
-    notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
-    let earth_excess = earth_implausible(&state.fitted);
-    let consistency =
-        consistency(&data, &state.fitted, state.diag.weights(), sensitivities(&state.fitted.model), opts.alpha);
-    let disagree = consistency.as_ref().is_some_and(Consistency::disagrees);
-    let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree {
-        Verdict::UnexplainedStructure
-    } else {
-        Verdict::AtNoiseFloor
-    };
-    let mut final_report = ctx.cal_report(&state, paper);
-    final_report.consider = considered.terms;
-    let added = steps.len() > 1;
-    Ok(LoopReport {
-        steps,
-        verdict,
-        alpha: opts.alpha,
-        earth_excess,
-        consistency,
-        asks,
-        notes,
-        skipped,
-        initial,
-        final_diagnostics: added.then_some(state.diag),
-        final_report,
-        unvouched: None,
-    })
+    (asks, notes)
 }

@@ -665,250 +665,350 @@ pub fn diagnose(data: &LoopData, model: &Model, cutoff_hz: f64, alpha: f64, nois
     let k: [f64; 3] = std::array::from_fn(|a| (m[(a, 0)].powi(2) + m[(a, 1)].powi(2) + m[(a, 2)].powi(2)).sqrt());
     let n_runs = data.kin.runs.len();
     let tests = TESTS_PER_RUN_AXIS * 3 * n_runs;
-    let alpha_per_test = alpha / tests as f64;
-    let thr = |dof: usize| chi2_upper_quantile(dof, alpha_per_test);
-    let mut blocking = Blocking::<3>::default();
-    let mut cross = [[0.0f64; 3]; 3];
-    let mut pooled = [(0.0f64, 0.0f64, 0.0f64, 0usize); 3]; // Σe², floor var·n, noise var·n, n
-    let mut runs = Vec::with_capacity(n_runs);
-    let centres = angle_bin_centres();
-    let (theta2_binning, angle_binning) =
-        (Binning::new(std::f64::consts::TAU, THETA2_BINS), Binning::new(std::f64::consts::TAU, ANGLE_BINS));
-    let mut scratch = Vec::new();
+    let cx = DiagCtx { k, level: Level { alpha_per_test: alpha / tests as f64 }, cutoff_hz, noise_window_s };
+    let mut pooled = Pooled::default();
+    let mut walker = Walker::new(&ev);
     let mut fft_planner = realfft::RealFftPlanner::new();
-    for (r, rk) in data.kin.runs.iter().enumerate() {
-        let rd = &data.runs[r];
-        let fs = rk.sample_rate_hz;
-        let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
-        let base_hz = rk.steady_rate_dps.abs() / 360.0;
-        // The residual per used sample, f32 (its rounding, 6e-8 of a residual, is far below the
-        // noise it measures): the floor, spectrum and whiteness need the series, and it is the
-        // largest thing the diagnostics hold (issue 7's memory bar).
-        let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(rd.n_valid));
-        let mut angle = AngleSums::new();
-        let mut theta_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(THETA2_BINS));
-        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s()) - rk.samples.first().map_or(0.0, |s| s.t_s()))
-            / TIME_BIN_S)
-            .ceil()
-            .max(1.0) as usize;
-        let mut time_bins: [Bins; 3] = std::array::from_fn(|_| Bins::new(n_time));
-        let mut temp = [SlopeSums::default(); 3];
-        let mut rate_sums: [RateBinSums; 3] = Default::default();
-        let mut clipped = [0u64; 3];
-        let mut dev_sq = 0.0;
-        let (mut n_axis, mut ss_axis) = ([0usize; 3], [0.0f64; 3]);
+    let runs = (0..n_runs)
+        .map(|r| {
+            let sums = walker.walk(data, r, &mut pooled);
+            run_diag(data, r, sums, &cx, &mut pooled, &mut fft_planner)
+        })
+        .collect();
+    pooled.into_diagnostics(runs, &k, tests, cx.level.alpha_per_test)
+}
+
+/// What every run's diagnostics share.
+struct DiagCtx {
+    /// Each axis's sensitivity, counts per °/s: residuals in counts are reported in °/s.
+    k: [f64; 3],
+    level: Level,
+    /// The gyro's low-pass cut-off, Hz.
+    cutoff_hz: f64,
+    /// The noise floor's window, s.
+    noise_window_s: f64,
+}
+
+/// The per-test level of the Bonferroni-corrected family.
+struct Level {
+    alpha_per_test: f64,
+}
+
+impl Level {
+    /// χ² threshold for `dof` degrees of freedom.
+    fn threshold(&self, dof: usize) -> f64 {
+        chi2_upper_quantile(dof, self.alpha_per_test)
+    }
+
+    fn test(&self, chi2: f64, dof: usize) -> Test {
+        Test { chi2, dof, sigma: chi2_to_sigma(dof, chi2), significant: dof > 0 && chi2 > self.threshold(dof) }
+    }
+}
+
+/// What the whole data set pools across runs, per axis.
+#[derive(Default)]
+struct Pooled {
+    /// The residuals of samples whose three axes are all unclipped, for the block inflation.
+    blocking: Blocking<3>,
+    /// Σ eᵢ·eⱼ (i < j) over those samples.
+    cross: [[f64; 3]; 3],
+    /// Σe², floor variance·n, noise variance·n, n.
+    sums: [(f64, f64, f64, usize); 3],
+}
+
+impl Pooled {
+    fn into_diagnostics(self, runs: Vec<RunDiag>, k: &[f64; 3], tests: usize, alpha_per_test: f64) -> Diagnostics {
+        let pooled = &self.sums;
+        let per_sample = |a: usize, v: f64| v / pooled[a].3.max(1) as f64;
+        let noise_variance_counts2 = std::array::from_fn(|a| per_sample(a, pooled[a].2));
+        let rms_dps = std::array::from_fn(|a| per_sample(a, pooled[a].0).sqrt() / k[a]);
+        let floor_dps = std::array::from_fn(|a| per_sample(a, pooled[a].1).sqrt() / k[a]);
+        let est: [Option<_>; 3] = std::array::from_fn(|a| self.blocking.estimate(a));
+        let inflation = std::array::from_fn(|a| est[a].map_or(1.0, |l| l.inflation()));
+        let block_samples = std::array::from_fn(|a| est[a].map_or(1, |l| 1u64 << l.level));
+        let correlation = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let (a, b) = (i.min(j), i.max(j));
+                if a == b {
+                    1.0
+                } else {
+                    self.cross[a][b] / (pooled[a].0 * pooled[b].0).sqrt()
+                }
+            })
+        });
+        let mut d = Diagnostics {
+            runs,
+            noise_variance_counts2,
+            rms_dps,
+            floor_dps,
+            inflation,
+            block_samples,
+            correlation,
+            findings: Vec::new(),
+            tests,
+            alpha_per_test,
+        };
+        d.findings = findings(&d);
+        d
+    }
+}
+
+/// What one walk over a run's residual gathers, per axis.
+struct RunSums {
+    /// The residual per used sample, f32 (its rounding, 6e-8 of a residual, is far below the
+    /// noise it measures): the floor, spectrum and whiteness need the series, and it is the
+    /// largest thing the diagnostics hold (issue 7's memory bar). NaN where clipped.
+    e: [Vec<f32>; 3],
+    angle: AngleSums,
+    theta_bins: [Bins; 3],
+    time_bins: [Bins; 3],
+    temp: [SlopeSums; 3],
+    rate_sums: [RateBinSums; 3],
+    clipped: [u64; 3],
+    /// Σ (θ1'/θ1'_steady − 1)² over the used samples.
+    dev_sq: f64,
+    /// Unclipped samples and Σe² per axis.
+    n_axis: [usize; 3],
+    ss_axis: [f64; 3],
+}
+
+/// Walks runs' residuals sample by sample into [`RunSums`].
+struct Walker<'a> {
+    ev: &'a Evaluator<'a>,
+    centres: Vec<(f64, f64)>,
+    theta2_binning: Binning,
+    angle_binning: Binning,
+    scratch: Vec<f64>,
+}
+
+impl<'a> Walker<'a> {
+    fn new(ev: &'a Evaluator<'a>) -> Self {
+        Self {
+            ev,
+            centres: angle_bin_centres(),
+            theta2_binning: Binning::new(std::f64::consts::TAU, THETA2_BINS),
+            angle_binning: Binning::new(std::f64::consts::TAU, ANGLE_BINS),
+            scratch: Vec::new(),
+        }
+    }
+
+    /// Run `r`'s sums; its fully unclipped residual rows go into `pooled`.
+    fn walk(&mut self, data: &LoopData, r: usize, pooled: &mut Pooled) -> RunSums {
+        let (rk, rd) = (&data.kin.runs[r], &data.runs[r]);
         let t_first = rk.samples.first().map_or(0.0, |s| s.t_s());
+        let n_time = ((rk.samples.last().map_or(0.0, |s| s.t_s()) - t_first) / TIME_BIN_S).ceil().max(1.0) as usize;
+        let mut sums = RunSums {
+            e: std::array::from_fn(|_| Vec::with_capacity(rd.n_valid)),
+            angle: AngleSums::new(),
+            theta_bins: std::array::from_fn(|_| Bins::new(THETA2_BINS)),
+            time_bins: std::array::from_fn(|_| Bins::new(n_time)),
+            temp: [SlopeSums::default(); 3],
+            rate_sums: Default::default(),
+            clipped: [0; 3],
+            dev_sq: 0.0,
+            n_axis: [0; 3],
+            ss_axis: [0.0; 3],
+        };
         // Rate bins span 0 to the largest possible axis rate, |θ1'|·√2 + |θ2'| bounds |ω_s|.
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         let rate_binning = Binning::new(rate_max, RATE_BINS);
         let time_binning = Binning::of_width(TIME_BIN_S, n_time);
         let mut cursor = Cursor::default();
         for i in rd.valid.indices() {
-            let (s, p) = ev.visit(r, i, &mut cursor);
-            let bin = theta2_binning.angle_index(p.theta2_rad);
+            let (s, p) = self.ev.visit(r, i, &mut cursor);
+            let bin = self.theta2_binning.angle_index(p.theta2_rad);
             let tb = time_binning.index(s.t_s() - t_first);
             let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
-            dev_sq += dev * dev;
+            sums.dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
-            let hb = angle_binning.angle_index(p.theta2_rad);
-            angle.add_sample(hb, dev_pct);
-            let preds = ev.predict3(p, &mut scratch);
+            let hb = self.angle_binning.angle_index(p.theta2_rad);
+            sums.angle.add_sample(hb, dev_pct);
+            let preds = self.ev.predict3(p, &mut self.scratch);
             for a in 0..3 {
-                let r = ev.axis_rate(p, a).abs();
+                let r = self.ev.axis_rate(p, a).abs();
                 let rbin = rate_binning.index(r);
                 if is_clipped(s.rate_counts[a]) {
-                    clipped[a] += 1;
-                    e[a].push(f32::NAN);
-                    angle.add_clipped(a, hb, dev_pct);
+                    sums.clipped[a] += 1;
+                    sums.e[a].push(f32::NAN);
+                    sums.angle.add_clipped(a, hb, dev_pct);
                     continue;
                 }
                 let pred = preds[a];
                 let ea = f64::from(s.rate_counts[a]) - pred;
                 row[a] = ea;
-                n_axis[a] += 1;
-                ss_axis[a] += ea * ea;
-                e[a].push(ea as f32);
-                angle.add_residual(a, hb, dev_pct, ea);
-                theta_bins[a].add(bin, ea, pred);
-                time_bins[a].add(tb, ea, 0.0);
-                temp[a].add(p.temp_c, ea);
-                rate_sums[a].add(rbin, ea, centres[hb]);
+                sums.n_axis[a] += 1;
+                sums.ss_axis[a] += ea * ea;
+                sums.e[a].push(ea as f32);
+                sums.angle.add_residual(a, hb, dev_pct, ea);
+                sums.theta_bins[a].add(bin, ea, pred);
+                sums.time_bins[a].add(tb, ea, 0.0);
+                sums.temp[a].add(p.temp_c, ea);
+                sums.rate_sums[a].add(rbin, ea, self.centres[hb]);
             }
             if row.iter().all(|v| !v.is_nan()) {
-                blocking.push(row);
+                pooled.blocking.push(row);
                 for i in 0..3 {
                     for j in i + 1..3 {
-                        cross[i][j] += row[i] * row[j];
+                        pooled.cross[i][j] += row[i] * row[j];
                     }
                 }
             }
         }
-        blocking.end_segment();
-        let AngleFits { orders, ripple: mut ripples } = angle.fits();
-        let coefs: [[(f64, f64); MAX_ORDER + 1]; 3] = std::array::from_fn(|a| harmonic_coefficients(&orders[a]));
-        let n_used = e[0].len().max(1);
-        let speed_deviation_rms_percent = (dev_sq / n_used as f64).sqrt() * 100.0;
-        let w = ((noise_window_s * fs / 2.0).round() as usize).max(1);
-        let band_lo = (NOISE_BAND_FIRST_HARMONIC * table_hz).max(NOISE_BAND_MIN_HZ);
-        let band_hi = (0.5 * cutoff_hz).min(fs / 8.0).max(band_lo * 2.0).min(0.45 * fs);
-        let block = ((WHITENESS_BLOCK_S * fs).round() as usize).max(1);
-        let mut axes = Vec::with_capacity(3);
-        let mut theta2 = Vec::with_capacity(3);
-        let mut spectrum = Vec::with_capacity(3);
-        for a in 0..3 {
-            let ea = &e[a];
-            let (n, ss) = (n_axis[a], ss_axis[a]);
-            let floor_var = high_pass_variance(ea, w);
-            let pg = Periodogram::with_planner(ea, fs, &mut fft_planner);
-            let noise_var = pg
-                .noise_variance(band_lo, band_hi, table_hz)
-                .filter(|v| v.is_finite() && *v > 0.0)
-                .unwrap_or(floor_var);
-            pooled[a].0 += ss;
-            pooled[a].1 += floor_var * n as f64;
-            pooled[a].2 += noise_var * n as f64;
-            pooled[a].3 += n;
-            let ka = k[a];
-            let nf = n.max(1) as f64;
-            let order_terms: Vec<OrderTerm> = orders[a]
-                .iter()
-                .enumerate()
-                .map(|(nn, o)| {
-                    if nn == 0 {
-                        let mean = o.ec / nf;
-                        let sd = (noise_var / nf).sqrt();
-                        let chi2 = (mean / sd).powi(2);
-                        OrderTerm {
-                            order: 0,
-                            amplitude_dps: mean / ka,
-                            phase_deg: 0.0,
-                            sigma_dps: sd / ka,
-                            chi2,
-                            significant: chi2 > thr(1),
-                        }
-                    } else {
-                        let (sa, cb) = o.solve();
-                        let sd = (2.0 * noise_var / nf).sqrt();
-                        let chi2 = (sa * sa + cb * cb) / (sd * sd);
-                        OrderTerm {
-                            order: nn as u32,
-                            amplitude_dps: (sa * sa + cb * cb).sqrt() / ka,
-                            phase_deg: cb.atan2(sa).to_degrees(),
-                            sigma_dps: sd / ka,
-                            chi2,
-                            significant: chi2 > thr(2),
-                        }
-                    }
-                })
-                .collect();
-            let rate_bins = rate_sums[a].without_orders_0_and_1(&coefs[a]);
-            let ripple = std::mem::take(&mut ripples[a]);
-            let (q, lags) = ljung_box(ea, block, LJUNG_BOX_LAGS);
-            let test = |chi2: f64, dof: usize| Test {
-                chi2,
-                dof,
-                sigma: chi2_to_sigma(dof, chi2),
-                significant: dof > 0 && chi2 > thr(dof),
-            };
-            let (tchi, tdof, _, trange) = time_bins[a].spread(noise_var);
-            let (rchi, rdof, rmax, _) = rate_bins.spread(noise_var);
-            let (ts, tsd) = temp[a].slope(noise_var);
-            let (rs, rsd) = ripple.slope(noise_var);
-            let z2 = |s: f64, sd: f64| if sd.is_finite() && sd > 0.0 { (s / sd).powi(2) } else { 0.0 };
-            let rms = (ss / nf).sqrt();
-            let floor = floor_var.sqrt();
-            axes.push(AxisRunDiag {
-                axis: AXES[a],
-                n,
-                rms_dps: rms / ka,
-                floor_dps: floor / ka,
-                noise_dps: noise_var.sqrt() / ka,
-                rms_over_floor: rms / floor,
-                orders: order_terms,
-                whiteness: test(q, lags),
-                time_drift: test(tchi, tdof),
-                time_drift_range_dps: trange / ka,
-                temperature_slope_dps_per_c: ts / ka,
-                temperature: test(z2(ts, tsd), 1),
-                rate: test(rchi, rdof),
-                rate_max_dps: rmax / ka,
-                ripple_slope_dps_per_percent: rs / ka,
-                ripple: test(z2(rs, rsd), 1),
-                speed_deviation_rms_percent,
-                clipped: clipped[a],
-            });
-            let tb = &theta_bins[a];
-            theta2.push(Theta2Curve {
-                theta2_deg: (0..THETA2_BINS).map(|b| (b as f64 + 0.5) * 360.0 / THETA2_BINS as f64).collect(),
-                residual_dps: (0..THETA2_BINS)
-                    .map(|b| if tb.count[b] > 0.0 { tb.sum[b] / tb.count[b] / ka } else { f64::NAN })
-                    .collect(),
-                residual_se_dps: (0..THETA2_BINS)
-                    .map(|b| {
-                        let c = tb.count[b];
-                        if c > 1.0 {
-                            let mean = tb.sum[b] / c;
-                            ((tb.sumsq[b] / c - mean * mean).max(0.0) / (c - 1.0)).sqrt() / ka
-                        } else {
-                            f64::NAN
-                        }
-                    })
-                    .collect(),
-                fit_dps: (0..THETA2_BINS)
-                    .map(|b| if tb.count[b] > 0.0 { tb.extra[b] / tb.count[b] / ka } else { f64::NAN })
-                    .collect(),
-                counts: tb.count.iter().map(|&c| c as u64).collect(),
-            });
-            spectrum.push(AmplitudeSpectrum::from_periodogram(
-                &pg,
-                ka,
-                (SPECTRUM_PLOT_HARMONICS * table_hz).min(0.5 * fs),
-                SPECTRUM_PLOT_POINTS,
-            ));
-        }
-        runs.push(RunDiag {
-            run: rk.run,
-            pose: rk.pose,
-            commanded_rate_dps: rk.commanded_rate_dps,
-            axes,
-            plots: RunPlots { theta2, spectrum, table_hz, base_hz },
-        });
+        pooled.blocking.end_segment();
+        sums
     }
-    let noise_variance_counts2 = std::array::from_fn(|a| pooled[a].2 / pooled[a].3.max(1) as f64);
-    let rms_dps = std::array::from_fn(|a| (pooled[a].0 / pooled[a].3.max(1) as f64).sqrt() / k[a]);
-    let floor_dps = std::array::from_fn(|a| (pooled[a].1 / pooled[a].3.max(1) as f64).sqrt() / k[a]);
-    let (inflation, block_samples) = {
-        let est: [Option<_>; 3] = std::array::from_fn(|a| blocking.estimate(a));
-        (
-            std::array::from_fn(|a| est[a].map_or(1.0, |l| l.inflation())),
-            std::array::from_fn(|a| est[a].map_or(1, |l| 1u64 << l.level)),
-        )
+}
+
+/// Run `r`'s diagnostics from its sums; its noise figures go into `pooled`.
+fn run_diag(
+    data: &LoopData,
+    r: usize,
+    sums: RunSums,
+    cx: &DiagCtx,
+    pooled: &mut Pooled,
+    fft_planner: &mut realfft::RealFftPlanner<f64>,
+) -> RunDiag {
+    let (k, level) = (&cx.k, &cx.level);
+    let rk = &data.kin.runs[r];
+    let fs = rk.sample_rate_hz;
+    let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
+    let base_hz = rk.steady_rate_dps.abs() / 360.0;
+    let AngleFits { orders, ripple: mut ripples } = sums.angle.fits();
+    let n_used = sums.e[0].len().max(1);
+    let speed_deviation_rms_percent = (sums.dev_sq / n_used as f64).sqrt() * 100.0;
+    let band_lo = (NOISE_BAND_FIRST_HARMONIC * table_hz).max(NOISE_BAND_MIN_HZ);
+    let band = NoiseBand {
+        floor_window: ((cx.noise_window_s * fs / 2.0).round() as usize).max(1),
+        lo_hz: band_lo,
+        hi_hz: (0.5 * cx.cutoff_hz).min(fs / 8.0).max(band_lo * 2.0).min(0.45 * fs),
     };
-    let correlation = std::array::from_fn(|i| {
-        std::array::from_fn(|j| {
-            let (a, b) = (i.min(j), i.max(j));
-            if a == b {
-                1.0
+    let mut axes = Vec::with_capacity(3);
+    let mut theta2 = Vec::with_capacity(3);
+    let mut spectrum = Vec::with_capacity(3);
+    for a in 0..3 {
+        let ka = k[a];
+        let ea = &sums.e[a];
+        let (n, ss) = (sums.n_axis[a], sums.ss_axis[a]);
+        let floor_var = high_pass_variance(ea, band.floor_window);
+        let pg = Periodogram::with_planner(ea, fs, fft_planner);
+        let noise_var = pg
+            .noise_variance(band.lo_hz, band.hi_hz, table_hz)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .unwrap_or(floor_var);
+        let p = &mut pooled.sums[a];
+        *p = (p.0 + ss, p.1 + floor_var * n as f64, p.2 + noise_var * n as f64, p.3 + n);
+        let nf = n.max(1) as f64;
+        let rate_bins = sums.rate_sums[a].without_orders_0_and_1(&harmonic_coefficients(&orders[a]));
+        let ripple = std::mem::take(&mut ripples[a]);
+        let block = ((WHITENESS_BLOCK_S * fs).round() as usize).max(1);
+        let (q, lags) = ljung_box(ea, block, LJUNG_BOX_LAGS);
+        let (tchi, tdof, _, trange) = sums.time_bins[a].spread(noise_var);
+        let (rchi, rdof, rmax, _) = rate_bins.spread(noise_var);
+        let (ts, tsd) = sums.temp[a].slope(noise_var);
+        let (rs, rsd) = ripple.slope(noise_var);
+        let z2 = |s: f64, sd: f64| if sd.is_finite() && sd > 0.0 { (s / sd).powi(2) } else { 0.0 };
+        let rms = (ss / nf).sqrt();
+        let floor = floor_var.sqrt();
+        axes.push(AxisRunDiag {
+            axis: AXES[a],
+            n,
+            rms_dps: rms / ka,
+            floor_dps: floor / ka,
+            noise_dps: noise_var.sqrt() / ka,
+            rms_over_floor: rms / floor,
+            orders: order_terms(&orders[a], noise_var, nf, ka, level),
+            whiteness: level.test(q, lags),
+            time_drift: level.test(tchi, tdof),
+            time_drift_range_dps: trange / ka,
+            temperature_slope_dps_per_c: ts / ka,
+            temperature: level.test(z2(ts, tsd), 1),
+            rate: level.test(rchi, rdof),
+            rate_max_dps: rmax / ka,
+            ripple_slope_dps_per_percent: rs / ka,
+            ripple: level.test(z2(rs, rsd), 1),
+            speed_deviation_rms_percent,
+            clipped: sums.clipped[a],
+        });
+        theta2.push(theta2_curve(&sums.theta_bins[a], ka));
+        spectrum.push(AmplitudeSpectrum::from_periodogram(
+            &pg,
+            ka,
+            (SPECTRUM_PLOT_HARMONICS * table_hz).min(0.5 * fs),
+            SPECTRUM_PLOT_POINTS,
+        ));
+    }
+    RunDiag {
+        run: rk.run,
+        pose: rk.pose,
+        commanded_rate_dps: rk.commanded_rate_dps,
+        axes,
+        plots: RunPlots { theta2, spectrum, table_hz, base_hz },
+    }
+}
+
+/// Where a run's noise is measured: the floor's high-pass window (samples) and the band of the
+/// long-run noise level.
+struct NoiseBand {
+    floor_window: usize,
+    lo_hz: f64,
+    hi_hz: f64,
+}
+
+/// The harmonic tests of one run and axis: order 0 (the mean, 1 dof), then each order's
+/// amplitude and phase (2 dof), in counts scaled to °/s by `ka`.
+fn order_terms(orders: &[OrderSums; MAX_ORDER + 1], noise_var: f64, nf: f64, ka: f64, level: &Level) -> Vec<OrderTerm> {
+    orders
+        .iter()
+        .enumerate()
+        .map(|(nn, o)| {
+            if nn == 0 {
+                let mean = o.ec / nf;
+                let sd = (noise_var / nf).sqrt();
+                let chi2 = (mean / sd).powi(2);
+                OrderTerm {
+                    order: 0,
+                    amplitude_dps: mean / ka,
+                    phase_deg: 0.0,
+                    sigma_dps: sd / ka,
+                    chi2,
+                    significant: chi2 > level.threshold(1),
+                }
             } else {
-                cross[a][b] / (pooled[a].0 * pooled[b].0).sqrt()
+                let (sa, cb) = o.solve();
+                let sd = (2.0 * noise_var / nf).sqrt();
+                let chi2 = (sa * sa + cb * cb) / (sd * sd);
+                OrderTerm {
+                    order: nn as u32,
+                    amplitude_dps: (sa * sa + cb * cb).sqrt() / ka,
+                    phase_deg: cb.atan2(sa).to_degrees(),
+                    sigma_dps: sd / ka,
+                    chi2,
+                    significant: chi2 > level.threshold(2),
+                }
             }
         })
-    });
-    let mut d = Diagnostics {
-        runs,
-        noise_variance_counts2,
-        rms_dps,
-        floor_dps,
-        inflation,
-        block_samples,
-        correlation,
-        findings: Vec::new(),
-        tests,
-        alpha_per_test,
-    };
-    d.findings = findings(&d);
-    d
+        .collect()
+}
+
+/// The plotted residual against θ2 of one run and axis, °/s.
+fn theta2_curve(tb: &Bins, ka: f64) -> Theta2Curve {
+    let per_bin = |f: &dyn Fn(usize) -> f64| (0..THETA2_BINS).map(f).collect::<Vec<f64>>();
+    Theta2Curve {
+        theta2_deg: per_bin(&|b| (b as f64 + 0.5) * 360.0 / THETA2_BINS as f64),
+        residual_dps: per_bin(&|b| if tb.count[b] > 0.0 { tb.sum[b] / tb.count[b] / ka } else { f64::NAN }),
+        residual_se_dps: per_bin(&|b| {
+            let c = tb.count[b];
+            if c > 1.0 {
+                let mean = tb.sum[b] / c;
+                ((tb.sumsq[b] / c - mean * mean).max(0.0) / (c - 1.0)).sqrt() / ka
+            } else {
+                f64::NAN
+            }
+        }),
+        fit_dps: per_bin(&|b| if tb.count[b] > 0.0 { tb.extra[b] / tb.count[b] / ka } else { f64::NAN }),
+        counts: tb.count.iter().map(|&c| c as u64).collect(),
+    }
 }
 
 /// Groups the significant tests by kind.

@@ -58,7 +58,7 @@ fn run_loop(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str]) -> 
     let with_earth: Vec<&str> = effects.iter().copied().chain([earth.as_str()]).collect();
     let (runs, truth) = capture_with(seed, rates_dps, duration_s, &with_earth, FullScale::Dps500);
     let opts = LoopOptions { latitude_deg: Some(LAB_LATITUDE_DEG), ..LoopOptions::default() };
-    let report = close_loop(&runs, &opts, Some(&truth)).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+    let report = close_loop(&runs, &opts, Some(truth.sensor())).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
     (report, truth)
 }
 
@@ -215,7 +215,7 @@ fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
     let asks = crate::calib::present::loop_text::asks(&r);
     assert!(asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{asks:?}");
     // The combined phase corrects these runs: the calibration is right for them.
-    let t = TruthErrors::of(&r.final_report().axes, &truth);
+    let t = TruthErrors::of(&r.final_report().axes, &truth.sensor());
     assert_within_3_sigma(&t, "one speed");
 }
 
@@ -225,12 +225,12 @@ fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
 #[test]
 fn clipped_samples_are_excluded_and_reported() {
     let (runs, truth) = capture_with(4, &[220.0], SHORT_S, &[], FullScale::Dps250);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let clipped: u64 = r.final_report().clipped.iter().sum();
     assert!(clipped > 0, "nothing clipped");
     let notes = crate::calib::present::loop_text::notes(&r);
     assert!(notes.iter().any(|n| n.starts_with("Clipping")), "{notes:?}");
-    assert_within_3_sigma(&TruthErrors::of(&r.final_report().axes, &truth), "clipped");
+    assert_within_3_sigma(&TruthErrors::of(&r.final_report().axes, &truth.sensor()), "clipped");
 }
 
 /// The report serialises, and its final calibration is what `apply` uses.
@@ -263,7 +263,7 @@ fn loop_report_serialises_and_feeds_apply() {
 fn a_random_walk_a_curve_took_first_goes_to_the_free_drift() {
     let (runs, truth) =
         capture_with(1, &[180.0, 90.0, -180.0], BAR_DURATION_S, &["bias_random_walk"], FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     assert!(r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
@@ -277,7 +277,7 @@ fn a_random_walk_a_curve_took_first_goes_to_the_free_drift() {
 fn finer_knots_replace_coarser_ones_that_leave_a_random_walk() {
     let (runs, truth) =
         capture_with(1, &[180.0, 90.0, -180.0], BAR_DURATION_S, &["bias_random_walk=0.006"], FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let effects = r.effects();
     assert!(effects.iter().any(|e| matches!(e, Effect::DriftKnots(s) if *s < 40)), "{}", r.summary());
     assert_eq!(effects.iter().filter(|e| e.is_free_drift()).count(), 1, "{effects:?}");
@@ -511,7 +511,7 @@ fn undeclared_pose_fixture_is_found_named_and_corrected() {
 fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
     for seed in [11, 12] {
         let (runs, truth) = capture_with(seed, &[180.0], BAR_DURATION_S, &["earth_rotation=60"], FullScale::Dps500);
-        let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+        let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
         assert!(
             r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation)),
             "{:?}",
@@ -531,7 +531,7 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
 #[test]
 fn earth_added_without_a_test_costs_nothing_on_the_default_design() {
     let (runs, truth) = capture_with(7, &[180.0, 90.0, -180.0], BAR_DURATION_S, &[], FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     assert!(r.effects().contains(&Effect::EarthRotation), "{}", r.summary());
     let t = truth_of(r.steps.last().expect("steps"));
     assert!(t.max_sensitivity_ppm() <= 15.0, "{}", r.summary());
@@ -547,7 +547,7 @@ fn earth_added_without_a_test_costs_nothing_on_the_default_design() {
 fn g_sensitivity_holds_earths_vertical_part_without_a_latitude() {
     let effects = ["g_sensitivity", "earth_rotation=45"];
     let (runs, truth) = capture_with(7, &[180.0, -180.0], BAR_DURATION_S, &effects, FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let effects = r.effects();
     assert!(effects.contains(&Effect::GSensitivity), "{}", r.summary());
     assert_eq!(effects.last(), Some(&Effect::EarthRotationHorizontal), "{}", r.summary());
@@ -589,7 +589,7 @@ fn a_random_walk_ends_in_the_free_drift_and_the_tilt_is_found_beside_it() {
     // stays the tilt's (with a level per run it was the levels', and the tilt went).
     let effects = ["offset_drift", "bias_random_walk", "table_tilt", "earth_rotation=45"];
     let (runs, truth) = capture_with(8, &[180.0, -180.0], BAR_DURATION_S, &effects, FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let effects = r.effects();
     let drifts: Vec<&Effect> = effects.iter().filter(|e| e.is_drift()).collect();
     assert!(matches!(drifts[..], [Effect::DriftKnots(_)]), "{}", r.summary());
@@ -654,7 +654,7 @@ fn smoothed_temperatures_are_the_per_sample_ones() {
 #[test]
 fn one_speed_carries_an_inseparable_g_sensitivity_in_sigma() {
     let (runs, truth) = capture_with(8, &[180.0], SHORT_S, &["g_sensitivity=0.15"], FullScale::Dps500);
-    let r = close_loop(&runs, &LoopOptions::default(), Some(&truth)).expect("calibrates");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let term = r
         .notes
         .iter()

@@ -229,14 +229,77 @@ fn start_model_at_zero(state: &Fitted, c: &Candidate) -> super::extended::Model 
 pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> Result<StepOutcome, CalError> {
     let weights = diag.weights();
     let cands = candidates(data, &state.model.effects, &evidence(diag));
+    let nothing = || StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() };
     if cands.is_empty() {
-        return Ok(StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() });
+        return Ok(nothing());
     }
+    let Some((mut scores, n_total)) = score_all(data, state, &cands, alpha, weights)? else {
+        // The current model was fitted, so this only happens at the edge of f64: nothing more
+        // can be added on top of it.
+        return Ok(nothing());
+    };
+    scores.sort_by(|a, b| b.score.significance_sigma.total_cmp(&a.score.significance_sigma));
+    let fitter = CandidateFit { data, state, cands: &cands, weights };
+    let mut skipped = Vec::new();
+    let mut drift_choice = Vec::new();
+    let mut accepted = None;
+    let mut tried_drift = false;
+    for bi in (0..scores.len()).filter(|&i| scores[i].passed()) {
+        let effect = scores[bi].score.effect;
+        if effect.is_drift() {
+            // The drift models are alternatives, tried together once: the best of them or none.
+            if tried_drift {
+                continue;
+            }
+            tried_drift = true;
+            let (choices, best) = best_drift(&scores, &fitter, n_total, &mut skipped);
+            drift_choice = choices;
+            if best.is_some() {
+                accepted = best;
+                break;
+            }
+        } else {
+            match fitter.fit(&scores[bi]) {
+                Ok(f) => {
+                    accepted = Some((bi, f));
+                    break;
+                }
+                Err(why) => skipped.push(Skipped { effect, why }),
+            }
+        }
+    }
+    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.score).collect(), skipped, accepted, drift_choice })
+}
+
+/// A candidate's score, its index in the candidate list, and its linearised joint solution.
+struct Scored {
+    score: Score,
+    candidate: usize,
+    solution: Option<super::extended::JointSolution>,
+}
+
+impl Scored {
+    /// Whether it passed its test.
+    fn passed(&self) -> bool {
+        self.solution.is_some() && self.score.delta_chi2 > self.score.threshold
+    }
+}
+
+/// Every candidate scored from one pass of cross-products (the model's columns against all,
+/// each candidate's block against itself), and the samples summed. `None` when the current
+/// model's own normal equations are singular.
+fn score_all(
+    data: &LoopData,
+    state: &Fitted,
+    cands: &[Candidate],
+    alpha: f64,
+    weights: [f64; 3],
+) -> Result<Option<(Vec<Scored>, u64)>, CalError> {
     let mut cols = state.model.cols();
     let nl = state.model.lin.len();
     let ns = state.model.shared.len();
     let mut positions = Vec::with_capacity(cands.len());
-    for c in &cands {
+    for c in cands {
         let start = cols.len();
         cols.extend(c.cols.iter().copied());
         positions.push(start..cols.len());
@@ -246,37 +309,37 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
     let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
     let Some(base) = solve_joint(&total, &base_sel, weights) else {
-        // The current model was fitted, so this only happens at the edge of f64: nothing more
-        // can be added on top of it.
-        return Ok(StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() });
+        return Ok(None);
     };
     let n_total: u64 = total.n.iter().sum();
     let m = cands.len();
-    let mut scores: Vec<(Score, usize, Option<super::extended::JointSolution>)> = Vec::with_capacity(m);
-    for (ci, (c, pos)) in cands.iter().zip(&positions).enumerate() {
-        // The free drift is scored as it is fitted: in place of what it replaces (a drift curve
-        // already in: with both the sums are singular, and a random walk that a curve took
-        // first was left as structure, flagged on every seed of the trust bench).
-        let (mut sel, removed) = without_replaced(state, c, data, &base_sel);
-        let mut dof: usize = 0;
-        for (j, col) in pos.clone().zip(&c.cols) {
-            match col {
-                Col::Lin(_) => {
-                    sel.lin.push(j);
-                    dof += 3;
-                }
-                Col::Shared(_) => {
-                    sel.shared.push(j);
-                    dof += 1;
+    let scores = cands
+        .iter()
+        .zip(&positions)
+        .enumerate()
+        .map(|(ci, (c, pos))| {
+            // The free drift is scored as it is fitted: in place of what it replaces (a drift
+            // curve already in: with both the sums are singular, and a random walk that a curve
+            // took first was left as structure, flagged on every seed of the trust bench).
+            let (mut sel, removed) = without_replaced(state, c, data, &base_sel);
+            let mut dof: usize = 0;
+            for (j, col) in pos.clone().zip(&c.cols) {
+                match col {
+                    Col::Lin(_) => {
+                        sel.lin.push(j);
+                        dof += 3;
+                    }
+                    Col::Shared(_) => {
+                        sel.shared.push(j);
+                        dof += 1;
+                    }
                 }
             }
-        }
-        let dof = dof.saturating_sub(removed).max(1);
-        let threshold = super::stats::chi2_upper_quantile(dof, alpha / m as f64);
-        let sol = solve_joint(&total, &sel, weights);
-        let delta_chi2 = sol.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
-        scores.push((
-            Score {
+            let dof = dof.saturating_sub(removed).max(1);
+            let threshold = super::stats::chi2_upper_quantile(dof, alpha / m as f64);
+            let solution = solve_joint(&total, &sel, weights);
+            let delta_chi2 = solution.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
+            let score = Score {
                 effect: c.effect,
                 drift_tau_s: c.held_at,
                 delta_chi2,
@@ -284,33 +347,37 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 threshold,
                 significance_sigma: super::stats::chi2_to_sigma(dof, delta_chi2),
                 known_physics: false,
-            },
-            ci,
-            sol,
-        ));
-    }
-    scores.sort_by(|a, b| b.0.significance_sigma.total_cmp(&a.0.significance_sigma));
-    let mut drift_choice = Vec::new();
-    let mut skipped = Vec::new();
-    let passed = |i: usize| {
-        let (sc, _, sol) = &scores[i];
-        sol.is_some() && sc.delta_chi2 > sc.threshold
-    };
-    // A candidate that cannot be fitted to the end (singular, or a parameter at its bound) is
-    // skipped with its reason and the next passing one is tried: one bad candidate never ends
-    // the calibration.
-    let fit_of = |i: usize| -> Result<Fitted, String> {
-        let (_, ci, sol) = &scores[i];
-        let sol = sol.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
-        let replaces = replaced(state, &cands[*ci], data);
+            };
+            Scored { score, candidate: ci, solution }
+        })
+        .collect();
+    Ok(Some((scores, n_total)))
+}
+
+/// Fits a scored candidate to the end.
+struct CandidateFit<'a> {
+    data: &'a LoopData,
+    state: &'a Fitted,
+    cands: &'a [Candidate],
+    weights: [f64; 3],
+}
+
+impl CandidateFit<'_> {
+    /// A candidate that cannot be fitted to the end (singular, or a parameter at its bound) is
+    /// skipped with its reason and the next passing one is tried: one bad candidate never ends
+    /// the calibration.
+    fn fit(&self, scored: &Scored) -> Result<Fitted, String> {
+        let (state, data) = (self.state, self.data);
+        let sol = scored.solution.as_ref().ok_or_else(|| "its linearised fit is singular".to_string())?;
+        let cand = &self.cands[scored.candidate];
         // A step solved without the replaced columns does not map onto the model's parameters:
         // the replacement starts at zero (the knots enter linearly; one pass places them).
-        let mut start = if replaces.is_empty() {
-            start_model(state, &cands[*ci], sol)
+        let mut start = if replaced(state, cand, data).is_empty() {
+            start_model(state, cand, sol)
         } else {
-            start_model_at_zero(state, &cands[*ci])
+            start_model_at_zero(state, cand)
         };
-        if cands[*ci].effect.is_free_drift() {
+        if cand.effect.is_free_drift() {
             // The free drift replaces what it holds: a drift curve already in (with both, the
             // knots hold the curve's shape and its parameters run off) and, when each run has
             // a level of its own, a table tilt, whose only trace is a constant rate in each run
@@ -319,69 +386,55 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
                 start = start.without(*e);
             }
         }
-        let f = fit(data, start, weights).map_err(|e| e.to_string())?;
+        let f = fit(data, start, self.weights).map_err(|e| e.to_string())?;
         match f.at_bound() {
             Some(why) => Err(why),
             None => Ok(f),
         }
-    };
-    let mut accepted = None;
-    let mut tried_drift = false;
-    for bi in (0..scores.len()).filter(|&i| passed(i)) {
-        let effect = scores[bi].0.effect;
-        if effect.is_drift() {
-            if tried_drift {
-                continue;
+    }
+}
+
+/// The drift models are alternatives: fit the best-scoring variant of each that passed, and
+/// keep the one with the lowest BIC after fitting (the warm-up's time constant is only on its
+/// grid before). Returns every variant fitted with its χ² and BIC, and the chosen one (its index
+/// in `scores`, and its fit); those that could not be fitted go into `skipped`.
+fn best_drift(
+    scores: &[Scored],
+    fitter: &CandidateFit,
+    n_total: u64,
+    skipped: &mut Vec<Skipped>,
+) -> (Vec<DriftChoice>, Option<(usize, Fitted)>) {
+    let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
+    let mut seen: Vec<Effect> = Vec::new();
+    for (i, scored) in scores.iter().enumerate().filter(|(_, s)| s.passed() && s.score.effect.is_drift()) {
+        let sc = &scored.score;
+        // Only the best-scoring variant of each: the warm-up's other time constants start the
+        // same model elsewhere, and where the runs do not separate it every one failed alike
+        // (six fits to convergence, 29 % of realistic-2speed-s101's CPU, for one line in the
+        // skipped list).
+        if seen.contains(&sc.effect) {
+            continue;
+        }
+        seen.push(sc.effect);
+        match fitter.fit(scored) {
+            Ok(f) => {
+                let (lin, shared) = sc.effect.params(&fitter.data.layout);
+                let k = 3 * lin.len() + shared.len();
+                let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
+                choices.push((i, f, bic));
             }
-            tried_drift = true;
-            // The drift models are alternatives: fit the best-scoring variant of each that
-            // passed, and keep the one with the lowest BIC after fitting (the warm-up's time
-            // constant is only on its grid before).
-            let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
-            let mut seen: Vec<Effect> = Vec::new();
-            for i in (0..scores.len()).filter(|&i| passed(i) && scores[i].0.effect.is_drift()) {
-                let sc = &scores[i].0;
-                // Only the best-scoring variant of each: the warm-up's other time constants
-                // start the same model elsewhere, and where the runs do not separate it every
-                // one failed alike (six fits to convergence, 29 % of realistic-2speed-s101's
-                // CPU, for one line in the skipped list).
-                if seen.contains(&sc.effect) {
-                    continue;
+            Err(why) => {
+                if !skipped.iter().any(|s: &Skipped| s.effect == sc.effect) {
+                    skipped.push(Skipped { effect: sc.effect, why });
                 }
-                seen.push(sc.effect);
-                match fit_of(i) {
-                    Ok(f) => {
-                        let (lin, shared) = sc.effect.params(&data.layout);
-                        let k = 3 * lin.len() + shared.len();
-                        let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
-                        choices.push((i, f, bic));
-                    }
-                    Err(why) => {
-                        if !skipped.iter().any(|s: &Skipped| s.effect == sc.effect) {
-                            skipped.push(Skipped { effect: sc.effect, why });
-                        }
-                    }
-                }
-            }
-            drift_choice = choices
-                .iter()
-                .map(|c| DriftChoice { effect: scores[c.0].0.effect, chi2: c.1.solution.chi2, bic: c.2 })
-                .collect();
-            if let Some(c) = choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)) {
-                accepted = Some((c.0, c.1));
-                break;
-            }
-        } else {
-            match fit_of(bi) {
-                Ok(f) => {
-                    accepted = Some((bi, f));
-                    break;
-                }
-                Err(why) => skipped.push(Skipped { effect, why }),
             }
         }
     }
-    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.0).collect(), skipped, accepted, drift_choice })
+    let table = choices
+        .iter()
+        .map(|c| DriftChoice { effect: scores[c.0].score.effect, chi2: c.1.solution.chi2, bic: c.2 })
+        .collect();
+    (table, choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).map(|c| (c.0, c.1)))
 }
 
 /// Whether adding the free drift takes `e` out of the model: every drift curve, and the table

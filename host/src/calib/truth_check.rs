@@ -3,10 +3,19 @@
 
 use super::derived::{mahalanobis2, AxisEstimate};
 use super::report::CalReport;
-use crate::sim::Truth;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
+
+/// The sensor a calibration is compared with: its true sensitivities and sensing axes (a
+/// simulator's truth, `crate::sim::Truth::sensor`, or a reference instrument's).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorTruth {
+    /// Sensitivities k_i, counts per °/s.
+    pub k_counts_per_dps: [f64; 3],
+    /// Sensing axes s_i, unit rows in the package frame.
+    pub s: [[f64; 3]; 3],
+}
 
 /// Errors of one calibration against the simulated truth.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -44,7 +53,7 @@ fn common_rotation(est: &[[f64; 3]; 3], truth: &[[f64; 3]; 3]) -> Matrix3<f64> {
 
 impl TruthErrors {
     /// Compares per-axis estimates with the truth.
-    pub fn of(axes: &[AxisEstimate; 3], truth: &Truth) -> Self {
+    pub fn of(axes: &[AxisEstimate; 3], truth: &SensorTruth) -> Self {
         let mut out = Self {
             direction_error_deg: [0.0; 3],
             direction_z: [0.0; 3],

@@ -92,6 +92,11 @@ pub struct RunTruth {
 }
 
 impl Truth {
+    /// The sensor alone, as a calibration is compared with it.
+    pub fn sensor(&self) -> crate::calib::truth_check::SensorTruth {
+        crate::calib::truth_check::SensorTruth { k_counts_per_dps: self.k_counts_per_dps, s: self.s }
+    }
+
     /// M as a matrix.
     pub fn m(&self) -> Matrix3<f64> {
         Matrix3::from_fn(|r, c| self.m_counts_per_dps[r][c])
