@@ -20,7 +20,6 @@ use super::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
 use super::truth_check::{SensorTruth, TruthErrors};
-use super::wire::ParamMoveJson;
 use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
 use crate::capture::Run;
 use nalgebra::DMatrix;
@@ -248,13 +247,41 @@ pub struct LoopReport {
     /// The final model's calibration report (linear part: M, offsets, with σ).
     pub final_report: CalReport,
     /// Why nothing vouches for the calibration though it was computed (a noise floor or test
-    /// statistic that is not a number, [`super::sanity::vouch`]); the verdict is then
+    /// statistic that is not a number, [`LoopReport::vouched`]); the verdict is then
     /// [`Verdict::UnexplainedStructure`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unvouched: Option<String>,
 }
 
 impl LoopReport {
+    /// The loop's report once checked: `Err` when its answer is not [`super::sanity::sound`] (or an effect's
+    /// parameter is not a number); flagged, with the reason, when a floor or statistic of its
+    /// diagnostics (the linear model's or the final model's) is not a number.
+    pub fn vouched(mut self) -> Result<Self, CalError> {
+        super::sanity::sound(&self.final_report)?;
+        if let Some(p) = self
+            .steps
+            .last()
+            .into_iter()
+            .flat_map(|s| &s.effect_params)
+            .find(|p| !(p.estimate.value.is_finite() && p.estimate.sigma.is_finite()))
+        {
+            return Err(CalError::Degenerate {
+                model: self.final_report.model.clone(),
+                what: format!("{} is {} ± {} {}", p.name, p.estimate.value, p.estimate.sigma, p.unit),
+            });
+        }
+        // The linear model's diagnostics weighted and steered every step after it.
+        let reason = [(self.final_diagnostics.as_ref(), "final model"), (Some(&self.initial), "linear model")]
+            .into_iter()
+            .find_map(|(d, model)| Some(format!("{model}, {}", super::sanity::first_not_a_number(d?)?)));
+        if let Some(reason) = reason {
+            self.verdict = Verdict::UnexplainedStructure;
+            self.unvouched = Some(reason);
+        }
+        Ok(self)
+    }
+
     /// The verdict.
     pub fn verdict(&self) -> Verdict {
         self.verdict
@@ -779,7 +806,7 @@ pub fn calibrate(runs: &[Run], cal: &CalOptions) -> Result<CalReport, CalError> 
 pub fn close_loop(runs: &[Run], opts: &LoopOptions, truth: Option<SensorTruth>) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = kinematics::reconstruct(runs, &opts.cal.kinematics)?;
-    loop_on(kin, runs[0].gyro, opts, truth).and_then(super::sanity::vouch)
+    loop_on(kin, runs[0].gyro, opts, truth).and_then(LoopReport::vouched)
 }
 
 /// [`close_loop`] on runs whose samples were turned into kinematics as they were decoded
@@ -795,7 +822,7 @@ pub fn close_loop_reconstructed(
 ) -> Result<LoopReport, CalError> {
     check_runs(runs)?;
     let kin = rec.finish(runs)?;
-    loop_on(kin, runs[0].gyro, opts, truth).and_then(super::sanity::vouch)
+    loop_on(kin, runs[0].gyro, opts, truth).and_then(LoopReport::vouched)
 }
 
 /// The loop proper, on reconstructed kinematics.
@@ -1024,4 +1051,27 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
         notes.push(note);
     }
     (asks, notes)
+}
+
+// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+
+#[derive(Serialize, Deserialize)]
+pub struct ParamMoveJson {
+    name: String,
+    before: f64,
+    after: f64,
+    sigma: f64,
+    moved_sigma: f64,
+}
+
+impl From<ParamMove> for ParamMoveJson {
+    fn from(m: ParamMove) -> Self {
+        Self { name: m.name, before: m.before, after: m.after.value, sigma: m.after.sigma, moved_sigma: m.moved_sigma }
+    }
+}
+
+impl From<ParamMoveJson> for ParamMove {
+    fn from(m: ParamMoveJson) -> Self {
+        Self { name: m.name, before: m.before, after: Estimate::new(m.after, m.sigma), moved_sigma: m.moved_sigma }
+    }
 }

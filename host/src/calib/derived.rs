@@ -4,7 +4,7 @@
 
 use super::axes::AXES;
 use super::estimate::Estimate;
-use super::wire::{AxisEstimateJson, InterAxisAngleJson};
+use super::estimate::{estimates, sigmas, values};
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -171,6 +171,95 @@ pub fn mahalanobis2(d: [f64; 2], cov: [[f64; 2]; 2]) -> f64 {
 /// Converts a fixed array to a column vector (helper for callers building covariances).
 pub fn dvec(v: &[f64]) -> DVector<f64> {
     DVector::from_column_slice(v)
+}
+
+// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+
+#[derive(Serialize, Deserialize)]
+pub struct AxisEstimateJson {
+    axis: char,
+    k_counts_per_dps: f64,
+    k_sigma: f64,
+    k_vs_nominal_percent: f64,
+    s: [f64; 3],
+    s_sigma: [f64; 3],
+    offset_counts: f64,
+    offset_sigma_counts: f64,
+    tilt_deg: f64,
+    tilt_sigma_deg: f64,
+    tilt_component_axes: [char; 2],
+    tilt_components_deg: [f64; 2],
+    tilt_components_cov_deg2: [[f64; 2]; 2],
+    /// Absent from files written before the mount's σ was reported.
+    #[serde(default)]
+    tilt_mount_sigma_deg: f64,
+}
+
+impl From<AxisEstimate> for AxisEstimateJson {
+    fn from(a: AxisEstimate) -> Self {
+        Self {
+            axis: a.axis,
+            k_counts_per_dps: a.k_counts_per_dps.value,
+            k_sigma: a.k_counts_per_dps.sigma,
+            k_vs_nominal_percent: a.k_vs_nominal_percent,
+            s: values(a.s),
+            s_sigma: sigmas(a.s),
+            offset_counts: a.offset_counts.value,
+            offset_sigma_counts: a.offset_counts.sigma,
+            tilt_deg: a.tilt_deg.value,
+            tilt_sigma_deg: a.tilt_deg.sigma,
+            tilt_component_axes: a.tilt_component_axes,
+            tilt_components_deg: a.tilt_components_deg,
+            tilt_components_cov_deg2: a.tilt_components_cov_deg2,
+            tilt_mount_sigma_deg: a.tilt_mount_sigma_deg,
+        }
+    }
+}
+
+impl From<AxisEstimateJson> for AxisEstimate {
+    fn from(a: AxisEstimateJson) -> Self {
+        Self {
+            axis: a.axis,
+            k_counts_per_dps: Estimate::new(a.k_counts_per_dps, a.k_sigma),
+            k_vs_nominal_percent: a.k_vs_nominal_percent,
+            s: estimates(a.s, a.s_sigma),
+            offset_counts: Estimate::new(a.offset_counts, a.offset_sigma_counts),
+            tilt_deg: Estimate::new(a.tilt_deg, a.tilt_sigma_deg),
+            tilt_component_axes: a.tilt_component_axes,
+            tilt_components_deg: a.tilt_components_deg,
+            tilt_components_cov_deg2: a.tilt_components_cov_deg2,
+            tilt_mount_sigma_deg: a.tilt_mount_sigma_deg,
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+pub struct InterAxisAngleJson {
+    axes: [char; 2],
+    angle_deg: f64,
+    sigma_deg: f64,
+    non_orthogonality_deg: f64,
+}
+
+impl From<InterAxisAngle> for InterAxisAngleJson {
+    fn from(a: InterAxisAngle) -> Self {
+        Self {
+            axes: a.axes,
+            angle_deg: a.angle_deg.value,
+            sigma_deg: a.angle_deg.sigma,
+            non_orthogonality_deg: a.non_orthogonality_deg,
+        }
+    }
+}
+
+impl From<InterAxisAngleJson> for InterAxisAngle {
+    fn from(a: InterAxisAngleJson) -> Self {
+        Self {
+            axes: a.axes,
+            angle_deg: Estimate::new(a.angle_deg, a.sigma_deg),
+            non_orthogonality_deg: a.non_orthogonality_deg,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -42,6 +42,25 @@ impl Estimate {
     }
 }
 
+/// The flat JSON form of estimates: calibration.json and loop.json are read by programs outside
+/// the crate (`validation/check.py` reads `axes[i].s`, `k_counts_per_dps` and `k_sigma`; the
+/// all-effects bench also `tilt_mount_sigma_deg`), so each report type that holds [`Estimate`]s
+/// converts to and from a layout beside it (`#[serde(into, from)]`) that writes each estimate's
+/// value and σ as two fields side by side, as they were before the type existed. The values.
+pub(crate) fn values<const N: usize>(e: [Estimate; N]) -> [f64; N] {
+    e.map(|e| e.value)
+}
+
+/// The σs of the flat JSON form ([`values`]).
+pub(crate) fn sigmas<const N: usize>(e: [Estimate; N]) -> [f64; N] {
+    e.map(|e| e.sigma)
+}
+
+/// Estimates from the flat JSON form's values and σs ([`values`]).
+pub(crate) fn estimates<const N: usize>(value: [f64; N], sigma: [f64; N]) -> [Estimate; N] {
+    std::array::from_fn(|i| Estimate::new(value[i], sigma[i]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,7 +10,6 @@
 
 use super::error::CalError;
 use super::estimate::Estimate;
-use super::wire::{GearEstimateJson, IndexStatsJson};
 use crate::capture::{Run, RunSample, RunTemperature, Samples};
 use crate::geometry::{omega2, Pose};
 use nalgebra::Matrix3;
@@ -837,6 +836,71 @@ fn run_kinematics(
         index,
         temperatures: run.temperatures.clone(),
     })
+}
+
+// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+
+#[derive(Serialize, Deserialize)]
+pub struct IndexStatsJson {
+    pulses: usize,
+    rejected: usize,
+    ref_counts: f64,
+    ref_sigma_counts: f64,
+    ref_sigma_deg: f64,
+    centre_rms_counts: f64,
+    plate_width_counts: f64,
+    period_counts: f64,
+    period_sigma_counts: f64,
+}
+
+impl From<IndexStats> for IndexStatsJson {
+    fn from(i: IndexStats) -> Self {
+        Self {
+            pulses: i.pulses,
+            rejected: i.rejected,
+            ref_counts: i.ref_counts.value,
+            ref_sigma_counts: i.ref_counts.sigma,
+            ref_sigma_deg: i.ref_sigma_deg,
+            centre_rms_counts: i.centre_rms_counts,
+            plate_width_counts: i.plate_width_counts,
+            period_counts: i.period_counts.value,
+            period_sigma_counts: i.period_counts.sigma,
+        }
+    }
+}
+
+impl From<IndexStatsJson> for IndexStats {
+    fn from(i: IndexStatsJson) -> Self {
+        Self {
+            pulses: i.pulses,
+            rejected: i.rejected,
+            ref_counts: Estimate::new(i.ref_counts, i.ref_sigma_counts),
+            ref_sigma_deg: i.ref_sigma_deg,
+            centre_rms_counts: i.centre_rms_counts,
+            plate_width_counts: i.plate_width_counts,
+            period_counts: Estimate::new(i.period_counts, i.period_sigma_counts),
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+pub struct GearEstimateJson {
+    nominal: f64,
+    estimated: f64,
+    sigma: f64,
+    deviation_ppm: f64,
+}
+
+impl From<GearEstimate> for GearEstimateJson {
+    fn from(g: GearEstimate) -> Self {
+        Self { nominal: g.nominal, estimated: g.ratio.value, sigma: g.ratio.sigma, deviation_ppm: g.deviation_ppm }
+    }
+}
+
+impl From<GearEstimateJson> for GearEstimate {
+    fn from(g: GearEstimateJson) -> Self {
+        Self { nominal: g.nominal, ratio: Estimate::new(g.estimated, g.sigma), deviation_ppm: g.deviation_ppm }
+    }
 }
 
 #[cfg(test)]

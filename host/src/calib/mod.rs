@@ -33,7 +33,6 @@ pub mod sincos;
 pub mod spectrum;
 pub mod stats;
 pub mod truth_check;
-mod wire;
 
 #[cfg(test)]
 mod acceptance_tests;

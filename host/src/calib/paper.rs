@@ -10,9 +10,9 @@
 use super::axes::AXES;
 use super::derived::{delta_method, dvec};
 use super::estimate::Estimate;
+use super::estimate::{estimates, sigmas, values};
 use super::extended::Gram;
 use super::kinematics::Kinematics;
-use super::wire::{PaperAxisJson, PoseSinusoidJson};
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
@@ -181,4 +181,92 @@ pub fn paper_check(sums: &[Gram], kin: &Kinematics, inflation: [f64; 3], joint: 
         max_abs_z: zv.amax(),
         rms_z: (zv.norm_squared() / zs.len() as f64).sqrt(),
     })
+}
+
+// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+
+#[derive(Serialize, Deserialize)]
+pub struct PoseSinusoidJson {
+    pose: Pose,
+    coef: [f64; 4],
+    coef_sigma: [f64; 4],
+    amplitude_counts_per_dps: f64,
+    phase_deg: f64,
+    mean_theta2_rate_dps: f64,
+    n: u64,
+}
+
+impl From<PoseSinusoid> for PoseSinusoidJson {
+    fn from(p: PoseSinusoid) -> Self {
+        Self {
+            pose: p.pose,
+            coef: values(p.coef),
+            coef_sigma: sigmas(p.coef),
+            amplitude_counts_per_dps: p.amplitude_counts_per_dps,
+            phase_deg: p.phase_deg,
+            mean_theta2_rate_dps: p.mean_theta2_rate_dps,
+            n: p.n,
+        }
+    }
+}
+
+impl From<PoseSinusoidJson> for PoseSinusoid {
+    fn from(p: PoseSinusoidJson) -> Self {
+        Self {
+            pose: p.pose,
+            coef: estimates(p.coef, p.coef_sigma),
+            amplitude_counts_per_dps: p.amplitude_counts_per_dps,
+            phase_deg: p.phase_deg,
+            mean_theta2_rate_dps: p.mean_theta2_rate_dps,
+            n: p.n,
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+pub struct PaperAxisJson {
+    axis: char,
+    s: [f64; 3],
+    s_sigma: [f64; 3],
+    k_counts_per_dps: f64,
+    k_sigma: f64,
+    offset_counts: f64,
+    offset_sigma_counts: f64,
+    z_s: [f64; 3],
+    z_k: f64,
+    z_offset: f64,
+    sinusoids: [PoseSinusoid; 2],
+}
+
+impl From<PaperAxis> for PaperAxisJson {
+    fn from(a: PaperAxis) -> Self {
+        Self {
+            axis: a.axis,
+            s: values(a.s),
+            s_sigma: sigmas(a.s),
+            k_counts_per_dps: a.k_counts_per_dps.value,
+            k_sigma: a.k_counts_per_dps.sigma,
+            offset_counts: a.offset_counts.value,
+            offset_sigma_counts: a.offset_counts.sigma,
+            z_s: a.z_s,
+            z_k: a.z_k,
+            z_offset: a.z_offset,
+            sinusoids: a.sinusoids,
+        }
+    }
+}
+
+impl From<PaperAxisJson> for PaperAxis {
+    fn from(a: PaperAxisJson) -> Self {
+        Self {
+            axis: a.axis,
+            s: estimates(a.s, a.s_sigma),
+            k_counts_per_dps: Estimate::new(a.k_counts_per_dps, a.k_sigma),
+            offset_counts: Estimate::new(a.offset_counts, a.offset_sigma_counts),
+            z_s: a.z_s,
+            z_k: a.z_k,
+            z_offset: a.z_offset,
+            sinusoids: a.sinusoids,
+        }
+    }
 }

@@ -8,11 +8,10 @@
 //!   positive definite; otherwise there is no answer ([`CalError::Degenerate`], exit 1);
 //! - [`vouch`], on the loop's report: [`sound`], then every noise floor and test statistic of
 //!   the diagnostics a number; otherwise the answer stands but nothing vouches for it, and the
-//!   verdict is [`Verdict::UnexplainedStructure`] with the reason in [`LoopReport::unvouched`]
+//!   verdict is [`super::closure::Verdict::UnexplainedStructure`] with the reason in [`super::closure::LoopReport::unvouched`]
 //!   (exit 3).
 
 use super::axes::AXES;
-use super::closure::{LoopReport, Verdict};
 use super::diagnostics::{AxisRunDiag, Diagnostics};
 use super::extended::LoopData;
 use super::{CalError, CalReport};
@@ -176,39 +175,10 @@ fn axis_run_not_a_number(ad: &AxisRunDiag) -> Option<String> {
         .map(|o| format!("the χ² of harmonic {} is {}", o.order, o.chi2))
 }
 
-/// The loop's report once checked: `Err` when its answer is not [`sound`] (or an effect's
-/// parameter is not a number); flagged, with the reason, when a floor or statistic of its
-/// diagnostics (the linear model's or the final model's) is not a number.
-pub fn vouch(mut r: LoopReport) -> Result<LoopReport, CalError> {
-    sound(&r.final_report)?;
-    if let Some(p) = r
-        .steps
-        .last()
-        .into_iter()
-        .flat_map(|s| &s.effect_params)
-        .find(|p| !(p.estimate.value.is_finite() && p.estimate.sigma.is_finite()))
-    {
-        return Err(CalError::Degenerate {
-            model: r.final_report.model.clone(),
-            what: format!("{} is {} ± {} {}", p.name, p.estimate.value, p.estimate.sigma, p.unit),
-        });
-    }
-    // The linear model's diagnostics weighted and steered every step after it.
-    let reason = [(r.final_diagnostics.as_ref(), "final model"), (Some(&r.initial), "linear model")]
-        .into_iter()
-        .find_map(|(d, model)| Some(format!("{model}, {}", first_not_a_number(d?)?)));
-    if let Some(reason) = reason {
-        r.verdict = Verdict::UnexplainedStructure;
-        r.unvouched = Some(reason);
-    }
-    Ok(r)
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::testgen::{two_pose_runs, typical_sensor};
-    use super::super::{calibrate, close_loop, CalOptions, LoopOptions};
-    use super::*;
+    use super::super::{calibrate, close_loop, CalOptions, LoopOptions, Verdict};
     use crate::capture::Run;
 
     /// A run as a lossy line leaves it: every 40th sample lost (a gap every 50 ms, so no
@@ -246,14 +216,14 @@ mod tests {
     fn numbers_that_are_not_numbers_are_refused_or_flagged() {
         let good = close_loop(&two_pose_runs(4), &LoopOptions::default(), None).unwrap();
         assert_eq!(good.verdict(), Verdict::AtNoiseFloor, "{}", good.summary());
-        let good = vouch(good).unwrap();
+        let good = good.vouched().unwrap();
         assert_eq!((good.verdict(), &good.unvouched), (Verdict::AtNoiseFloor, &None));
         let model = good.final_report.model.clone();
 
         let mut r = good.clone();
         r.final_report.cov[5][5] = f64::NAN;
         assert_eq!(
-            vouch(r).unwrap_err().to_string(),
+            r.vouched().unwrap_err().to_string(),
             format!("degenerate fit ({model}): the variance of m_y.omega_y_dps is NaN; no calibration")
         );
         // m_z.omega_x_dps a copy of m_y.omega_x_dps: every variance positive, the whole singular.
@@ -263,7 +233,7 @@ mod tests {
         for row in cov.iter_mut() {
             row[8] = row[4];
         }
-        let err = vouch(r).unwrap_err().to_string();
+        let err = r.vouched().unwrap_err().to_string();
         let head = format!(
             "degenerate fit ({model}): the covariance of the 12 base parameters is not positive definite (pivot "
         );
@@ -271,7 +241,7 @@ mod tests {
 
         let mut r = good.clone();
         r.initial.runs[1].axes[2].floor_dps = f64::NAN;
-        let r = vouch(r).unwrap();
+        let r = r.vouched().unwrap();
         let reason = "linear model, run 2 (pose 2, +180.0 °/s), axis z: the noise floor is NaN °/s";
         assert_eq!((r.verdict(), r.unvouched.as_deref()), (Verdict::UnexplainedStructure, Some(reason)));
         let summary = r.summary();
