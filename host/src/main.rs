@@ -793,6 +793,12 @@ fn calibrate(
     if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
         obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
     }
+    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::extended).
+    let temps: Vec<f64> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| f64::from(t.raw))).collect();
+    let out_temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
+    if let (Some(d), Some(obj)) = (export::DriftModel::of(&lr, out_temp_mean), value.as_object_mut()) {
+        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
+    }
     let json_text = serde_json::to_string_pretty(&value)?;
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
