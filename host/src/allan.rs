@@ -171,6 +171,24 @@ fn fit_terms_with(curve: &[AllanPoint], n_samples: usize, allowed: u8) -> NoiseT
 /// Seconds per hour.
 const S_PER_H: f64 = 3600.0;
 
+/// A noise figure with three significant digits (fixed notation from 0.001 up to 10⁵, else
+/// with an exponent), or `none seen` for a term the fit left out: the curve shows no such
+/// slope within the stretch (printing 0.000 there read like a figure too small to show).
+pub fn figure(v: f64) -> String {
+    if v == 0.0 {
+        return "none seen".into();
+    }
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor();
+    if !(-3.0..5.0).contains(&mag) {
+        return format!("{v:.2e}");
+    }
+    let decimals = (2.0 - mag).max(0.0) as usize;
+    format!("{v:.decimals$}")
+}
+
 /// Noise figures of one axis from its rate series (°/s) at `tau0_s`.
 pub fn axis_noise(axis: char, rate: &[f64], tau0_s: f64) -> AxisNoise {
     let curve = overlapping_adev(rate, tau0_s);
@@ -333,11 +351,11 @@ impl NoiseReport {
         o.push_str("<tr><th>axis</th><th class=\"num\">ARW [°/√h]</th><th class=\"num\">bias instability [°/h]</th><th class=\"num\">RRW [°/h/√h]</th><th class=\"num\">σ min [°/s]</th><th class=\"num\">at τ [s]</th></tr>\n");
         for a in &self.axes {
             o.push_str(&format!(
-                "<tr><td>{}</td><td class=\"num\">{:.4}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3e}</td><td class=\"num\">{:.2}</td></tr>\n",
+                "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.3e}</td><td class=\"num\">{:.2}</td></tr>\n",
                 a.axis,
-                a.arw_deg_per_sqrt_h,
-                a.bias_instability_deg_per_h,
-                a.rrw_deg_per_h_per_sqrt_h,
+                figure(a.arw_deg_per_sqrt_h),
+                figure(a.bias_instability_deg_per_h),
+                figure(a.rrw_deg_per_h_per_sqrt_h),
                 a.adev_min_dps,
                 a.tau_at_min_s
             ));
@@ -349,7 +367,7 @@ impl NoiseReport {
         if self.duration_s < SHORT_STRETCH_S {
             o.push_str(&format!(
                 " A {:.0} s stretch measures σ(τ) up to τ = {:.0} s only: ARW is firm, bias instability and RRW are \
-                 indicative (0 where the curve shows no such term yet).",
+                 indicative (\"none seen\" where the curve shows no such slope yet).",
                 self.duration_s,
                 self.duration_s * MAX_CLUSTER_FRACTION
             ));
@@ -375,6 +393,8 @@ impl std::fmt::Display for NoiseReport {
             self.scaling
         )?;
         writeln!(f, "axis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]  ADEV min [°/s] at τ [s]")?;
+        let none_seen =
+            self.axes.iter().any(|a| a.bias_instability_deg_per_h == 0.0 || a.rrw_deg_per_h_per_sqrt_h == 0.0);
         if self.duration_s < SHORT_STRETCH_S {
             writeln!(
                 f,
@@ -383,14 +403,17 @@ impl std::fmt::Display for NoiseReport {
                 self.duration_s * MAX_CLUSTER_FRACTION
             )?;
         }
+        if none_seen {
+            writeln!(f, "(none seen: the Allan curve shows no such slope within the stretch; a longer one may)")?;
+        }
         for a in &self.axes {
             writeln!(
                 f,
-                "  {}   {:10.4}  {:22.3}  {:12.3}  {:14.3e}  {:8.2}",
+                "  {}   {:>10}  {:>22}  {:>12}  {:14.3e}  {:8.2}",
                 a.axis,
-                a.arw_deg_per_sqrt_h,
-                a.bias_instability_deg_per_h,
-                a.rrw_deg_per_h_per_sqrt_h,
+                figure(a.arw_deg_per_sqrt_h),
+                figure(a.bias_instability_deg_per_h),
+                figure(a.rrw_deg_per_h_per_sqrt_h),
                 a.adev_min_dps,
                 a.tau_at_min_s
             )?;
@@ -529,6 +552,40 @@ mod tests {
                 assert!((a.rrw_deg_per_h_per_sqrt_h / rrw - 1.0).abs() < 0.1, "seed {seed} {}: RRW", a.axis);
             }
         }
+    }
+
+    /// Figures keep three significant digits at every size; a term the fit left out says so.
+    #[test]
+    fn figures_have_significant_digits_and_a_missing_term_says_so() {
+        assert_eq!(figure(1.27832), "1.28");
+        assert_eq!(figure(0.0123456), "0.0123");
+        assert_eq!(figure(0.000123456), "1.23e-4");
+        assert_eq!(figure(123.456), "123");
+        assert_eq!(figure(0.0), "none seen");
+        let axis = AxisNoise {
+            axis: 'x',
+            arw_deg_per_sqrt_h: 1.2783,
+            bias_instability_deg_per_h: 0.0,
+            rrw_deg_per_h_per_sqrt_h: 0.000_42,
+            adev_min_dps: 7.22e-4,
+            tau_at_min_s: 198.11,
+            curve: Vec::new(),
+        };
+        let text = NoiseReport {
+            run: 1,
+            samples: 480_000,
+            duration_s: 3600.0,
+            tau0_s: 0.00125,
+            scaling: "calibration (package frame)".into(),
+            axes: vec![axis],
+        }
+        .to_string();
+        assert!(
+            text.contains("\n  x         1.28               none seen       4.20e-4        7.220e-4    198.11\n"),
+            "{text}"
+        );
+        assert!(!text.contains("0.000 "), "{text}");
+        assert!(text.contains("(none seen: the Allan curve shows no such slope within the stretch; a longer one may)"));
     }
 
     /// A constant offset has no Allan deviation: the figures see noise only.

@@ -474,7 +474,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             if json {
                 files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
             } else {
-                files::stdout(&report.to_string())?;
+                files::stdout(&host::text::wrap(&report.to_string(), host::text::TEXT_WIDTH))?;
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -847,7 +847,7 @@ fn calibrate(
         summary.push('\n');
         summary.push_str(&host::spec::text(c));
     }
-    files::stdout(&summary)?;
+    files::stdout(&host::text::wrap(&summary, host::text::TEXT_WIDTH))?;
     recorded?;
     Ok(match (lr.verdict(), checks.as_deref().is_some_and(|c| !host::spec::passed(c))) {
         // A result not to be trusted says so first, whatever the limits.
