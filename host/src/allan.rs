@@ -57,6 +57,32 @@ pub struct AxisNoise {
     pub curve: Vec<AllanPoint>,
 }
 
+impl AxisNoise {
+    /// The fitted terms as lines over the curve's τ range, each where its term is not zero:
+    /// white rate noise N/√τ (slope −1/2 on log-log axes, ARW), the flicker floor 0.664 B
+    /// (slope 0, bias instability) and the random walk K √(τ/3) (slope +1/2, RRW), IEEE Std
+    /// 952-1997 Table C.2. N, B, K from the figures: N = ARW/60, B = BI/3600, K = RRW/(3600·60).
+    pub fn fitted_lines(&self) -> Vec<(&'static str, Vec<(f64, f64)>)> {
+        let (Some(first), Some(last)) = (self.curve.first(), self.curve.last()) else { return Vec::new() };
+        let n = self.arw_deg_per_sqrt_h / S_PER_H.sqrt();
+        let b = self.bias_instability_deg_per_h / S_PER_H;
+        let k = self.rrw_deg_per_h_per_sqrt_h / (S_PER_H * S_PER_H.sqrt());
+        let ends = [first.tau_s, last.tau_s];
+        let line = |f: &dyn Fn(f64) -> f64| ends.iter().map(|&t| (t, f(t))).collect::<Vec<_>>();
+        let mut out = Vec::new();
+        if n > 0.0 {
+            out.push(("ARW, N/√τ (slope −1/2)", line(&|t| n / t.sqrt())));
+        }
+        if b > 0.0 {
+            out.push(("bias instability, 0.664 B (slope 0)", line(&|_| FLICKER_FACTOR * b)));
+        }
+        if k > 0.0 {
+            out.push(("RRW, K √(τ/3) (slope +1/2)", line(&|t| k * (t / 3.0).sqrt())));
+        }
+        out
+    }
+}
+
 /// Overlapping Allan deviation of a rate series sampled every `tau0_s`, at log-spaced cluster
 /// sizes from 1 to a third of the record.
 pub fn overlapping_adev(rate: &[f64], tau0_s: f64) -> Vec<AllanPoint> {
@@ -324,24 +350,25 @@ pub fn capture_noise(cap: &Capture, cal: Option<&Calibration>) -> Result<NoiseRe
 }
 
 impl NoiseReport {
-    /// The log-log Allan deviation plot of the three axes, as SVG. The plot helpers have no log
-    /// x axis, so x is log₁₀ τ.
+    /// The Allan deviation of the three axes on log-log axes, as SVG, with each axis's fitted
+    /// terms drawn dashed in its colour ([`AxisNoise::fitted_lines`]).
     pub fn adev_svg(&self) -> Result<String, crate::report::plots::PlotError> {
         use crate::report::plots::{line_plot, PlotSpec, Series};
-        let series: Vec<Series> = self
-            .axes
-            .iter()
-            .enumerate()
-            .map(|(i, a)| {
-                Series::line(
-                    format!("{} axis", a.axis),
-                    a.curve.iter().map(|p| (p.tau_s.log10(), p.adev_dps)).collect(),
-                    i,
-                )
-            })
-            .collect();
+        let mut series = Vec::new();
+        for (i, a) in self.axes.iter().enumerate() {
+            series.push(Series::line(
+                format!("{} axis", a.axis),
+                a.curve.iter().map(|p| (p.tau_s, p.adev_dps)).collect(),
+                i,
+            ));
+            for (label, points) in a.fitted_lines() {
+                series.push(Series::dashed(format!("{}: {label}", a.axis), points, i));
+            }
+        }
         let spec =
-            PlotSpec::new("Overlapping Allan deviation (static stretch)", "log₁₀ τ [s]", "σ(τ) [°/s]").with_log_y();
+            PlotSpec::new("Overlapping Allan deviation (static stretch) and fitted terms", "τ [s]", "σ(τ) [°/s]")
+                .with_log_x()
+                .with_log_y();
         line_plot(&spec, &series)
     }
 
@@ -586,6 +613,42 @@ mod tests {
         );
         assert!(!text.contains("0.000 "), "{text}");
         assert!(text.contains("(none seen: the Allan curve shows no such slope within the stretch; a longer one may)"));
+    }
+
+    /// The plot has log-log axes and the fitted lines have the slopes of their terms.
+    #[test]
+    fn the_allan_plot_is_log_log_with_the_fitted_lines() {
+        let (tau0, n) = (0.1, 0.03);
+        let rate = synthetic(2, 100_000, tau0, n, 3f64.sqrt() * n / 10.0);
+        let mut a = axis_noise('x', &rate, tau0);
+        a.bias_instability_deg_per_h = 2.0;
+        let lines = a.fitted_lines();
+        let slope = |p: &[(f64, f64)]| (p[1].1 / p[0].1).log10() / (p[1].0 / p[0].0).log10();
+        let slopes: Vec<(&str, f64)> = lines.iter().map(|(l, p)| (*l, slope(p))).collect();
+        assert_eq!(slopes.len(), 3, "{slopes:?}");
+        assert!(
+            (slopes[0].1 + 0.5).abs() < 1e-12 && slopes[1].1 == 0.0 && (slopes[2].1 - 0.5).abs() < 1e-12,
+            "{slopes:?}"
+        );
+        // At τ = 1 s the white-noise line is N itself, °/s (ARW / 60).
+        let at_1s = a.arw_deg_per_sqrt_h / 60.0;
+        let (t0, s0) = lines[0].1[0];
+        assert!((s0 * t0.sqrt() - at_1s).abs() < 1e-12 * at_1s);
+        let report = NoiseReport {
+            run: 1,
+            samples: rate.len(),
+            duration_s: 10_000.0,
+            tau0_s: tau0,
+            scaling: "calibration (package frame)".into(),
+            axes: vec![a],
+        };
+        let svg = report.adev_svg().unwrap();
+        // Decade ticks on the τ axis (the curve spans 0.1 s to 3333 s), not log₁₀ τ.
+        for tick in ["0.1", "1", "10", "100", "1000"] {
+            assert!(svg.contains(&format!("\n{tick}\n</text>")), "no τ tick {tick}: {svg}");
+        }
+        assert!(!svg.contains("log₁₀"), "x is still log₁₀ τ");
+        assert!(svg.contains("x: ARW, N/√τ (slope −1/2)") && svg.contains("x: RRW, K √(τ/3) (slope +1/2)"));
     }
 
     /// A constant offset has no Allan deviation: the figures see noise only.
