@@ -57,6 +57,32 @@ pub struct AxisNoise {
     pub curve: Vec<AllanPoint>,
 }
 
+impl AxisNoise {
+    /// The fitted terms as lines over the curve's τ range, each where its term is not zero:
+    /// white rate noise N/√τ (slope −1/2 on log-log axes, ARW), the flicker floor 0.664 B
+    /// (slope 0, bias instability) and the random walk K √(τ/3) (slope +1/2, RRW), IEEE Std
+    /// 952-1997 Table C.2. N, B, K from the figures: N = ARW/60, B = BI/3600, K = RRW/(3600·60).
+    pub fn fitted_lines(&self) -> Vec<(&'static str, Vec<(f64, f64)>)> {
+        let (Some(first), Some(last)) = (self.curve.first(), self.curve.last()) else { return Vec::new() };
+        let n = self.arw_deg_per_sqrt_h / S_PER_H.sqrt();
+        let b = self.bias_instability_deg_per_h / S_PER_H;
+        let k = self.rrw_deg_per_h_per_sqrt_h / (S_PER_H * S_PER_H.sqrt());
+        let ends = [first.tau_s, last.tau_s];
+        let line = |f: &dyn Fn(f64) -> f64| ends.iter().map(|&t| (t, f(t))).collect::<Vec<_>>();
+        let mut out = Vec::new();
+        if n > 0.0 {
+            out.push(("ARW, N/√τ (slope −1/2)", line(&|t| n / t.sqrt())));
+        }
+        if b > 0.0 {
+            out.push(("bias instability, 0.664 B (slope 0)", line(&|_| FLICKER_FACTOR * b)));
+        }
+        if k > 0.0 {
+            out.push(("RRW, K √(τ/3) (slope +1/2)", line(&|t| k * (t / 3.0).sqrt())));
+        }
+        out
+    }
+}
+
 /// Overlapping Allan deviation of a rate series sampled every `tau0_s`, at log-spaced cluster
 /// sizes from 1 to a third of the record.
 pub fn overlapping_adev(rate: &[f64], tau0_s: f64) -> Vec<AllanPoint> {
@@ -170,6 +196,24 @@ fn fit_terms_with(curve: &[AllanPoint], n_samples: usize, allowed: u8) -> NoiseT
 
 /// Seconds per hour.
 const S_PER_H: f64 = 3600.0;
+
+/// A noise figure with three significant digits (fixed notation from 0.001 up to 10⁵, else
+/// with an exponent), or `none seen` for a term the fit left out: the curve shows no such
+/// slope within the stretch (printing 0.000 there read like a figure too small to show).
+pub fn figure(v: f64) -> String {
+    if v == 0.0 {
+        return "none seen".into();
+    }
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor();
+    if !(-3.0..5.0).contains(&mag) {
+        return format!("{v:.2e}");
+    }
+    let decimals = (2.0 - mag).max(0.0) as usize;
+    format!("{v:.decimals$}")
+}
 
 /// Noise figures of one axis from its rate series (°/s) at `tau0_s`.
 pub fn axis_noise(axis: char, rate: &[f64], tau0_s: f64) -> AxisNoise {
@@ -306,24 +350,25 @@ pub fn capture_noise(cap: &Capture, cal: Option<&Calibration>) -> Result<NoiseRe
 }
 
 impl NoiseReport {
-    /// The log-log Allan deviation plot of the three axes, as SVG. The plot helpers have no log
-    /// x axis, so x is log₁₀ τ.
+    /// The Allan deviation of the three axes on log-log axes, as SVG, with each axis's fitted
+    /// terms drawn dashed in its colour ([`AxisNoise::fitted_lines`]).
     pub fn adev_svg(&self) -> Result<String, crate::report::plots::PlotError> {
         use crate::report::plots::{line_plot, PlotSpec, Series};
-        let series: Vec<Series> = self
-            .axes
-            .iter()
-            .enumerate()
-            .map(|(i, a)| {
-                Series::line(
-                    format!("{} axis", a.axis),
-                    a.curve.iter().map(|p| (p.tau_s.log10(), p.adev_dps)).collect(),
-                    i,
-                )
-            })
-            .collect();
+        let mut series = Vec::new();
+        for (i, a) in self.axes.iter().enumerate() {
+            series.push(Series::line(
+                format!("{} axis", a.axis),
+                a.curve.iter().map(|p| (p.tau_s, p.adev_dps)).collect(),
+                i,
+            ));
+            for (label, points) in a.fitted_lines() {
+                series.push(Series::dashed(format!("{}: {label}", a.axis), points, i));
+            }
+        }
         let spec =
-            PlotSpec::new("Overlapping Allan deviation (static stretch)", "log₁₀ τ [s]", "σ(τ) [°/s]").with_log_y();
+            PlotSpec::new("Overlapping Allan deviation (static stretch) and fitted terms", "τ [s]", "σ(τ) [°/s]")
+                .with_log_x()
+                .with_log_y();
         line_plot(&spec, &series)
     }
 
@@ -333,11 +378,11 @@ impl NoiseReport {
         o.push_str("<tr><th>axis</th><th class=\"num\">ARW [°/√h]</th><th class=\"num\">bias instability [°/h]</th><th class=\"num\">RRW [°/h/√h]</th><th class=\"num\">σ min [°/s]</th><th class=\"num\">at τ [s]</th></tr>\n");
         for a in &self.axes {
             o.push_str(&format!(
-                "<tr><td>{}</td><td class=\"num\">{:.4}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3}</td><td class=\"num\">{:.3e}</td><td class=\"num\">{:.2}</td></tr>\n",
+                "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.3e}</td><td class=\"num\">{:.2}</td></tr>\n",
                 a.axis,
-                a.arw_deg_per_sqrt_h,
-                a.bias_instability_deg_per_h,
-                a.rrw_deg_per_h_per_sqrt_h,
+                figure(a.arw_deg_per_sqrt_h),
+                figure(a.bias_instability_deg_per_h),
+                figure(a.rrw_deg_per_h_per_sqrt_h),
                 a.adev_min_dps,
                 a.tau_at_min_s
             ));
@@ -349,7 +394,7 @@ impl NoiseReport {
         if self.duration_s < SHORT_STRETCH_S {
             o.push_str(&format!(
                 " A {:.0} s stretch measures σ(τ) up to τ = {:.0} s only: ARW is firm, bias instability and RRW are \
-                 indicative (0 where the curve shows no such term yet).",
+                 indicative (\"none seen\" where the curve shows no such slope yet).",
                 self.duration_s,
                 self.duration_s * MAX_CLUSTER_FRACTION
             ));
@@ -375,6 +420,8 @@ impl std::fmt::Display for NoiseReport {
             self.scaling
         )?;
         writeln!(f, "axis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]  ADEV min [°/s] at τ [s]")?;
+        let none_seen =
+            self.axes.iter().any(|a| a.bias_instability_deg_per_h == 0.0 || a.rrw_deg_per_h_per_sqrt_h == 0.0);
         if self.duration_s < SHORT_STRETCH_S {
             writeln!(
                 f,
@@ -383,14 +430,17 @@ impl std::fmt::Display for NoiseReport {
                 self.duration_s * MAX_CLUSTER_FRACTION
             )?;
         }
+        if none_seen {
+            writeln!(f, "(none seen: the Allan curve shows no such slope within the stretch; a longer one may)")?;
+        }
         for a in &self.axes {
             writeln!(
                 f,
-                "  {}   {:10.4}  {:22.3}  {:12.3}  {:14.3e}  {:8.2}",
+                "  {}   {:>10}  {:>22}  {:>12}  {:14.3e}  {:8.2}",
                 a.axis,
-                a.arw_deg_per_sqrt_h,
-                a.bias_instability_deg_per_h,
-                a.rrw_deg_per_h_per_sqrt_h,
+                figure(a.arw_deg_per_sqrt_h),
+                figure(a.bias_instability_deg_per_h),
+                figure(a.rrw_deg_per_h_per_sqrt_h),
                 a.adev_min_dps,
                 a.tau_at_min_s
             )?;
@@ -529,6 +579,76 @@ mod tests {
                 assert!((a.rrw_deg_per_h_per_sqrt_h / rrw - 1.0).abs() < 0.1, "seed {seed} {}: RRW", a.axis);
             }
         }
+    }
+
+    /// Figures keep three significant digits at every size; a term the fit left out says so.
+    #[test]
+    fn figures_have_significant_digits_and_a_missing_term_says_so() {
+        assert_eq!(figure(1.27832), "1.28");
+        assert_eq!(figure(0.0123456), "0.0123");
+        assert_eq!(figure(0.000123456), "1.23e-4");
+        assert_eq!(figure(123.456), "123");
+        assert_eq!(figure(0.0), "none seen");
+        let axis = AxisNoise {
+            axis: 'x',
+            arw_deg_per_sqrt_h: 1.2783,
+            bias_instability_deg_per_h: 0.0,
+            rrw_deg_per_h_per_sqrt_h: 0.000_42,
+            adev_min_dps: 7.22e-4,
+            tau_at_min_s: 198.11,
+            curve: Vec::new(),
+        };
+        let text = NoiseReport {
+            run: 1,
+            samples: 480_000,
+            duration_s: 3600.0,
+            tau0_s: 0.00125,
+            scaling: "calibration (package frame)".into(),
+            axes: vec![axis],
+        }
+        .to_string();
+        assert!(
+            text.contains("\n  x         1.28               none seen       4.20e-4        7.220e-4    198.11\n"),
+            "{text}"
+        );
+        assert!(!text.contains("0.000 "), "{text}");
+        assert!(text.contains("(none seen: the Allan curve shows no such slope within the stretch; a longer one may)"));
+    }
+
+    /// The plot has log-log axes and the fitted lines have the slopes of their terms.
+    #[test]
+    fn the_allan_plot_is_log_log_with_the_fitted_lines() {
+        let (tau0, n) = (0.1, 0.03);
+        let rate = synthetic(2, 100_000, tau0, n, 3f64.sqrt() * n / 10.0);
+        let mut a = axis_noise('x', &rate, tau0);
+        a.bias_instability_deg_per_h = 2.0;
+        let lines = a.fitted_lines();
+        let slope = |p: &[(f64, f64)]| (p[1].1 / p[0].1).log10() / (p[1].0 / p[0].0).log10();
+        let slopes: Vec<(&str, f64)> = lines.iter().map(|(l, p)| (*l, slope(p))).collect();
+        assert_eq!(slopes.len(), 3, "{slopes:?}");
+        assert!(
+            (slopes[0].1 + 0.5).abs() < 1e-12 && slopes[1].1 == 0.0 && (slopes[2].1 - 0.5).abs() < 1e-12,
+            "{slopes:?}"
+        );
+        // At τ = 1 s the white-noise line is N itself, °/s (ARW / 60).
+        let at_1s = a.arw_deg_per_sqrt_h / 60.0;
+        let (t0, s0) = lines[0].1[0];
+        assert!((s0 * t0.sqrt() - at_1s).abs() < 1e-12 * at_1s);
+        let report = NoiseReport {
+            run: 1,
+            samples: rate.len(),
+            duration_s: 10_000.0,
+            tau0_s: tau0,
+            scaling: "calibration (package frame)".into(),
+            axes: vec![a],
+        };
+        let svg = report.adev_svg().unwrap();
+        // Decade ticks on the τ axis (the curve spans 0.1 s to 3333 s), not log₁₀ τ.
+        for tick in ["0.1", "1", "10", "100", "1000"] {
+            assert!(svg.contains(&format!("\n{tick}\n</text>")), "no τ tick {tick}: {svg}");
+        }
+        assert!(!svg.contains("log₁₀"), "x is still log₁₀ τ");
+        assert!(svg.contains("x: ARW, N/√τ (slope −1/2)") && svg.contains("x: RRW, K √(τ/3) (slope +1/2)"));
     }
 
     /// A constant offset has no Allan deviation: the figures see noise only.

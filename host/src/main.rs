@@ -474,7 +474,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             if json {
                 files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
             } else {
-                files::stdout(&report.to_string())?;
+                files::stdout(&host::text::wrap(&report.to_string(), host::text::TEXT_WIDTH))?;
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -794,6 +794,12 @@ fn calibrate(
     if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
         obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
     }
+    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::extended).
+    let temps: Vec<f64> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| f64::from(t.raw))).collect();
+    let out_temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
+    if let (Some(d), Some(obj)) = (export::DriftModel::of(&lr, out_temp_mean), value.as_object_mut()) {
+        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
+    }
     let json_text = serde_json::to_string_pretty(&value)?;
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
@@ -842,7 +848,7 @@ fn calibrate(
         summary.push('\n');
         summary.push_str(&host::spec::text(c));
     }
-    files::stdout(&summary)?;
+    files::stdout(&host::text::wrap(&summary, host::text::TEXT_WIDTH))?;
     recorded?;
     Ok(match (lr.verdict(), checks.as_deref().is_some_and(|c| !host::spec::passed(c))) {
         // A result not to be trusted says so first, whatever the limits.

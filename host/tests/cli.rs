@@ -405,6 +405,15 @@ fn noise_of_a_simulated_static_run() {
     // and the estimate's few % at 20 s.
     let arw = r["axes"][0]["arw_deg_per_sqrt_h"].as_f64().unwrap();
     assert!((arw / 1.2728 - 1.0).abs() < 0.1, "{arw}");
+    // As text: three significant digits, and a term the 20-s curve cannot show is "none seen",
+    // never 0.000.
+    let o = host(&["noise", "--capture", cap.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains(" 0.000 "), "{text}");
+    assert!(
+        text.contains(&format!("  x   {:>10}", format!("{:.2}", r["axes"][0]["arw_deg_per_sqrt_h"].as_f64().unwrap()))),
+        "{text}"
+    );
     // A capture without a static stretch says how to record one.
     let moving = dir.join("moving.cap");
     assert_eq!(host(&["simulate", "--out", moving.to_str().unwrap(), "--duration", "3"]).status.code(), Some(0));
@@ -628,6 +637,15 @@ fn export_defaults_to_the_calibration_calibrate_writes_and_help_names_every_comm
     let run = |args: &[&str]| host_command().current_dir(tmp.path()).args(args).output().expect("host runs");
     let o = run(&["calibrate", "--replay", demo.to_str().unwrap(), "--no-db"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // The summary reads on a terminal: no line over 100 characters (one was 326), and it says
+    // plainly that the residual is noise.
+    let summary = String::from_utf8_lossy(&o.stdout);
+    let longest = summary.lines().map(|l| l.chars().count()).max().unwrap();
+    assert!(longest <= 100, "a {longest}-character line:\n{summary}");
+    assert!(
+        summary.contains("\n  only noise: no test of the residual found a pattern the model misses.\n"),
+        "{summary}"
+    );
     let o = run(&["export", "--format", "csv"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(String::from_utf8_lossy(&o.stdout).starts_with("name,"), "{}", String::from_utf8_lossy(&o.stdout));

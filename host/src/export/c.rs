@@ -6,6 +6,8 @@
 //! are split ([`super::SplitRow`]): `gyrocal_apply_split` gives the rate as a float pair
 //! `hi + lo` within 2^(e−19) °/s of `host apply` over the whole int16 range (2.4e-7 °/s at
 //! ±2000 °/s), and `gyrocal_apply` its float, which adds only its own rounding (half an ulp).
+//! `gyrocal_apply_with` also removes the offset drift and the g-sensitivity (zero terms where
+//! the calibration's model has none), and the header lists what it leaves out.
 
 use super::{f32_literal, sanitise, Export};
 use std::fmt::Write as _;
@@ -28,6 +30,10 @@ pub fn render(e: &Export) -> String {
         for line in p.to_string().lines() {
             let _ = writeln!(o, " * {}", sanitise(line));
         }
+    }
+    let _ = writeln!(o, " * Left out:");
+    for line in e.left_out() {
+        let _ = writeln!(o, " *   - {line}");
     }
     let _ = writeln!(o, " * Valid only for raw readings taken at the gyro configuration below. */");
     let _ = writeln!(o, "#ifndef GYROCAL_H\n#define GYROCAL_H\n\n#include <stdint.h>\n");
@@ -149,6 +155,7 @@ static inline void gyrocal_apply(const int16_t raw[3], float rate_dps[3])
     gyrocal_apply_split(raw, rate_dps, lo);
 }}
 
+{with}
 #endif /* GYROCAL_H */
 "#,
         mh = rows(&|r| r.m_hi),
@@ -157,6 +164,66 @@ static inline void gyrocal_apply(const int16_t raw[3], float rate_dps[3])
         bh = vector(&|r| r.b_hi),
         bm = vector(&|r| r.b_mid),
         bl = vector(&|r| r.b_lo),
+        with = with_terms(e),
     );
     o
+}
+
+/// The drift and g-sensitivity terms and `gyrocal_apply_with`.
+fn with_terms(e: &Export) -> String {
+    let t = e.rate_terms();
+    let v = |x: [f64; 3]| format!("{{{}f, {}f, {}f}}", f32_literal(x[0]), f32_literal(x[1]), f32_literal(x[2]));
+    let g = t.g_dps_per_g;
+    format!(
+        r#"
+/* Offset drift and g-sensitivity in the rate, deg/s, package frame (zero where the model has
+ * none; see "Left out" above). Warm-up: (K S)^-1 c at power-up, decaying as exp(-t/T). */
+static const float GYROCAL_WARMUP_RATE_DPS[3] = {wu};
+#define GYROCAL_WARMUP_TAU_S {tau}f
+/* Die temperature: (K S)^-1 beta, deg/s per deg C, from the OUT_TEMP reading below (OUT_TEMP
+ * falls 1 LSB per deg C, L3G4200D datasheet Table 5). */
+static const float GYROCAL_TEMP_RATE_DPS_PER_C[3] = {tc};
+#define GYROCAL_TEMP_REFERENCE_LSB {tref}f
+/* g-sensitivity: (K S)^-1 diag(k) G, deg/s per g of specific force along package x, y, z. */
+static const float GYROCAL_G_RATE_DPS_PER_G[3][3] = {{
+    {g0},
+    {g1},
+    {g2},
+}};
+
+#include <math.h>
+
+/* gyrocal_apply with the drift and the g-sensitivity removed. t_s: seconds since power-up (the
+ * calibration takes its session's first sample as power-up). out_temp_lsb: the die temperature
+ * as OUT_TEMP (the calibration averaged it over 20 s). specific_force_g: what an accelerometer
+ * on the same package reads, g (+1 g up at rest), or NULL without one (no g-sensitivity applied).
+ * Within half a float ulp of the rate plus GYROCAL_SPLIT_BOUND_DPS plus the float rounding of the
+ * terms (about 1e-7 of their size) of the double-precision reference (host/src/export/mod.rs,
+ * Export::apply_with). Needs expf (link with -lm where the C library asks for it). */
+static inline void gyrocal_apply_with(const int16_t raw[3], float t_s, float out_temp_lsb,
+                                      const float *specific_force_g, float rate_dps[3])
+{{
+    float hi[3], lo[3];
+    const float decay = expf(-t_s / GYROCAL_WARMUP_TAU_S);
+    const float dtemp_c = -(out_temp_lsb - GYROCAL_TEMP_REFERENCE_LSB);
+    int i;
+    gyrocal_apply_split(raw, hi, lo);
+    for (i = 0; i < 3; i++) {{
+        float terms = GYROCAL_WARMUP_RATE_DPS[i] * decay + GYROCAL_TEMP_RATE_DPS_PER_C[i] * dtemp_c;
+        if (specific_force_g) {{
+            const float *g = GYROCAL_G_RATE_DPS_PER_G[i];
+            terms += g[0] * specific_force_g[0] + g[1] * specific_force_g[1] + g[2] * specific_force_g[2];
+        }}
+        rate_dps[i] = hi[i] + (lo[i] - terms);
+    }}
+}}
+"#,
+        wu = v(t.warm_up_dps),
+        tau = f32_literal(t.warm_up_tau_s),
+        tc = v(t.temperature_dps_per_c),
+        tref = f32_literal(t.reference_out_temp_lsb),
+        g0 = v(g[0]),
+        g1 = v(g[1]),
+        g2 = v(g[2]),
+    )
 }

@@ -16,6 +16,111 @@ use protocol::GyroConfig;
 /// The key of the fitted g-sensitivity in `calibration.json` (written by `host calibrate`).
 pub const G_SENSITIVITY_KEY: &str = "g_sensitivity_dps_per_g";
 
+/// The key of the offset drift model in `calibration.json` (written by `host calibrate`).
+pub const DRIFT_MODEL_KEY: &str = "drift_model";
+
+/// OUT_TEMP's slope, LSB per °C: it falls one count per °C (L3G4200D datasheet, Table 5; the
+/// calibration's own temperature column uses the same, `calib::extended`).
+pub const OUT_TEMP_LSB_PER_C: f64 = -1.0;
+
+/// The offset drift of the final model, in the form a firmware can evaluate.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum DriftModel {
+    /// Warm-up after power-up: the offsets are `v_off + c exp(−t/T)`, t from the session's first
+    /// sample (taken as power-up), `v_off` the warmed-up level.
+    WarmUp {
+        /// c per axis, counts.
+        amplitude_counts: [f64; 3],
+        /// T, s.
+        tau_s: f64,
+    },
+    /// The offsets follow the die temperature: `v_off + β ΔT`, ΔT the die temperature from the
+    /// session's mean, °C.
+    Temperature {
+        /// β per axis, counts per °C.
+        counts_per_c: [f64; 3],
+        /// The session's mean OUT_TEMP reading, LSB: where ΔT = 0.
+        reference_out_temp_lsb: f64,
+    },
+    /// A drift that describes the session's own time span only (a polynomial over the capture, or
+    /// the free drift between knots): no firmware can evaluate it at another time.
+    SessionOnly {
+        /// The model's name.
+        model: String,
+        /// What the exported offsets are, then.
+        offsets_are: String,
+    },
+}
+
+impl DriftModel {
+    /// The drift of the loop's final model (`None` without one). The loop reports drift terms
+    /// in °/s of each sensing axis (its coefficient over |row of M|, `calib::closure`), so
+    /// counts are that times |row of M|. `out_temp_mean_lsb` is the runs' mean OUT_TEMP.
+    pub fn of(lr: &crate::calib::LoopReport, out_temp_mean_lsb: Option<f64>) -> Option<Self> {
+        use crate::calib::Effect;
+        let last = lr.steps.last()?;
+        let drift = last
+            .effects
+            .iter()
+            .copied()
+            .find(|e| e.is_free_drift())
+            .or_else(|| last.effects.iter().copied().find(|e| e.is_drift()))?;
+        let m = lr.final_report().m_counts_per_dps;
+        let k: [f64; 3] = std::array::from_fn(|a| Vector3::from(m[a]).norm());
+        let param = |name: &str| last.effect_params.iter().find(|p| p.name == name).map(|p| p.estimate.value);
+        let per_axis = |name: &str| -> Option<[f64; 3]> {
+            let v = [param(&format!("{name}, x"))?, param(&format!("{name}, y"))?, param(&format!("{name}, z"))?];
+            Some(std::array::from_fn(|a| v[a] * k[a]))
+        };
+        let portable = match drift {
+            Effect::DriftWarmUp => per_axis("warm-up drift at the first sample")
+                .zip(param("warm-up time constant T"))
+                .map(|(amplitude_counts, tau_s)| DriftModel::WarmUp { amplitude_counts, tau_s }),
+            Effect::DriftTemperature => per_axis("offset vs temperature").zip(out_temp_mean_lsb).map(
+                |(counts_per_c, reference_out_temp_lsb)| DriftModel::Temperature {
+                    counts_per_c,
+                    reference_out_temp_lsb,
+                },
+            ),
+            _ => None,
+        };
+        Some(portable.unwrap_or_else(|| DriftModel::SessionOnly {
+            model: drift.name(),
+            offsets_are: drift.offset_reference().unwrap_or("the session's mean").to_string(),
+        }))
+    }
+}
+
+/// What the drift and the g-sensitivity add to the offsets, in the package frame's rate: the
+/// single-precision exports subtract these from `(K S)⁻¹ v − (K S)⁻¹ v_off`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RateTerms {
+    /// `(K S)⁻¹ c` of the warm-up, °/s at t = 0 (zero without a warm-up model).
+    pub warm_up_dps: [f64; 3],
+    /// The warm-up's T, s (1 without a warm-up model, where it multiplies zero).
+    pub warm_up_tau_s: f64,
+    /// `(K S)⁻¹ β` of the temperature drift, °/s per °C (zero without one).
+    pub temperature_dps_per_c: [f64; 3],
+    /// The OUT_TEMP reading where the temperature drift is zero, LSB.
+    pub reference_out_temp_lsb: f64,
+    /// `(K S)⁻¹ diag(|row of M|) G`, °/s per g of specific force along package x, y, z (zero
+    /// without a fitted g-sensitivity).
+    pub g_dps_per_g: [[f64; 3]; 3],
+}
+
+/// The inputs besides the raw reading that the drift and the g-sensitivity need.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inputs {
+    /// Seconds since power-up (the warm-up's t).
+    pub t_s: f64,
+    /// The die temperature as OUT_TEMP, LSB (averaged as the firmware likes).
+    pub out_temp_lsb: f64,
+    /// Specific force along package x, y, z, g, as an accelerometer reads it (+1 g up at rest);
+    /// `None`: no accelerometer, the g-sensitivity is not applied.
+    pub specific_force_g: Option<[f64; 3]>,
+}
+
 /// Output format of `host export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
@@ -50,6 +155,9 @@ pub struct Export {
     /// bias per g of specific force along package x, y, z, °/s per g (`calibration.json`'s
     /// `g_sensitivity_dps_per_g`).
     pub g_sensitivity_dps_per_g: Option<[[f64; 3]; 3]>,
+    /// The offset drift, when the calibration's model holds one (`calibration.json`'s
+    /// `drift_model`).
+    pub drift: Option<DriftModel>,
 }
 
 /// 1-σ uncertainties from the report's covariance diagonal.
@@ -72,6 +180,12 @@ impl Export {
             None => None,
             Some(g) => {
                 Some(serde_json::from_value(g).with_context(|| format!("{G_SENSITIVITY_KEY} is not 3×3 numbers"))?)
+            }
+        };
+        let drift = match field(DRIFT_MODEL_KEY) {
+            None => None,
+            Some(d) => {
+                Some(serde_json::from_value(d).with_context(|| format!("{DRIFT_MODEL_KEY} does not read back"))?)
             }
         };
         let (calibration, gyro, sigma) = match serde_json::from_str::<CalReport>(text) {
@@ -105,7 +219,79 @@ impl Export {
             provenance,
             noise,
             g_sensitivity_dps_per_g,
+            drift,
         })
+    }
+
+    /// The drift and g-sensitivity terms in the package frame's rate ([`RateTerms`]).
+    pub fn rate_terms(&self) -> RateTerms {
+        let inv = Matrix3::from_fn(|i, j| self.m_inv_dps_per_count[i][j]);
+        let rate = |counts: [f64; 3]| -> [f64; 3] { (inv * Vector3::from(counts)).into() };
+        let mut t = RateTerms {
+            warm_up_dps: [0.0; 3],
+            warm_up_tau_s: 1.0,
+            temperature_dps_per_c: [0.0; 3],
+            reference_out_temp_lsb: 0.0,
+            g_dps_per_g: [[0.0; 3]; 3],
+        };
+        match &self.drift {
+            Some(DriftModel::WarmUp { amplitude_counts, tau_s }) => {
+                t.warm_up_dps = rate(*amplitude_counts);
+                t.warm_up_tau_s = *tau_s;
+            }
+            Some(DriftModel::Temperature { counts_per_c, reference_out_temp_lsb }) => {
+                t.temperature_dps_per_c = rate(*counts_per_c);
+                t.reference_out_temp_lsb = *reference_out_temp_lsb;
+            }
+            Some(DriftModel::SessionOnly { .. }) | None => {}
+        }
+        if let Some(g) = self.g_sensitivity_dps_per_g {
+            let m = &self.calibration.m_counts_per_dps;
+            let k = Matrix3::from_diagonal(&Vector3::from_fn(|a, _| Vector3::from(m[a]).norm()));
+            let gp = inv * k * Matrix3::from_fn(|i, j| g[i][j]);
+            t.g_dps_per_g = std::array::from_fn(|i| std::array::from_fn(|j| gp[(i, j)]));
+        }
+        t
+    }
+
+    /// The rate with the drift and the g-sensitivity applied, °/s, in double precision: the
+    /// reference the exports' `apply_with` is held to. `v = K S ω + v_off + d + diag(k) G f`,
+    /// so `ω = (K S)⁻¹ (v − v_off) − (K S)⁻¹ d − (K S)⁻¹ diag(k) G f`.
+    pub fn apply_with(&self, raw: [i16; 3], inputs: &Inputs) -> [f64; 3] {
+        let t = self.rate_terms();
+        let base = self.calibration.apply(raw);
+        let decay = (-inputs.t_s / t.warm_up_tau_s).exp();
+        let dtemp_c = (inputs.out_temp_lsb - t.reference_out_temp_lsb) / OUT_TEMP_LSB_PER_C;
+        let f = inputs.specific_force_g.unwrap_or([0.0; 3]);
+        std::array::from_fn(|i| {
+            let g: f64 = (0..3).map(|j| t.g_dps_per_g[i][j] * f[j]).sum();
+            base[i] - t.warm_up_dps[i] * decay - t.temperature_dps_per_c[i] * dtemp_c - g
+        })
+    }
+
+    /// What the C and Rust exports leave out, one line each (ASCII), for their header.
+    pub fn left_out(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        match &self.drift {
+            None => out.push("offset drift: none in this calibration's model (the drift terms are zero)".into()),
+            Some(DriftModel::SessionOnly { model, offsets_are }) => out.push(format!(
+                "offset drift: '{model}' describes the calibration session's own time span only and is not \
+                 exported (the drift terms are zero); the offsets are those at {offsets_are}"
+            )),
+            Some(DriftModel::WarmUp { .. }) => {
+                out.push("offset drift with die temperature (this calibration's drift model is the warm-up)".into())
+            }
+            Some(DriftModel::Temperature { .. }) => {
+                out.push("offset warm-up in time (this calibration's drift model is the die temperature)".into())
+            }
+        }
+        if self.g_sensitivity_dps_per_g.is_none() {
+            out.push("g-sensitivity: not in this calibration's model (its terms are zero)".into());
+        }
+        out.push("sensitivity and direction changing with temperature, non-linearity: not modelled".into());
+        out.push("uncertainties: 1-sigma in calibration.json, k = 2 on report.html's certificate".into());
+        out.push("noise figures (ARW, bias instability, RRW): calibration.json and report.html".into());
+        out.into_iter().map(|l| sanitise(&l)).collect()
     }
 
     /// (K S)⁻¹ v_off, °/s: the offset expressed as a rate. The exports apply
@@ -243,11 +429,46 @@ pub(crate) fn f32_literal(v: f64) -> String {
     format!("{:e}", v as f32)
 }
 
+/// ASCII spellings of the symbols the provenance and the model name use ("±500 °/s" becomes
+/// "+-500 deg/s"), so that the C header says them rather than `?`.
+const ASCII_SPELLINGS: [(char, &str); 16] = [
+    ('°', "deg"),
+    ('±', "+-"),
+    ('ω', "omega"),
+    ('θ', "theta"),
+    ('τ', "tau"),
+    ('σ', "sigma"),
+    ('µ', "u"),
+    ('μ', "u"),
+    ('√', "sqrt"),
+    ('×', "x"),
+    ('·', "*"),
+    ('−', "-"),
+    ('–', "-"),
+    ('—', "-"),
+    ('…', "..."),
+    ('⁻', "^-"),
+];
+
 /// A string safe inside a C or Rust string literal and a comment: printable ASCII without `"`,
-/// `\` or `*/`; anything else becomes `?`.
+/// `\` or `*/`. The symbols of [`ASCII_SPELLINGS`] are spelled out (superscript digits as `^n`);
+/// anything else becomes `?`.
 pub(crate) fn sanitise(s: &str) -> String {
-    let out: String =
-        s.chars().map(|c| if c.is_ascii_graphic() && c != '"' && c != '\\' || c == ' ' { c } else { '?' }).collect();
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        if let Some((_, ascii)) = ASCII_SPELLINGS.iter().find(|(u, _)| *u == c) {
+            out.push_str(ascii);
+        } else if let Some(d) = "⁰¹²³⁴⁵⁶⁷⁸⁹".chars().position(|u| u == c) {
+            if !out.ends_with('-') && !out.ends_with(|p: char| p.is_ascii_digit()) || !out.contains('^') {
+                out.push('^');
+            }
+            out.push_str(&d.to_string());
+        } else if c == '"' || c == '\\' || !(c.is_ascii_graphic() || c == ' ') {
+            out.push('?');
+        } else {
+            out.push(c);
+        }
+    }
     out.replace("*/", "*?")
 }
 

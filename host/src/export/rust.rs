@@ -3,7 +3,9 @@
 //! header (single-precision FPU on Cortex-M4F), with the same split coefficients and the same
 //! bound ([`super::SplitRow`]): `apply_split` agrees with `host apply` to 2^(e−19) °/s over the
 //! whole int16 range, `apply` adds its own rounding. Rust neither contracts nor reassociates
-//! float operations, so the error-free sums hold as written.
+//! float operations, so the error-free sums hold as written. `apply_with` also removes the
+//! offset drift and the g-sensitivity (zero terms where the calibration's model has none), and
+//! the header lists what it leaves out.
 
 use super::{f32_literal, sanitise, Export};
 use std::fmt::Write as _;
@@ -29,12 +31,17 @@ pub fn render(e: &Export) -> String {
             let _ = writeln!(o, "// {}", sanitise(line));
         }
     }
+    let _ = writeln!(o, "// Left out:");
+    for line in e.left_out() {
+        let _ = writeln!(o, "//   - {line}");
+    }
     let odr = e.gyro.map_or("None".to_string(), |g| format!("Some({})", g.odr.hz()));
     let bw = e.gyro.map_or("None".to_string(), |g| format!("Some({})", g.bandwidth.bw_bits()));
     let m = &e.m_inv_dps_per_count;
     let off = e.calibration.offset_counts;
     let b = e.offset_rate_dps();
     let sp = e.split();
+    let t = e.rate_terms();
     let _ = writeln!(
         o,
         r#"
@@ -73,6 +80,37 @@ pub struct GyroCal {{
     /// Proven bound on `|hi + lo − (K S)⁻¹ (raw − v_off)|` of [`GyroCal::apply_split`], °/s,
     /// for every raw reading.
     pub split_bound_dps: f64,
+    /// Warm-up drift in the rate at power-up, `(K S)⁻¹ c`, °/s, decaying as exp(−t/T) (zero
+    /// without a warm-up model).
+    pub warm_up_rate_dps: [f32; 3],
+    /// The warm-up's T, s.
+    pub warm_up_tau_s: f32,
+    /// Temperature drift in the rate, `(K S)⁻¹ β`, °/s per °C (zero without one).
+    pub temp_rate_dps_per_c: [f32; 3],
+    /// The OUT_TEMP reading where the temperature drift is zero, LSB (OUT_TEMP falls 1 LSB per
+    /// °C, L3G4200D datasheet Table 5).
+    pub temp_reference_lsb: f32,
+    /// g-sensitivity in the rate, `(K S)⁻¹ diag(k) G`, °/s per g of specific force along
+    /// package x, y, z (zero without a fitted one).
+    pub g_rate_dps_per_g: [[f32; 3]; 3],
+}}
+
+/// e^(−x) for x ≥ 0 in f32 without `std` (core has no `exp`): x = n ln 2 + r, |r| ≤ ln 2 / 2,
+/// e^(−r) by its Taylor series to r⁷ (remainder below 2e-8 relative), 2^(−n) from the bits.
+fn exp_neg(x: f32) -> f32 {{
+    if !(x < 87.0) {{
+        return if x >= 87.0 {{ 0.0 }} else {{ f32::NAN }};
+    }}
+    let x = if x < 0.0 {{ 0.0 }} else {{ x }};
+    let n = (x * core::f32::consts::LOG2_E + 0.5) as i32;
+    let r = -(x - n as f32 * core::f32::consts::LN_2);
+    let mut p = 1.0f32;
+    let mut k = 7;
+    while k > 0 {{
+        p = 1.0 + r * p / k as f32;
+        k -= 1;
+    }}
+    p * f32::from_bits(((127 - n) as u32) << 23)
 }}
 
 impl GyroCal {{
@@ -110,6 +148,31 @@ impl GyroCal {{
     pub fn apply(&self, raw: [i16; 3]) -> [f32; 3] {{
         self.apply_split(raw).0
     }}
+
+    /// [`GyroCal::apply`] with the drift and the g-sensitivity removed: `t_s` seconds since
+    /// power-up (the calibration takes its session's first sample as power-up), `out_temp_lsb`
+    /// the die temperature as OUT_TEMP (the calibration averaged it over 20 s),
+    /// `specific_force_g` what an accelerometer on the same package reads, g (+1 g up at rest;
+    /// None: no g-sensitivity applied). Within half an f32 ulp plus `split_bound_dps` plus the
+    /// f32 rounding of the terms (about 1e-7 of their size) of `host`'s double-precision
+    /// reference (`Export::apply_with`).
+    pub fn apply_with(&self, raw: [i16; 3], t_s: f32, out_temp_lsb: f32, specific_force_g: Option<[f32; 3]>) -> [f32; 3] {{
+        let (hi, lo) = self.apply_split(raw);
+        let decay = exp_neg(t_s / self.warm_up_tau_s);
+        let dtemp_c = -(out_temp_lsb - self.temp_reference_lsb);
+        let mut out = [0.0f32; 3];
+        let mut i = 0;
+        while i < 3 {{
+            let mut terms = self.warm_up_rate_dps[i] * decay + self.temp_rate_dps_per_c[i] * dtemp_c;
+            if let Some(f) = specific_force_g {{
+                let g = &self.g_rate_dps_per_g[i];
+                terms += g[0] * f[0] + g[1] * f[1] + g[2] * f[2];
+            }}
+            out[i] = hi[i] + (lo[i] - terms);
+            i += 1;
+        }}
+        out
+    }}
 }}
 
 /// The calibration of sensor {serial}.
@@ -129,6 +192,11 @@ pub const GYROCAL: GyroCal = GyroCal {{
     offset_rate_mid: {bd},
     offset_rate_lo: {bl},
     split_bound_dps: {bound:e},
+    warm_up_rate_dps: {wu},
+    warm_up_tau_s: {tau},
+    temp_rate_dps_per_c: {tc},
+    temp_reference_lsb: {tref},
+    g_rate_dps_per_g: [{g0}, {g1}, {g2}],
 }};"#,
         fs = e.calibration.full_scale.range_dps(),
         r0 = row(m[0]),
@@ -149,6 +217,13 @@ pub const GYROCAL: GyroCal = GyroCal {{
         bd = row([sp.rows[0].b_mid, sp.rows[1].b_mid, sp.rows[2].b_mid]),
         bl = row([sp.rows[0].b_lo, sp.rows[1].b_lo, sp.rows[2].b_lo]),
         bound = sp.rows.iter().map(super::SplitRow::bound_dps).fold(0.0, f64::max),
+        wu = row(t.warm_up_dps),
+        tau = f32_literal(t.warm_up_tau_s),
+        tc = row(t.temperature_dps_per_c),
+        tref = f32_literal(t.reference_out_temp_lsb),
+        g0 = row(t.g_dps_per_g[0]),
+        g1 = row(t.g_dps_per_g[1]),
+        g2 = row(t.g_dps_per_g[2]),
     );
     o
 }

@@ -424,3 +424,237 @@ fn json_and_csv_carry_every_parameter_exactly() {
     assert_eq!(v, e.m_inv_dps_per_count[0][1]);
     assert_eq!(csv.lines().count(), 1 + 5 + 24);
 }
+
+/// `sample_export` with a warm-up drift and a g-sensitivity; `wide_export` with a temperature
+/// drift and none: sizes of a real part's (0.3 °/s warm-up, 0.05 °/s/°C, 0.05 °/s/g).
+fn exports_with_terms() -> [Export; 2] {
+    let mut a = sample_export();
+    a.drift = Some(DriftModel::WarmUp { amplitude_counts: [-16.5, 10.25, -21.75], tau_s: 88.25 });
+    a.g_sensitivity_dps_per_g = Some([[0.02, 0.05, -0.01], [0.0, -0.03, 0.04], [0.06, 0.0, 0.015]]);
+    let mut b = wide_export();
+    b.drift = Some(DriftModel::Temperature { counts_per_c: [0.7, -0.45, 0.2], reference_out_temp_lsb: 13.4 });
+    [a, b]
+}
+
+/// The inputs of reading `i`: t over the first 10 min, OUT_TEMP over ±20 LSB round the
+/// reference, the specific force turning on a cone (1 g) and absent every fifth reading.
+fn inputs_of(i: usize) -> Inputs {
+    let a = i as f64 * 0.37;
+    Inputs {
+        t_s: (i % 600) as f64 + 0.25,
+        out_temp_lsb: (i % 41) as f64 - 20.0 + 13.0,
+        specific_force_g: (!i.is_multiple_of(5)).then(|| [0.6 * a.cos(), 0.6 * a.sin(), 0.8]),
+    }
+}
+
+/// Every 9th reading of [`readings`] with its [`inputs_of`].
+fn readings_with_inputs() -> Vec<([i16; 3], Inputs)> {
+    readings().into_iter().step_by(9).enumerate().map(|(i, r)| (r, inputs_of(i))).collect()
+}
+
+/// One input line: `x y z t_s out_temp has_f fx fy fz`.
+fn input_line(r: &[i16; 3], x: &Inputs) -> String {
+    let f = x.specific_force_g.unwrap_or([0.0; 3]);
+    let has = u8::from(x.specific_force_g.is_some());
+    format!("{} {} {} {} {} {has} {} {} {}\n", r[0], r[1], r[2], x.t_s, x.out_temp_lsb, f[0], f[1], f[2])
+}
+
+/// Runs `exe` on the readings with inputs; each output line holds three floats' bit patterns.
+fn run_with_inputs(exe: &Path, cases: &[([i16; 3], Inputs)]) -> Vec<[f32; 3]> {
+    use std::io::Write;
+    let mut child = Command::new(exe).stdin(Stdio::piped()).stdout(Stdio::piped()).spawn().expect("runs");
+    let input: String = cases.iter().map(|(r, x)| input_line(r, x)).collect();
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()).unwrap());
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
+    assert!(out.status.success());
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: Vec<f32> =
+                l.split_whitespace().map(|x| f32::from_bits(u32::from_str_radix(x, 16).unwrap())).collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// Compares `apply_with` of an export with [`Export::apply_with`]: within half an f32 ulp of the
+/// result, the split's bound, and 1e-6 of the terms' size (their f32 rounding and the f32
+/// exponential, each a few 1e-8 relative); returns the largest difference, °/s. Also checks
+/// that the terms are not negligible, so that the comparison tests them.
+fn compare_with(e: &Export, cases: &[([i16; 3], Inputs)], got: &[[f32; 3]]) -> f64 {
+    assert_eq!(got.len(), cases.len());
+    let bounds = e.split().rows.map(|r| r.bound_dps());
+    let mut worst = 0.0f64;
+    let mut largest_term = 0.0f64;
+    for ((r, x), g) in cases.iter().zip(got) {
+        let want = e.apply_with(*r, x);
+        let plain = e.calibration.apply(*r);
+        for i in 0..3 {
+            let terms = (want[i] - plain[i]).abs();
+            largest_term = largest_term.max(terms);
+            let d = (f64::from(g[i]) - want[i]).abs();
+            let tol = half_ulp(g[i]) + bounds[i] + 1e-6 * (terms + 1.0);
+            assert!(d <= tol, "raw {r:?} {x:?} axis {i}: {} vs {} ({d:e} > {tol:e} °/s)", g[i], want[i]);
+            worst = worst.max(d);
+        }
+    }
+    assert!(largest_term > 0.1, "the drift and g-sensitivity terms reach {largest_term} °/s only");
+    worst
+}
+
+#[test]
+fn c_header_applies_the_drift_and_the_g_sensitivity_as_the_library_does() {
+    let cases = readings_with_inputs();
+    for (n, e) in exports_with_terms().iter().enumerate() {
+        let dir = scratch(&format!("cwith{n}"));
+        std::fs::write(dir.path().join("gyrocal.h"), e.render(Format::C).unwrap()).unwrap();
+        std::fs::write(
+            dir.path().join("main.c"),
+            r#"#include <stdio.h>
+#include <string.h>
+#include "gyrocal.h"
+static unsigned long bits(float f) { uint32_t u; memcpy(&u, &f, sizeof u); return (unsigned long)u; }
+int main(void) {
+    int a, b, c, has;
+    float t, temp, f[3], w[3];
+    while (scanf("%d %d %d %f %f %d %f %f %f", &a, &b, &c, &t, &temp, &has, &f[0], &f[1], &f[2]) == 9) {
+        const int16_t raw[3] = {(int16_t)a, (int16_t)b, (int16_t)c};
+        gyrocal_apply_with(raw, t, temp, has ? f : NULL, w);
+        printf("%08lx %08lx %08lx\n", bits(w[0]), bits(w[1]), bits(w[2]));
+    }
+    return 0;
+}
+"#,
+        )
+        .unwrap();
+        let exe = dir.path().join("apply");
+        let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+        let o = Command::new(&cc)
+            .args(["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-ffp-contract=fast", "-o"])
+            .arg(&exe)
+            .arg(dir.path().join("main.c"))
+            .arg("-lm")
+            .output()
+            .unwrap_or_else(|err| panic!("cannot run the C compiler {cc:?}: {err}"));
+        assert!(o.status.success(), "cc failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        let worst = compare_with(e, &cases, &run_with_inputs(&exe, &cases));
+        eprintln!("C apply_with, export {n}, vs Export::apply_with over {} readings: max {worst:.2e} °/s", cases.len());
+    }
+}
+
+#[test]
+fn rust_export_applies_the_drift_and_the_g_sensitivity_as_the_library_does() {
+    let cases = readings_with_inputs();
+    for (n, e) in exports_with_terms().iter().enumerate() {
+        let dir = scratch(&format!("rustwith{n}"));
+        let dir = dir.path();
+        std::fs::write(dir.join("gyrocal.rs"), e.render(Format::Rust).unwrap()).unwrap();
+        let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+        std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
+        let o = Command::new(&rustc)
+            .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
+            .arg(dir)
+            .arg(dir.join("lib.rs"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::write(
+            dir.join("main.rs"),
+            r#"include!("gyrocal.rs");
+fn main() {
+    use std::io::{BufRead, Write};
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    for line in std::io::stdin().lock().lines() {
+        let line = line.unwrap();
+        let v: Vec<&str> = line.split_whitespace().collect();
+        let raw = [v[0].parse().unwrap(), v[1].parse().unwrap(), v[2].parse().unwrap()];
+        let f: [f32; 3] = [v[6].parse().unwrap(), v[7].parse().unwrap(), v[8].parse().unwrap()];
+        let f = (v[5] == "1").then_some(f);
+        let w = GYROCAL.apply_with(raw, v[3].parse().unwrap(), v[4].parse().unwrap(), f);
+        writeln!(out, "{:08x} {:08x} {:08x}", w[0].to_bits(), w[1].to_bits(), w[2].to_bits()).unwrap();
+    }
+}
+"#,
+        )
+        .unwrap();
+        let exe = dir.join("apply");
+        let o = Command::new(&rustc)
+            .args(["--edition", "2021", "-O", "-o"])
+            .arg(&exe)
+            .arg(dir.join("main.rs"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "rustc failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        let worst = compare_with(e, &cases, &run_with_inputs(&exe, &cases));
+        eprintln!(
+            "Rust apply_with, export {n}, vs Export::apply_with over {} readings: max {worst:.2e} °/s",
+            cases.len()
+        );
+    }
+}
+
+/// The reference itself: a warm-up of c counts at t = 0 and a g-sensitivity G move the rate by
+/// exactly (K S)⁻¹ c and (K S)⁻¹ diag(k) G f; the warm-up is gone after 40 T.
+#[test]
+fn apply_with_removes_the_modelled_offset_and_g_sensitivity() {
+    let [e, _] = exports_with_terms();
+    let raw = [1200, -800, 300];
+    let none = Inputs { t_s: 40.0 * 88.25, out_temp_lsb: 0.0, specific_force_g: None };
+    assert_eq!(e.apply_with(raw, &none), e.calibration.apply(raw));
+    let inv = Matrix3::from_fn(|i, j| e.m_inv_dps_per_count[i][j]);
+    let m = e.calibration.m_counts_per_dps;
+    let k = Matrix3::from_diagonal(&Vector3::from_fn(|a, _| Vector3::from(m[a]).norm()));
+    let g = Matrix3::from_fn(|i, j| e.g_sensitivity_dps_per_g.unwrap()[i][j]);
+    let f = Vector3::new(0.0, 0.0, 1.0);
+    let at_start = Inputs { t_s: 0.0, out_temp_lsb: 0.0, specific_force_g: Some(f.into()) };
+    let want = Vector3::from(e.calibration.apply(raw)) - inv * Vector3::new(-16.5, 10.25, -21.75) - inv * k * g * f;
+    let got = Vector3::from(e.apply_with(raw, &at_start));
+    assert!((got - want).abs().max() < 1e-12, "{got} vs {want}");
+}
+
+/// The headers are ASCII with the symbols spelled out (no `?` for °, ± or ω), and say what they
+/// leave out.
+#[test]
+fn headers_are_ascii_and_say_what_they_leave_out() {
+    let [with, _] = exports_with_terms();
+    let c = sample_export().render(Format::C).unwrap();
+    assert!(c.is_ascii(), "{c}");
+    assert!(!c.contains('?'), "{c}");
+    assert!(c.contains(" * Model: linear: v = K S omega + v_off\n"), "{c}");
+    assert!(
+        c.contains(" * Left out:\n *   - offset drift: none in this calibration's model (the drift terms are zero)\n")
+    );
+    assert!(c.contains(" *   - g-sensitivity: not in this calibration's model (its terms are zero)\n"), "{c}");
+    let rust = with.render(Format::Rust).unwrap();
+    assert!(
+        rust.contains(
+            "// Left out:\n//   - offset drift with die temperature (this calibration's drift model is the warm-up)\n"
+        ),
+        "{rust}"
+    );
+    assert!(!rust.contains("g-sensitivity: not in"), "{rust}");
+    let mut session = sample_export();
+    session.drift = Some(DriftModel::SessionOnly {
+        model: "offset drift: quadratic in time".into(),
+        offsets_are: "the middle of the capture's time span, less half the quadratic term".into(),
+    });
+    assert!(session.render(Format::C).unwrap().contains(
+        " *   - offset drift: 'offset drift: quadratic in time' describes the calibration session's own time span \
+         only and is not exported (the drift terms are zero); the offsets are those at the middle of the \
+         capture's time span, less half the quadratic term\n"
+    ));
+    assert_eq!(sanitise("±500 °/s, (K S)⁻¹, m²"), "+-500 deg/s, (K S)^-1, m^2");
+}
+
+/// `drift_model` in calibration.json reads back into the export.
+#[test]
+fn the_drift_model_reads_back_from_calibration_json() {
+    let e = sample_export();
+    let mut v: serde_json::Value = serde_json::from_str(&e.calibration.to_json()).unwrap();
+    v[DRIFT_MODEL_KEY] = serde_json::json!({"kind": "warm_up", "amplitude_counts": [1.0, 2.0, 3.0], "tau_s": 60.0});
+    let back = Export::from_json(&v.to_string()).unwrap();
+    assert_eq!(back.drift, Some(DriftModel::WarmUp { amplitude_counts: [1.0, 2.0, 3.0], tau_s: 60.0 }));
+}

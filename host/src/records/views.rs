@@ -203,7 +203,7 @@ pub fn show(r: &Record) -> String {
     if !r.noise.is_empty() {
         let _ = writeln!(o, "\naxis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]");
         for n in &r.noise {
-            let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+            let f = |v: Option<f64>| v.map_or("-".to_string(), crate::allan::figure);
             let _ = writeln!(
                 o,
                 "  {}   {:>9}  {:>22}  {:>12}",

@@ -35,6 +35,8 @@ pub struct PlotSpec {
     pub x_ticks: Option<Vec<f64>>,
     /// Logarithmic y axis (values ≤ 0 are not drawn).
     pub log_y: bool,
+    /// Logarithmic x axis (values ≤ 0 are not drawn).
+    pub log_x: bool,
 }
 
 impl PlotSpec {
@@ -50,6 +52,7 @@ impl PlotSpec {
             height_px: 420,
             x_ticks: None,
             log_y: false,
+            log_x: false,
         }
     }
     /// Sets the x range.
@@ -76,6 +79,11 @@ impl PlotSpec {
     /// Makes the y axis logarithmic.
     pub fn with_log_y(mut self) -> Self {
         self.log_y = true;
+        self
+    }
+    /// Makes the x axis logarithmic.
+    pub fn with_log_x(mut self) -> Self {
+        self.log_x = true;
         self
     }
 }
@@ -207,7 +215,7 @@ fn x_axis(spec: &PlotSpec, data: Option<(f64, f64)>, pad: f64) -> Result<Axis, P
         AxisRequest {
             fixed: spec.x_range,
             ticks: spec.x_ticks.as_deref(),
-            log: false,
+            log: spec.log_x,
             pad,
             target_ticks: x_tick_target(spec.width_px),
             name: "x",
@@ -248,7 +256,8 @@ pub fn line_plot(spec: &PlotSpec, series: &[Series]) -> Result<String, PlotError
     if !series.iter().any(|s| s.points.iter().any(|p| p.0.is_finite() && p.1.is_finite())) {
         return Err(PlotError::NoFiniteData);
     }
-    let x = x_axis(spec, scale::extent(series.iter().flat_map(|s| s.points.iter().map(|p| p.0)), false), 0.02)?;
+    let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    let x = x_axis(spec, scale::extent(xs, spec.log_x), 0.02)?;
     let ydata = scale::extent(series.iter().flat_map(Series::ys), spec.log_y);
     let y = y_axis(spec.y_range, ydata, spec.log_y, spec.height_px)?;
     let items: Vec<_> = series.iter().filter_map(Series::legend_item).collect();

@@ -25,21 +25,22 @@ fn triple(v: [f64; 3], digits: usize) -> String {
     v.iter().map(|x| format!("{x:.digits$}")).collect::<Vec<_>>().join(" / ")
 }
 
-/// The before/after table, one row per model.
+/// The before/after table, one row per model: its name, then its figures on a line beneath
+/// (one line per model was up to 127 characters wide).
 pub fn table(r: &LoopReport) -> String {
     let mut o = String::new();
-    let truth = r.steps.iter().any(|s| s.truth.is_some());
-    let _ = write!(o, "  {:<52} {:>22} {:>14}", "model", "RMS/floor x / y / z", "held-out °/s");
-    if truth {
-        let _ = write!(o, " {:>12} {:>12} {:>7}", "dir err °", "sens ppm", "max z");
-    }
-    o.push('\n');
     for s in &r.steps {
         let ratio: [f64; 3] = std::array::from_fn(|a| s.rms_dps[a] / s.floor_dps[a]);
-        let ho = s.held_out_excess_dps.map_or("n/a".to_string(), |v| format!("{v:.4}"));
-        let _ = write!(o, "  {:<52} {:>22} {:>14}", step_name(s), triple(ratio, 3), ho);
+        let ho = s.held_out_excess_dps.map_or("n/a".to_string(), |v| format!("{v:.4} °/s"));
+        let _ = write!(o, "  {}\n      RMS/floor x / y / z {}, held-out {ho}", step_name(s), triple(ratio, 3));
         if let Some(t) = &s.truth {
-            let _ = write!(o, " {:>12.5} {:>12.1} {:>7.2}", t.max_direction_deg(), t.max_sensitivity_ppm(), t.max_z());
+            let _ = write!(
+                o,
+                "\n      against the truth: dir err {:.5}°, sens err {:.1} ppm, max z {:.2}",
+                t.max_direction_deg(),
+                t.max_sensitivity_ppm(),
+                t.max_z()
+            );
         }
         o.push('\n');
     }
@@ -199,7 +200,7 @@ pub fn summary(r: &LoopReport) -> String {
     }
     let _ = writeln!(o, "\nResidual of the final model:");
     if r.final_diagnostics().findings.is_empty() {
-        let _ = writeln!(o, "  no structure found.");
+        let _ = writeln!(o, "  only noise: no test of the residual found a pattern the model misses.");
     }
     for f in &r.final_diagnostics().findings {
         let _ = writeln!(o, "  - {}", findings::finding(f));
@@ -232,10 +233,10 @@ pub fn verdict(r: &LoopReport) -> String {
         Verdict::AtNoiseFloor => {
             let ratio: Vec<String> = (0..3).map(|a| format!("{:.3}", d.rms_dps[a] / d.floor_dps[a])).collect();
             format!(
-                "Calibrated, residual at the noise floor: RMS/floor x, y, z = {}; no structure left at the {} family-wise level ({} tests).",
+                "Calibrated, residual at the noise floor: RMS/floor x, y, z = {}; no test of the residual found a pattern ({} tests, false-alarm rate {} for all together).",
                 ratio.join(", "),
-                r.alpha,
-                d.tests
+                d.tests,
+                r.alpha
             )
         }
         Verdict::UnexplainedStructure if r.unvouched.is_some() => format!(
@@ -251,7 +252,7 @@ pub fn verdict(r: &LoopReport) -> String {
                 .chain(d.findings.iter().map(findings::finding))
                 .collect();
             format!(
-                "DO NOT TRUST THIS CALIBRATION: structure remains in the residual that no catalogued effect explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
+                "DO NOT TRUST THIS CALIBRATION: the data hold a pattern that is not noise and that no effect this program knows explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
                 what.join(" ")
             )
         }
