@@ -8,6 +8,7 @@ pub mod files;
 pub mod geometry;
 pub mod inspect;
 pub mod link;
+pub mod present;
 pub mod provenance;
 pub mod records;
 pub mod report;

@@ -895,7 +895,7 @@ fn g_sensitivity(lr: &calib::LoopReport) -> Option<[[f64; 3]; 3]> {
 /// page completed in memory, and every file renamed into `out_dir` whole.
 fn write_report(out_dir: &Path, lr: &calib::LoopReport, prov: &Provenance, extra: &str) -> Result<PathBuf> {
     let tmp = tempfile::Builder::new().prefix(".report.").tempdir_in(out_dir)?;
-    let drawn = calib::write_report(tmp.path(), lr)?;
+    let drawn = host::present::write_report(tmp.path(), lr)?;
     let page = fs::read_to_string(&drawn)?;
     let html = out_dir.join("report.html");
     for svg in fs::read_dir(tmp.path())? {

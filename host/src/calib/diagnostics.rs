@@ -190,7 +190,7 @@ pub enum FindingKind {
     RmsExcess,
 }
 
-/// One significant structure, in numbers ([`super::present::findings`] says it in words).
+/// One significant structure, in numbers ([`crate::present::findings`] says it in words).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Finding {
     /// What.

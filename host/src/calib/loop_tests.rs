@@ -201,7 +201,7 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
     assert!(f.places.iter().any(|&(_, axis)| axis == 0), "{f:?}");
     // 0.3 °/s injected; whatever the catalogue absorbed, most of it is still there.
     assert!(f.max_dps > 0.1, "{f:?}");
-    let verdict = crate::calib::present::loop_text::verdict(&r);
+    let verdict = crate::present::loop_text::verdict(&r);
     assert!(verdict.contains("DO NOT TRUST"), "{verdict}");
     assert!(r.summary().contains("UNEXPLAINED STRUCTURE"));
 }
@@ -212,7 +212,7 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
 fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
     let (r, truth) = run_loop(2, &[180.0], SHORT_S, &["delay_ms=5"]);
     assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::Phase), "{}", r.summary());
-    let asks = crate::calib::present::loop_text::asks(&r);
+    let asks = crate::present::loop_text::asks(&r);
     assert!(asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{asks:?}");
     // The combined phase corrects these runs: the calibration is right for them.
     let t = TruthErrors::of(&r.final_report().axes, &truth.sensor());
@@ -228,7 +228,7 @@ fn clipped_samples_are_excluded_and_reported() {
     let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     let clipped: u64 = r.final_report().clipped.iter().sum();
     assert!(clipped > 0, "nothing clipped");
-    let notes = crate::calib::present::loop_text::notes(&r);
+    let notes = crate::present::loop_text::notes(&r);
     assert!(notes.iter().any(|n| n.starts_with("Clipping")), "{notes:?}");
     assert_within_3_sigma(&TruthErrors::of(&r.final_report().axes, &truth.sensor()), "clipped");
 }
@@ -241,7 +241,7 @@ fn loop_report_serialises_and_feeds_apply() {
     let back: LoopReport = serde_json::from_str(&json).expect("deserialises");
     assert_eq!(back.verdict(), r.verdict());
     let dir = std::env::temp_dir().join(format!("loop-report-{}", std::process::id()));
-    let html = write_report(&dir, &r).expect("report written");
+    let html = crate::present::write_report(&dir, &r).expect("report written");
     let text = std::fs::read_to_string(&html).expect("readable");
     assert!(text.contains("<svg") && text.contains("index offset"), "report lacks figures or the effect");
     let _ = std::fs::remove_dir_all(&dir);
@@ -443,7 +443,7 @@ fn print_bar_summary() {
     let (r, _) = run_loop(1, &BAR_RATES_DPS, BAR_DURATION_S, &BAR_EFFECTS);
     eprintln!("{}\n{:.1} s", r.summary(), t.elapsed().as_secs_f64());
     if let Ok(dir) = std::env::var("LOOP_REPORT_DIR") {
-        let html = write_report(std::path::Path::new(&dir), &r).expect("report written");
+        let html = crate::present::write_report(std::path::Path::new(&dir), &r).expect("report written");
         eprintln!("report: {}", html.display());
     }
 }

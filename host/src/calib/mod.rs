@@ -25,7 +25,6 @@ pub mod extended;
 pub mod kinematics;
 pub mod layout;
 pub mod paper;
-pub mod present;
 pub mod report;
 pub mod sanity;
 pub mod selection;
@@ -49,7 +48,6 @@ pub use effects::Effect;
 pub use error::CalError;
 pub use estimate::Estimate;
 pub use kinematics::KinOptions;
-pub use present::write_report;
 pub use report::CalReport;
 
 use crate::capture::Run;

@@ -1,6 +1,6 @@
 //! The calibration report: every estimate with its 1-σ, the evidence behind it (residuals
 //! against the measured noise floor, sample accounting, index and gear checks) and the paper
-//! method's cross-check, as data (serialisable); [`super::present::cal_text`] prints it.
+//! method's cross-check, as data (serialisable); [`crate::present::cal_text`] prints it.
 
 use super::apply::Calibration;
 use super::derived::{AxisEstimate, InterAxisAngle};

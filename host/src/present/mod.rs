@@ -1,6 +1,6 @@
 //! Presentation: the calibration's results as the operator reads them, in plain text
 //! ([`cal_text`], [`loop_text`]) and as the HTML report with its figures ([`html`], drawn with
-//! [`crate::report`]'s primitives). The computation in the rest of [`super`] returns data and
+//! [`crate::report`]'s primitives). The computation in the rest of [`crate::calib`] returns data and
 //! never depends on this module.
 
 pub mod advice;
