@@ -207,6 +207,37 @@ fn lin_param(nl: usize, a: usize, p: usize) -> usize {
     a * nl + p
 }
 
+/// Where each candidate's columns sit in a selection: (is linear, position in `lin` or `shared`).
+type Places = Vec<Vec<(bool, usize)>>;
+
+/// The model's columns followed by every candidate's, the selection of all of them, and where
+/// each candidate's columns sit in it.
+fn with_candidates(f: &Fitted, cands: &[Candidate]) -> (Vec<Col>, Selection, Places) {
+    let (nl, ns) = (f.model.lin.len(), f.model.shared.len());
+    let mut cols = f.model.cols();
+    let mut sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
+    let mut places = Vec::with_capacity(cands.len());
+    for c in cands {
+        let mut pl = Vec::new();
+        for &col in &c.cols {
+            let j = cols.len();
+            cols.push(col);
+            match col {
+                Col::Lin(_) => {
+                    pl.push((true, sel.lin.len()));
+                    sel.lin.push(j);
+                }
+                Col::Shared(_) => {
+                    pl.push((false, sel.shared.len()));
+                    sel.shared.push(j);
+                }
+            }
+        }
+        places.push(pl);
+    }
+    (cols, sel, places)
+}
+
 /// The consider covariance of `f` (fitted with `weights`) for every catalogued effect it lacks.
 /// `base` are the 12 base parameters' indices in `f`'s covariance; `k` the sensitivities.
 #[allow(clippy::too_many_arguments)]
@@ -226,28 +257,7 @@ pub fn consider(
         return Consideration::none();
     }
     let (nl, ns) = (f.model.lin.len(), f.model.shared.len());
-    let mut cols = f.model.cols();
-    let mut sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
-    // Where each candidate's columns sit in the selection: (is linear, position in lin/shared).
-    let mut places: Vec<Vec<(bool, usize)>> = Vec::new();
-    for c in &cands {
-        let mut pl = Vec::new();
-        for &col in &c.cols {
-            let j = cols.len();
-            cols.push(col);
-            match col {
-                Col::Lin(_) => {
-                    pl.push((true, sel.lin.len()));
-                    sel.lin.push(j);
-                }
-                Col::Shared(_) => {
-                    pl.push((false, sel.shared.len()));
-                    sel.shared.push(j);
-                }
-            }
-        }
-        places.push(pl);
-    }
+    let (cols, sel, places) = with_candidates(f, &cands);
     let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
     let Some(total) = Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach)) else {
         return Consideration::none();

@@ -539,6 +539,32 @@ impl ColPlan {
     }
 }
 
+/// The sensor table's transmission error in pose `pose` at mesh angle `mesh_rad`: the effective
+/// θ2 from the index-referenced `theta2_rad`, the factor on θ2' and its derivative in the mesh
+/// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ).
+#[inline]
+fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh_rad: f64) -> (f64, f64, f64) {
+    let (mut th_eff, mut ripple, mut dripple) = (theta2_rad, 1.0, 0.0);
+    for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == pose) {
+        let nf = f64::from(n);
+        let (sn, cn) = (nf * mesh_rad).sin_cos();
+        th_eff += (a * sn - b * cn) / nf;
+        ripple += a * cn + b * sn;
+        dripple += nf * (b * cn - a * sn);
+    }
+    (th_eff, ripple, dripple)
+}
+
+/// ∂ω_s/∂e_k of the pose-2 fixture's turn e: −R2ᵀ(e_k × v) = R2ᵀ(v × e_k), `v` = ω2 + κ·ω̈2 in
+/// the table frame, `rt` = R2ᵀ.
+#[inline]
+fn fixture_jacobian(rt: &[[f64; 3]; 3], v: &[f64; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|k| {
+        let c = cross(v, &std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 }));
+        std::array::from_fn(|i| rt[i][0] * c[0] + rt[i][1] * c[1] + rt[i][2] * c[2])
+    })
+}
+
 /// Evaluates columns and predictions at samples for one model.
 pub struct Evaluator<'a> {
     data: &'a LoopData,
@@ -694,14 +720,7 @@ impl<'a> Evaluator<'a> {
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
         let mesh_rad = theta2 + sh.gear_lag_s * theta1_rate_rad_s;
-        let (mut th_eff, mut ripple, mut dripple) = (th, 1.0, 0.0);
-        for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == rk.pose) {
-            let nf = f64::from(n);
-            let (sn, cn) = (nf * mesh_rad).sin_cos();
-            th_eff += (a * sn - b * cn) / nf;
-            ripple += a * cn + b * sn;
-            dripple += nf * (b * cn - a * sn);
-        }
+        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, mesh_rad);
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
@@ -748,17 +767,10 @@ impl<'a> Evaluator<'a> {
         } else {
             [to_package(&basis[0]), [f64::NAN; 3], [f64::NAN; 3]]
         };
-        // ∂ω_s/∂e_k = −R2ᵀ(e_k × v) = R2ᵀ(v × e_k), v = ω2 + κ·ω̈2, in pose 2 only.
-        let d_fixture: [[f64; 3]; 3] = if !self.needs_fixture {
-            [[f64::NAN; 3]; 3]
-        } else if rk.pose == Pose::Two {
-            let v: [f64; 3] = std::array::from_fn(|i| w2[i] + sh.filter_s2 * w2_ddot[i]);
-            std::array::from_fn(|k| {
-                let c = cross(&v, &std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 }));
-                std::array::from_fn(|i| rt[i][0] * c[0] + rt[i][1] * c[1] + rt[i][2] * c[2])
-            })
-        } else {
-            [[0.0; 3]; 3]
+        let d_fixture = match (self.needs_fixture, rk.pose) {
+            (false, _) => [[f64::NAN; 3]; 3],
+            (true, Pose::Two) => fixture_jacobian(rt, &std::array::from_fn(|i| w2[i] + sh.filter_s2 * w2_ddot[i])),
+            (true, _) => [[0.0; 3]; 3],
         };
         let omega = to_package(&w2);
         let omega: [f64; 3] = std::array::from_fn(|i| omega[i] + sh.filter_s2 * d_filter[i]);
@@ -1518,6 +1530,54 @@ impl Reach {
     }
 }
 
+/// The rows of a [`Gram`] a chunk of the sparse path has touched, so that only they are drained.
+struct Touched {
+    flags: Vec<bool>,
+    rows: Vec<usize>,
+}
+
+impl Touched {
+    fn new(l: usize) -> Self {
+        Self { flags: vec![false; l], rows: Vec::with_capacity(l) }
+    }
+
+    #[inline]
+    fn mark(&mut self, ii: usize) {
+        if !self.flags[ii] {
+            self.flags[ii] = true;
+            self.rows.push(ii);
+        }
+    }
+
+    fn clear(&mut self) {
+        let Self { flags, rows } = self;
+        rows.drain(..).for_each(|ii| flags[ii] = false);
+    }
+}
+
+impl Gram {
+    /// One sample of axis `a`: its non-zero columns `nz` (index, value) and residual `e`, every
+    /// pair `reach` names into the upper triangle (`symmetrise` fills the rest). Only the
+    /// non-zero columns: the free drift's knots are 2 of dozens per sample, so the update costs
+    /// what the dense part does.
+    #[inline]
+    fn add_sparse(&mut self, a: usize, nz: &[(usize, f64)], e: f64, reach: &Reach, touched: &mut Touched) {
+        let l = self.l;
+        let g = &mut self.xtx[a];
+        for (k, &(ii, xi)) in nz.iter().enumerate() {
+            touched.mark(ii);
+            self.xte[a][ii] += xi * e;
+            for &(jj, xj) in &nz[k..] {
+                if reach.pairs(ii, jj) {
+                    g[ii.min(jj) * l + ii.max(jj)] += xi * xj;
+                }
+            }
+        }
+        self.ete[a] += e * e;
+        self.n[a] += 1;
+    }
+}
+
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
 /// their axis), every column pair.
 pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
@@ -1551,7 +1611,7 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
         .map(|(r, rk)| {
             let mut total = Gram::new(l);
             let mut local = Gram::new(l);
-            let (mut touched, mut rows) = (vec![false; l], Vec::with_capacity(l));
+            let mut touched = Touched::new(l);
             let all_rows: Vec<usize> = (0..l).collect();
             let valid = &data.runs[r].valid;
             let mut cursor = Cursor::default();
@@ -1598,29 +1658,15 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
                             continue;
                         }
                         ev.fill_nonzero(p, &plan, a, &common, &mut nz);
-                        let g = &mut local.xtx[a];
-                        for (k, &(ii, xi)) in nz.iter().enumerate() {
-                            if !touched[ii] {
-                                touched[ii] = true;
-                                rows.push(ii);
-                            }
-                            local.xte[a][ii] += xi * e;
-                            for &(jj, xj) in &nz[k..] {
-                                if reach.pairs(ii, jj) {
-                                    g[ii.min(jj) * l + ii.max(jj)] += xi * xj;
-                                }
-                            }
-                        }
-                        local.ete[a] += e * e;
-                        local.n[a] += 1;
+                        local.add_sparse(a, &nz, e, reach, &mut touched);
                     }
                 }
                 for (a, b) in block.iter_mut().enumerate() {
                     b.add_to(&mut local, a);
                 }
                 shared.add_to(&mut local, &mut same);
-                total.drain_rows(&mut local, if dense { &all_rows } else { &rows });
-                rows.drain(..).for_each(|ii| touched[ii] = false);
+                total.drain_rows(&mut local, if dense { &all_rows } else { &touched.rows });
+                touched.clear();
             }
             total.symmetrise();
             total
