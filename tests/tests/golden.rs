@@ -88,11 +88,11 @@ fn compare(name: &str, now: &[(f64, f64)], then: &[(f64, f64)], out: &mut Vec<St
     assert_eq!(now.len(), then.len(), "{name}");
     for (i, (&(v, s), &(v0, s0))) in now.iter().zip(then).enumerate() {
         let moved = (v - v0).abs() / s0;
-        if !(moved <= VALUE_TOL_SIGMA) {
+        if moved.is_nan() || moved > VALUE_TOL_SIGMA {
             out.push(format!("{name}[{i}] = {v} moved {moved:.2e} σ from {v0} (σ {s0})"));
         }
         let rel = (s / s0 - 1.0).abs();
-        if !(rel <= SIGMA_TOL_REL) {
+        if rel.is_nan() || rel > SIGMA_TOL_REL {
             out.push(format!("{name}[{i}]'s σ = {s} moved {rel:.2e} of itself from {s0}"));
         }
     }
