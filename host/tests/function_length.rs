@@ -22,7 +22,7 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 /// The name of the function a line opens, and the line's indentation.
 fn opens_fn(line: &str) -> Option<(&str, usize)> {
     let indent = line.len() - line.trim_start().len();
-    let mut words = line.trim_start().split_whitespace();
+    let mut words = line.split_whitespace();
     let mut word = words.next()?;
     while matches!(word, "pub" | "const" | "async" | "unsafe" | "extern") || word.starts_with("pub(") {
         word = words.next()?;
