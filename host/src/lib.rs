@@ -14,4 +14,5 @@ pub mod report;
 pub mod session;
 pub mod sim;
 pub mod spec;
+pub mod thermal;
 pub mod virtual_rig;
