@@ -15,6 +15,7 @@ pub mod manifest;
 pub mod model;
 pub mod poly;
 pub mod present;
+pub mod session;
 pub mod settle;
 pub mod truth_check;
 
