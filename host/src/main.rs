@@ -138,6 +138,11 @@ enum Cmd {
         /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
         #[arg(long, hide = true, requires = "port", value_name = "SOCKET")]
         lockstep_clock: Option<PathBuf>,
+        /// Live: a thermal session at these chamber setpoints, °C, in order: at each the operator
+        /// sets the chamber, the host waits for OUT_TEMP to settle (docs/thermal.md), then records
+        /// the runs into a subfolder; the thermal model is fitted at the end.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint, conflicts_with = "replay")]
+        chamber_c: Vec<f64>,
     },
     /// Convert raw counts to rate vectors in the package frame with a calibration.
     Apply {
@@ -425,6 +430,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             consider,
             baud,
             lockstep_clock,
+            chamber_c,
         } => {
             let mut considered = calib::consider::ConsiderOverrides::default();
             for c in &consider {
@@ -463,6 +469,24 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         &interrupted,
                     )?;
                     let plan = session::plan_with_static(&Pose::ALL, &rates_dps, duration, static_s);
+                    if !chamber_c.is_empty() {
+                        let m = host::thermal::live::record_thermal_session(
+                            &mut link,
+                            &chamber_c,
+                            &plan,
+                            &out_dir,
+                            operator.as_mut(),
+                            &mut host::thermal::live::ManualChamber,
+                            &interrupted,
+                        )?;
+                        let files: Vec<PathBuf> = m.paths(&out_dir).into_iter().flat_map(|(_, _, f)| f).collect();
+                        manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
+                        manifest.write(&out_dir)?;
+                        let opts =
+                            calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
+                        let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
+                        return calibrate_thermal(&out_dir, &out_dir, manifest.identity, record_to, &opts);
+                    }
                     let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
                     manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
                     manifest.write(&out_dir)?;

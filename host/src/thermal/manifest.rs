@@ -112,7 +112,7 @@ mod tests {
         assert_eq!(back.paths(&dir)[0].2, vec![dir.join("sp1_m20c").join("session.cap")]);
         std::fs::write(
             dir.join(MANIFEST_FILE),
-            r#"{"criterion":{"max_slope_c_per_min":0.03,"window_s":600},"setpoints":[]}"#,
+            r#"{"criterion":{"max_slope_c_per_min":0.03,"window_s":600,"max_span_c":1},"setpoints":[]}"#,
         )
         .unwrap();
         assert!(ThermalManifest::read_in(&dir).unwrap_err().to_string().contains("names no setpoint"));

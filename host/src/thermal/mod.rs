@@ -11,6 +11,7 @@
 //! (the third follows from |s_i| = 1): small, nearly linear in the axis's turn, and with σ from
 //! the calibration's own covariance.
 
+pub mod live;
 pub mod manifest;
 pub mod model;
 pub mod poly;
