@@ -477,6 +477,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                             &out_dir,
                             operator.as_mut(),
                             &mut host::thermal::live::ManualChamber,
+                            host::thermal::settle::SettleCriterion::default(),
                             &interrupted,
                         )?;
                         let files: Vec<PathBuf> = m.paths(&out_dir).into_iter().flat_map(|(_, _, f)| f).collect();

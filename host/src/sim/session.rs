@@ -12,7 +12,7 @@ use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
 use super::motion::{BaseState, EdgeCrossing, Encoder, IndexPlate, Motor};
 use super::sensor::{quantise, SenseChain, SensorTruth, Thermal};
 use super::stream::FrameWriter;
-use super::thermal::{TemperatureDependence, ThermalTruth};
+use super::thermal::{ChamberStep, TemperatureDependence, ThermalTruth};
 use super::truth::{RunTruth, Truth};
 use super::SimConfig;
 use crate::geometry::{omega2, Pose};
@@ -597,6 +597,21 @@ impl Session {
     /// been taken ([`Self::index_edges_until`]).
     pub fn mount(&mut self, t_s: f64, pose: Pose) {
         self.run = Some(self.new_run(t_s, pose, 0, 0.0));
+    }
+
+    /// The chamber steps to `setpoint_c` at `t_s` (the live emulator's simulated chamber): the
+    /// air ramps from where the die is, the die follows with its lag (its momentum from an
+    /// unfinished step is not carried over).
+    pub fn set_chamber(&mut self, t_s: f64, setpoint_c: f64, ramp_c_per_min: f64, die_tau_s: f64) {
+        let rise_c = self.thermal.drift.map_or(0.0, |d| d.rise_c);
+        let from_c = self.thermal.temperature_c(t_s) - rise_c;
+        let index = self.thermal.chamber.map_or(0, |c| c.index);
+        self.thermal.chamber = Some(ChamberStep {
+            ramp_c_per_min,
+            die_tau_s,
+            capture_after_s: -t_s,
+            ..ChamberStep::new(index, from_c, setpoint_c)
+        });
     }
 
     /// The pose the gyro is mounted in.

@@ -66,6 +66,7 @@ pub fn wait_settled<P: Read + Write>(
         if interrupted.load(Ordering::SeqCst) {
             bail!("interrupted while waiting for the die to settle");
         }
+        link.keep_alive()?;
         let mut readings = Vec::new();
         link.poll(|m| {
             if let RigMsg::Temperature(t) = m {
@@ -113,8 +114,10 @@ impl RigClock {
     }
 }
 
-/// Records a thermal session into `dir`: per setpoint, the chamber set, the die settled, the
-/// runs of `plan` recorded into `dir/spN_Tc/`. Returns the manifest (also in `dir/thermal.json`).
+/// Records a thermal session into `dir`: per setpoint, the chamber set, the die settled by
+/// `criterion`, the runs of `plan` recorded into `dir/spN_Tc/`. Returns the manifest (also in
+/// `dir/thermal.json`).
+#[allow(clippy::too_many_arguments)] // the session's parts, each distinct; no natural grouping
 pub fn record_thermal_session<P: Read + Write>(
     link: &mut Link<P>,
     setpoints_c: &[f64],
@@ -122,9 +125,9 @@ pub fn record_thermal_session<P: Read + Write>(
     dir: &Path,
     operator: &mut dyn Operator,
     chamber: &mut dyn Chamber,
+    criterion: SettleCriterion,
     interrupted: &AtomicBool,
 ) -> Result<ThermalManifest> {
-    let criterion = SettleCriterion::default();
     let mut manifest = ThermalManifest { criterion, setpoints: Vec::new() };
     for (i, &setpoint_c) in setpoints_c.iter().enumerate() {
         chamber.set(setpoint_c, &mut |msg| session::prompt(link, msg, operator, interrupted))?;
@@ -205,5 +208,124 @@ mod tests {
             .unwrap();
         assert_eq!(asked.len(), 1);
         assert!(asked[0].contains("-20 °C"), "{asked:?}");
+    }
+}
+
+/// The live thermal session against the simulator's live rig (the firmware's own core on the
+/// simulated plant, `crate::sim::SimRig`) in its simulated time: a driven chamber, the settle
+/// watch, the runs recorded per setpoint, the manifest, and the model from the captures.
+#[cfg(test)]
+mod session_tests {
+    use super::*;
+    use crate::session::AssumeYes;
+    use crate::sim::{SimConfig, SimRig};
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    use std::time::Duration;
+
+    /// Simulated time advanced per read, s: a poll's worth of the rig's stream.
+    const STEP_S: f64 = 0.02;
+    /// The test chamber: fast, so the test stays short (a bench-top chamber ramps at 2 °C/min).
+    const RAMP_C_PER_MIN: f64 = 60.0;
+    const DIE_TAU_S: f64 = 20.0;
+
+    /// The host's side of an in-process rig: each read advances simulated time by [`STEP_S`].
+    struct InProcess {
+        rig: Rc<RefCell<SimRig>>,
+        pending: Vec<u8>,
+    }
+
+    impl Read for InProcess {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.pending.is_empty() {
+                let mut rig = self.rig.borrow_mut();
+                let t = rig.now_s() + STEP_S;
+                rig.advance_to(t);
+                self.pending = rig.take_output();
+            }
+            let n = buf.len().min(self.pending.len());
+            buf[..n].copy_from_slice(&self.pending[..n]);
+            self.pending.drain(..n);
+            Ok(n)
+        }
+    }
+
+    impl Write for InProcess {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.rig.borrow_mut().receive(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    struct SimClock(Rc<RefCell<SimRig>>);
+
+    impl crate::link::Clock for SimClock {
+        fn now(&self) -> Duration {
+            Duration::from_secs_f64(self.0.borrow().now_s())
+        }
+    }
+
+    /// A driven chamber: the simulated one around the rig.
+    struct SimChamber(Rc<RefCell<SimRig>>);
+
+    impl Chamber for SimChamber {
+        fn set(&mut self, setpoint_c: f64, _ask: &mut dyn FnMut(&str) -> Result<()>) -> Result<()> {
+            self.0.borrow_mut().set_chamber(setpoint_c, RAMP_C_PER_MIN, DIE_TAU_S);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_thermal_session_against_the_simulated_rig_settles_records_and_fits() {
+        let mut cfg = SimConfig::with_runs(11, Vec::new());
+        cfg.effects.temperature_dependence = Some(Default::default());
+        let rig = Rc::new(RefCell::new(SimRig::new(&cfg).unwrap()));
+        let port = InProcess { rig: rig.clone(), pending: Vec::new() };
+        let mut link = Link::with_clock(port, "in-process rig", Box::new(SimClock(rig.clone())));
+        let dir = tempfile::tempdir().unwrap();
+        let plan = session::plan(&crate::geometry::Pose::ALL, &[180.0], 6.0);
+        // A 2-minute window for a chamber that settles in a minute (the default is 20 min).
+        let criterion = SettleCriterion { window_s: 120.0, ..SettleCriterion::default() };
+        let setpoints = [0.0, 25.0, 50.0];
+        let m = record_thermal_session(
+            &mut link,
+            &setpoints,
+            &plan,
+            dir.path(),
+            &mut AssumeYes,
+            &mut SimChamber(rig.clone()),
+            criterion,
+            &AtomicBool::new(false),
+        )
+        .unwrap();
+        assert_eq!(ThermalManifest::read_in(dir.path()).unwrap().as_ref(), Some(&m));
+        let mut cals = Vec::new();
+        for (setpoint_c, _, files) in m.paths(dir.path()) {
+            assert_eq!(files.len(), 2);
+            let runs: Vec<_> =
+                files.iter().flat_map(|f| crate::capture::decode(&std::fs::read(f).unwrap()).runs).collect();
+            let report = crate::calib::calibrate(&runs, &Default::default()).unwrap();
+            let temps: Vec<i8> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
+            cals.push(super::super::SetpointCal::from_report(setpoint_c, &report, &temps).unwrap());
+        }
+        for e in &m.setpoints {
+            // At least one window; the fast chamber settles within a few of its lags after it.
+            let settle_s = e.settle_s.unwrap();
+            assert!((120.0..600.0).contains(&settle_s), "{e:?}");
+        }
+        let model = super::super::ThermalModel::fit(&cals).unwrap();
+        // The die temperatures are the setpoints (the chamber anchors OUT_TEMP's offset), and
+        // the offsets follow the simulated 0.03 °/s/°C of x to a few σ.
+        for (s, sp) in model.setpoints.iter().zip(setpoints) {
+            assert!((s.die_c - sp).abs() <= 1.0, "{s:?}");
+        }
+        let offset = model.curve(0, super::super::Quantity::OffsetCounts);
+        assert_eq!(offset.order, 1, "three setpoints: a line at most");
+        let slope = offset.coef[1];
+        let k = cals[1].values[0][1].value;
+        assert!((slope.value / k - 0.03).abs() < 0.005, "{slope:?} counts/°C, k {k}");
     }
 }

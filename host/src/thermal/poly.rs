@@ -167,9 +167,14 @@ pub const MAX_ORDER: usize = 3;
 
 /// The order with the smallest weighted PRESS among those whose held-out fits keep a degree of
 /// freedom (order ≤ points − 3, at most [`MAX_ORDER`]: with five setpoints, a quadratic), so a
-/// held-out fit is never an exact interpolation through its points; ties go to the lower order.
+/// held-out curve is never an exact interpolation through its points; a line is always tried
+/// (three setpoints: a held-out line through the other two). Ties go to the lower order.
 pub fn choose_order(points: &[Point]) -> Option<OrderChoice> {
-    let max = MAX_ORDER.min(points.len().checked_sub(3)?);
+    let n = points.len();
+    if n < 3 {
+        return None;
+    }
+    let max = MAX_ORDER.min((n - 3).max(1));
     let press: Vec<f64> = (0..=max).map_while(|d| weighted_press(points, d)).collect();
     let order = press.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map(|(d, _)| d)?;
     Some(OrderChoice { order, press })
@@ -209,7 +214,8 @@ mod tests {
         assert_eq!(choose_order(&points(|x| 2.0 + 0.03 * x + 1e-4 * x * x, &noise)).unwrap().order, 2);
         // Five points: a quadratic is the most whose held-out fits keep a degree of freedom.
         assert_eq!(choose_order(&points(|x| x, &noise)).unwrap().press.len(), 3);
-        assert_eq!(choose_order(&points(|x| x, &noise)[..3]).unwrap().press.len(), 1);
+        assert_eq!(choose_order(&points(|x| x, &noise)[..3]).unwrap().press.len(), 2);
+        assert_eq!(choose_order(&points(|x| x, &noise)[..3]).unwrap().order, 1);
         assert!(choose_order(&points(|x| x, &noise)[..2]).is_none());
     }
 
