@@ -932,7 +932,11 @@ fn calibrate_thermal(
         setpoints.push(thermal::setpoint_from_files(setpoint_c, &sub_out, &files)?);
     }
     let model = thermal::write_model(out_dir, setpoints)?;
-    note(&format!("wrote {} with the thermal model", out_dir.join("calibration.json").display()));
+    note(&format!(
+        "wrote {} with the thermal model and {}",
+        out_dir.join("calibration.json").display(),
+        out_dir.join(thermal::THERMAL_REPORT).display()
+    ));
     files::stdout(&present::text(&model))?;
     Ok(status)
 }

@@ -41,6 +41,8 @@ fn simulate_calibrate_and_apply_a_thermal_session() {
     assert_eq!(cal["thermal"]["curves"].as_array().unwrap().len(), 12);
     assert_eq!(cal["thermal_base_setpoint_c"], 25.0);
     assert!(out.join("sp2_0c").join("report.html").is_file());
+    let page = std::fs::read_to_string(out.join("thermal.html")).unwrap();
+    assert_eq!(page.matches("<svg").count(), 12, "one figure per quantity and axis");
 
     let cal_s = out.join("calibration.json");
     let cal_s = cal_s.to_str().unwrap();

@@ -14,6 +14,7 @@
 pub mod live;
 pub mod manifest;
 pub mod model;
+pub mod plots;
 pub mod poly;
 pub mod present;
 pub mod session;

@@ -9,6 +9,9 @@ use crate::sim::{self, SimConfig};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
+/// The thermal report's file name in the output folder.
+pub const THERMAL_REPORT: &str = "thermal.html";
+
 /// Capture file name in each setpoint folder of a simulated programme (its truth beside it).
 pub const SIM_CAPTURE: &str = "session.cap";
 
@@ -72,7 +75,8 @@ pub fn setpoint_from_files(
     Ok((sp, value))
 }
 
-/// Fits the model over the setpoints and writes `out_dir/calibration.json`: the calibration of
+/// Fits the model over the setpoints and writes `out_dir/thermal.html` (each quantity against
+/// temperature) and `out_dir/calibration.json`: the calibration of
 /// the setpoint nearest the model's reference temperature (what `host apply` uses without
 /// `--temp-c`, and the exports), with the model in its `thermal` section. Returns the model.
 pub fn write_model(out_dir: &Path, setpoints: Vec<(SetpointCal, serde_json::Value)>) -> Result<ThermalModel> {
@@ -89,6 +93,7 @@ pub fn write_model(out_dir: &Path, setpoints: Vec<(SetpointCal, serde_json::Valu
     obj.insert(CALIBRATION_KEY.into(), serde_json::to_value(&model)?);
     obj.insert("thermal_base_setpoint_c".into(), nearest.0.setpoint_c.into());
     crate::files::write_atomic(&out_dir.join("calibration.json"), serde_json::to_string_pretty(&value)?)?;
+    crate::files::write_atomic(&out_dir.join(THERMAL_REPORT), super::plots::html(&model))?;
     Ok(model)
 }
 
