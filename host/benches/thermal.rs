@@ -17,7 +17,8 @@
 //!
 //! `cargo bench -p host --bench thermal --profile release` (the `bench` profile's fat LTO is
 //! not needed for these figures); `BENCH_SEEDS=N` (default 10), `BENCH_DURATION_S` per run
-//! (default 60), the default run design 180, 90, −180 °/s in both poses.
+//! (default 60), the default run design 180, 90, −180 °/s in both poses; `BENCH_NO_EFFECTS=1`
+//! switches the rig effects off (the temperature dependence alone).
 
 use host::calib::{self, LoopOptions};
 use host::geometry::Pose;
@@ -46,11 +47,11 @@ fn env_or(name: &str, default: f64) -> f64 {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
-fn base(seed: u64, duration_s: f64) -> SimConfig {
+fn base(seed: u64, duration_s: f64, effects: bool) -> SimConfig {
     let runs =
         Pose::ALL.iter().flat_map(|&pose| RATES_DPS.map(|rate_dps| RunSpec { pose, rate_dps, duration_s })).collect();
     let mut cfg = SimConfig::with_runs(seed, runs);
-    for e in EFFECTS {
+    for e in EFFECTS.iter().filter(|_| effects) {
         cfg.effects.enable(e).expect("a known effect");
     }
     cfg
@@ -75,8 +76,8 @@ struct SeedFigures {
     floor: usize,
 }
 
-fn run_seed(seed: u64, duration_s: f64) -> Result<SeedFigures, String> {
-    let b = base(seed, duration_s);
+fn run_seed(seed: u64, duration_s: f64, effects: bool) -> Result<SeedFigures, String> {
+    let b = base(seed, duration_s, effects);
     let steps = programme(&b, &SETPOINTS_C, SettleCriterion::default()).map_err(|e| e.to_string())?;
     let mut setpoints = Vec::new();
     let mut truths = Vec::new();
@@ -151,12 +152,14 @@ fn max_abs(v: &[f64]) -> f64 {
 fn main() {
     let seeds = env_or("BENCH_SEEDS", 10.0) as u64;
     let duration_s = env_or("BENCH_DURATION_S", 60.0);
-    println!("thermal bench: {seeds} seeds, setpoints {SETPOINTS_C:?} °C, runs {RATES_DPS:?} °/s × 2 poses × {duration_s} s, effects {EFFECTS:?}");
+    let effects = std::env::var("BENCH_NO_EFFECTS").is_err();
+    let named: &[&str] = if effects { &EFFECTS } else { &[] };
+    println!("thermal bench: {seeds} seeds, setpoints {SETPOINTS_C:?} °C, runs {RATES_DPS:?} °/s × 2 poses × {duration_s} s, effects {named:?}");
     println!("seed  floor  coef max|z| rms z  held-out rate: max|z| rms z, max err °/s (25 °C cal alone)  25 °C: max|z| rms z   wall s");
     let mut all: Vec<SeedFigures> = Vec::new();
     for seed in 1..=seeds {
         let t0 = Instant::now();
-        match run_seed(seed, duration_s) {
+        match run_seed(seed, duration_s, effects) {
             Ok(f) => {
                 println!(
                     "{seed:>4}  {}/5    {:>6.2} {:>5.2}            {:>5.2} {:>5.2}, {:>7.4} ({:>6.3})                    {:>5.2} {:>5.2}   {:>6.1}",
