@@ -22,7 +22,8 @@
 
 use host::calib::{self, LoopOptions};
 use host::geometry::Pose;
-use host::sim::{self, thermal::programme, RunSpec, SimConfig};
+use host::sim::{self, RunSpec, SimConfig};
+use host::thermal::programme::programme;
 use host::thermal::{settle::SettleCriterion, truth_check, SetpointCal, ThermalModel};
 use std::time::Instant;
 

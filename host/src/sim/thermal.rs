@@ -4,8 +4,9 @@
 //! ([`TemperatureDependence`], polynomials in `T − reference_c`); a chamber step
 //! ([`ChamberStep`]) moves the die from one setpoint to the next through the chamber's air ramp
 //! and the board's thermal lag. `host simulate --chamber-c` simulates one session per setpoint,
-//! each starting once the die has settled by the live session's own criterion
-//! (`crate::thermal::settle`).
+//! each starting once the die has settled by the live session's own criterion (the chamber
+//! programme is `host::thermal::session::programme`, outside `sim` so that `sim` imports nothing
+//! of `thermal`).
 
 use nalgebra::{Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -206,60 +207,6 @@ impl ThermalTruth {
             self.offset_ref_counts[axis] + self.k_ref_counts_per_dps[axis] * dep.offset_change_dps(temp_c)[axis];
         (offset, k, dep.direction(axis, &Vector3::from(self.s_ref[axis]), temp_c))
     }
-}
-
-/// Longest wait for a settled die at one setpoint, s: 24 h (judgement: a chamber that has not
-/// settled the die in a day is broken, not slow).
-pub const MAX_SETTLE_S: f64 = 86_400.0;
-
-/// One setpoint of a simulated chamber programme: its session and the wait before it.
-#[derive(Debug, Clone)]
-pub struct ProgrammeStep {
-    /// The session at this setpoint (its `chamber` set).
-    pub config: super::SimConfig,
-    /// From the chamber's step to the settled verdict, s.
-    pub settle_s: f64,
-}
-
-/// The sessions of a chamber programme: `base`'s runs at each setpoint in turn, each starting
-/// when `criterion` finds the simulated OUT_TEMP settled (the host's own watch). The die starts
-/// at the lab's 25 °C; each step starts from the previous setpoint (its small remaining lag
-/// ignored). Temperature dependence is switched on at its defaults unless `base` sets it.
-pub fn programme(
-    base: &super::SimConfig,
-    setpoints_c: &[f64],
-    criterion: crate::thermal::settle::SettleCriterion,
-) -> Result<Vec<ProgrammeStep>, super::ConfigError> {
-    let out_temp_at_0c = super::session::Session::new(base).truth().out_temp_at_0c;
-    let rise_c = base.effects.offset_drift.map_or(0.0, |d| d.rise_c);
-    let mut from_c = super::session::AMBIENT_C;
-    let mut steps = Vec::with_capacity(setpoints_c.len());
-    for (j, &setpoint_c) in setpoints_c.iter().enumerate() {
-        let mut step = ChamberStep::new(j as u32 + 1, from_c, setpoint_c);
-        if !step.is_valid() {
-            return Err(super::ConfigError {
-                field: "chamber".into(),
-                requirement: format!("setpoint {setpoint_c} must be finite"),
-            });
-        }
-        let mut watch = crate::thermal::settle::SettleWatch::new(criterion);
-        let reading = |t: f64| -(out_temp_at_0c - (step.die_c(t) + rise_c)).round();
-        let settle_s =
-            (0..=MAX_SETTLE_S as u32).map(f64::from).find(|&t| watch.push(t, reading(t))).ok_or_else(|| {
-                super::ConfigError {
-                    field: "chamber".into(),
-                    requirement: format!("setpoint {setpoint_c} °C does not settle within 24 h"),
-                }
-            })?;
-        step.capture_after_s = settle_s;
-        let mut config = base.clone();
-        config.chamber = Some(step);
-        config.effects.temperature_dependence.get_or_insert_with(TemperatureDependence::default);
-        config.validate()?;
-        steps.push(ProgrammeStep { config, settle_s });
-        from_c = setpoint_c;
-    }
-    Ok(steps)
 }
 
 #[cfg(test)]

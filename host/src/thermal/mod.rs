@@ -17,6 +17,7 @@ pub mod model;
 pub mod plots;
 pub mod poly;
 pub mod present;
+pub mod programme;
 pub mod session;
 pub mod settle;
 pub mod truth_check;

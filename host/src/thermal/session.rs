@@ -22,7 +22,7 @@ pub fn simulate_programme(base: &SimConfig, setpoints_c: &[f64], out_dir: &Path)
         bail!("{} already holds a thermal session ({MANIFEST_FILE}): choose another --out", out_dir.display());
     }
     let criterion = SettleCriterion::default();
-    let steps = sim::thermal::programme(base, setpoints_c, criterion).context("invalid simulation")?;
+    let steps = super::programme::programme(base, setpoints_c, criterion).context("invalid simulation")?;
     let mut entries = Vec::with_capacity(steps.len());
     for (i, (step, &setpoint_c)) in steps.iter().zip(setpoints_c).enumerate() {
         let dir_name = ThermalManifest::folder_name(i + 1, setpoint_c);

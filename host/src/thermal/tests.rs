@@ -3,10 +3,11 @@
 //! session's criterion. `host/benches/thermal.rs` runs ten seeds with longer runs and every
 //! realistic effect.
 
+use super::programme::programme;
 use super::truth_check::{coefficients, held_out_rate_z, single_setpoint_z};
 use super::*;
 use crate::capture::decode;
-use crate::sim::{self, thermal::programme, SimConfig};
+use crate::sim::{self, SimConfig};
 
 /// The setpoints.
 pub const SETPOINTS_C: [f64; 5] = [-20.0, 0.0, 25.0, 50.0, 70.0];
