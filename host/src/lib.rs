@@ -16,4 +16,5 @@ pub mod session;
 pub mod sim;
 pub mod spec;
 pub mod text;
+pub mod thermal;
 pub mod virtual_rig;

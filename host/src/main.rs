@@ -138,6 +138,11 @@ enum Cmd {
         /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
         #[arg(long, hide = true, requires = "port", value_name = "SOCKET")]
         lockstep_clock: Option<PathBuf>,
+        /// Live: a thermal session at these chamber setpoints, °C, in order: at each the operator
+        /// sets the chamber, the host waits for OUT_TEMP to settle (docs/thermal.md), then records
+        /// the runs into a subfolder; the thermal model is fitted at the end.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint, conflicts_with = "replay")]
+        chamber_c: Vec<f64>,
     },
     /// Convert raw counts to rate vectors in the package frame with a calibration.
     Apply {
@@ -150,6 +155,10 @@ enum Cmd {
         /// A capture: prints t_s,pose,x_dps,y_dps,z_dps for every sample as CSV.
         #[arg(long)]
         capture: Option<PathBuf>,
+        /// Die temperature, °C, for a calibration with a thermal model (`calibrate --replay` of a
+        /// thermal session): the model at this temperature; outside its range, an error.
+        #[arg(long, allow_negative_numbers = true)]
+        temp_c: Option<f64>,
     },
     /// Export a calibration for a firmware or a toolchain: C header, Rust const, Kalibr YAML, JSON, CSV.
     Export {
@@ -240,6 +249,10 @@ enum Cmd {
         /// Full configuration as JSON (a `SimConfig`); overrides the options above.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// A thermal session: the runs at each of these chamber setpoints, °C, in order, each once
+        /// the die has settled; --out is then a folder (one subfolder per setpoint, thermal.json).
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint)]
+        chamber_c: Vec<f64>,
     },
     /// The firmware's core and the simulated exciter on a pseudo-terminal, to try the live
     /// session without hardware: prints the device path, then serves `calibrate --port PATH`.
@@ -353,6 +366,14 @@ fn parse_counts(s: &str) -> Result<[i16; 3], String> {
     v.try_into().map_err(|v: Vec<i16>| format!("expected 3 counts x,y,z, got {}", v.len()))
 }
 
+/// A chamber setpoint, °C: the L3G4200D's operating range, −40…85 °C (datasheet Table 4).
+fn parse_setpoint(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (-40.0..=85.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?} is not a setpoint: give °C within the gyro's −40…85 °C")),
+    }
+}
+
 fn parse_full_scale(s: &str) -> Result<u16, String> {
     match s {
         "250" | "500" | "2000" => Ok(s.parse().expect("matched digits")),
@@ -409,6 +430,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             consider,
             baud,
             lockstep_clock,
+            chamber_c,
         } => {
             let mut considered = calib::consider::ConsiderOverrides::default();
             for c in &consider {
@@ -447,10 +469,37 @@ fn run(cli: Cli) -> Result<ExitCode> {
                         &interrupted,
                     )?;
                     let plan = session::plan_with_static(&Pose::ALL, &rates_dps, duration, static_s);
+                    if !chamber_c.is_empty() {
+                        let m = host::thermal::live::record_thermal_session(
+                            &mut link,
+                            &chamber_c,
+                            &plan,
+                            &out_dir,
+                            operator.as_mut(),
+                            &mut host::thermal::live::ManualChamber,
+                            host::thermal::settle::SettleCriterion::default(),
+                            &interrupted,
+                        )?;
+                        let files: Vec<PathBuf> = m.paths(&out_dir).into_iter().flat_map(|(_, _, f)| f).collect();
+                        manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
+                        manifest.write(&out_dir)?;
+                        let opts =
+                            calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
+                        let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
+                        return calibrate_thermal(&out_dir, &out_dir, manifest.identity, record_to, &opts);
+                    }
                     let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
                     manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
                     manifest.write(&out_dir)?;
                     (files, manifest.identity, Some(manifest.started_utc))
+                }
+                None if replay.len() == 1
+                    && host::thermal::manifest::ThermalManifest::read_in(&replay[0])?.is_some() =>
+                {
+                    let opts =
+                        calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
+                    let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
+                    return calibrate_thermal(&replay[0], &out_dir, identity, record_to, &opts);
                 }
                 None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
                     Some(m) => {
@@ -494,7 +543,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config } => {
+        Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config, chamber_c } => {
             let cfg = match config {
                 Some(path) => {
                     let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -521,9 +570,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     cfg
                 }
             };
-            simulate(&cfg, &out)
+            if chamber_c.is_empty() {
+                simulate(&cfg, &out)
+            } else {
+                simulate_thermal(&cfg, &chamber_c, &out)
+            }
         }
-        Cmd::Apply { cal, counts, capture } => apply(&cal, counts, capture.as_deref()),
+        Cmd::Apply { cal, counts, capture, temp_c } => apply(&cal, counts, capture.as_deref(), temp_c),
         Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
         Cmd::ConfigureDrive { port, gear_ratio, load_inertia_kgm2, supply_v, baud } => {
             let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
@@ -858,6 +911,43 @@ fn calibrate(
     })
 }
 
+/// `host calibrate --replay <thermal folder>`: each setpoint calibrated into its own subfolder of
+/// `out_dir` (its files, record and summary as for one session), then the thermal model over
+/// them in `out_dir/calibration.json` and on standard output. The exit status is the worst
+/// setpoint's.
+fn calibrate_thermal(
+    dir: &Path,
+    out_dir: &Path,
+    identity: Identity,
+    record_to: RecordTo<'_>,
+    opts: &calib::LoopOptions,
+) -> Result<ExitCode> {
+    use host::thermal::{manifest::ThermalManifest, present, session as thermal};
+    let manifest = ThermalManifest::read_in(dir)?.context("not a thermal session folder")?;
+    let mut setpoints = Vec::new();
+    let mut status = ExitCode::SUCCESS;
+    for (setpoint_c, sub, files) in manifest.paths(dir) {
+        let name = sub.file_name().context("a setpoint folder without a name")?;
+        let sub_out = out_dir.join(name);
+        note(&format!("setpoint {setpoint_c} °C: {}", sub.display()));
+        let rec = RecordTo { db: record_to.db, again: record_to.again, spec: record_to.spec };
+        let code = calibrate(&files, &sub_out, None, identity.clone(), None, rec, opts)
+            .with_context(|| format!("setpoint {setpoint_c} °C"))?;
+        if code != ExitCode::SUCCESS {
+            status = code;
+        }
+        setpoints.push(thermal::setpoint_from_files(setpoint_c, &sub_out, &files)?);
+    }
+    let model = thermal::write_model(out_dir, setpoints)?;
+    note(&format!(
+        "wrote {} with the thermal model and {}",
+        out_dir.join("calibration.json").display(),
+        out_dir.join(thermal::THERMAL_REPORT).display()
+    ));
+    files::stdout(&present::text(&model))?;
+    Ok(status)
+}
+
 /// Refuses captures already in a record of `db` (same SHA-256), naming the record: the same
 /// data recorded twice would count twice in the production statistics. A database that cannot
 /// be read now is left to the record step, which keeps the files and says so.
@@ -938,8 +1028,26 @@ fn load_calibration(path: &Path) -> Result<calib::Calibration> {
     calib::Calibration::from_json(&text).with_context(|| format!("{} is not a calibration", path.display()))
 }
 
-fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>) -> Result<ExitCode> {
-    let cal = load_calibration(cal_path)?;
+/// The calibration at `temp_c` from the thermal model in `path`.
+fn thermal_calibration(path: &Path, temp_c: f64) -> Result<calib::Calibration> {
+    let text = fs::read_to_string(path).with_context(|| format!("cannot read calibration {}", path.display()))?;
+    let model =
+        host::thermal::session::model_in(&text).with_context(|| format!("{}", path.display()))?.with_context(|| {
+            format!("{} holds no thermal model (--temp-c needs the calibration of a thermal session)", path.display())
+        })?;
+    model.calibration_at(temp_c).with_context(|| format!("{}", path.display()))
+}
+
+fn apply(
+    cal_path: &Path,
+    counts: Option<[i16; 3]>,
+    capture_path: Option<&Path>,
+    temp_c: Option<f64>,
+) -> Result<ExitCode> {
+    let cal = match temp_c {
+        None => load_calibration(cal_path)?,
+        Some(t) => thermal_calibration(cal_path, t)?,
+    };
     if let Some(c) = counts {
         let w = cal.apply(c);
         files::stdout(&format!("{:.4},{:.4},{:.4}\n", w[0], w[1], w[2]))?;
@@ -981,6 +1089,16 @@ fn apply(cal_path: &Path, counts: Option<[i16; 3]>, capture_path: Option<&Path>)
 /// Path of the truth written beside a simulated capture: `x.cap` → `x.truth.json`.
 fn truth_path(capture: &Path) -> PathBuf {
     capture.with_extension("truth.json")
+}
+
+/// `host simulate --chamber-c`: one folder per setpoint and the thermal manifest.
+fn simulate_thermal(cfg: &sim::SimConfig, setpoints_c: &[f64], out: &Path) -> Result<ExitCode> {
+    cfg.validate().map_err(|e| Usage(anyhow::Error::new(e).context("invalid simulation")))?;
+    let m = host::thermal::session::simulate_programme(cfg, setpoints_c, out)?;
+    let waits: Vec<String> =
+        m.setpoints.iter().map(|s| format!("{} °C after {:.0} s", s.setpoint_c, s.settle_s.unwrap_or(0.0))).collect();
+    note(&format!("wrote {} setpoints in {} (settled: {})", m.setpoints.len(), out.display(), waits.join(", ")));
+    Ok(ExitCode::SUCCESS)
 }
 
 fn simulate(cfg: &sim::SimConfig, out: &Path) -> Result<ExitCode> {

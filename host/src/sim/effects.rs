@@ -39,6 +39,11 @@ pub struct Effects {
     /// A rate random walk of the offset on every axis.
     #[serde(default)]
     pub bias_random_walk: Option<BiasRandomWalk>,
+    /// Offset, sensitivity and direction as functions of die temperature (`host simulate
+    /// --chamber-c` switches it on; not in [`Effects::NAMES`]: a single session at one
+    /// temperature cannot show it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_dependence: Option<super::thermal::TemperatureDependence>,
 }
 
 /// Physical source: a MEMS gyro's proof masses are accelerometers too; typical parts show

@@ -21,6 +21,7 @@ mod rig;
 mod sensor;
 mod session;
 mod stream;
+pub mod thermal;
 mod truth;
 
 #[cfg(test)]
@@ -78,6 +79,10 @@ pub struct SimConfig {
     pub start_encoder: u32,
     /// Angular width of the index shield plate, degrees (assumed: "a few degrees").
     pub index_plate_width_deg: f64,
+    /// The chamber step before this session (`host simulate --chamber-c`): the die's
+    /// temperature follows it; absent, the die starts at the lab's 25 °C.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chamber: Option<thermal::ChamberStep>,
 }
 
 /// Default ramp time, s (assumed: a gentle ramp that keeps the magnetic gears from slipping).
@@ -119,6 +124,7 @@ impl SimConfig {
             start_t_us: 0,
             start_encoder: 0,
             index_plate_width_deg: DEFAULT_INDEX_PLATE_WIDTH_DEG,
+            chamber: None,
         }
     }
 
@@ -168,6 +174,16 @@ impl SimConfig {
                 "offset_drift",
                 "needs tau_s > 0 and a finite rise_c",
             )?;
+        }
+        if let Some(c) = self.chamber {
+            check(
+                c.is_valid(),
+                "chamber",
+                "needs finite temperatures, ramp_c_per_min > 0, die_tau_s > 0, capture_after_s ≥ 0",
+            )?;
+        }
+        if let Some(d) = e.temperature_dependence {
+            check(d.is_finite(), "temperature_dependence", "needs finite coefficients")?;
         }
         if let Some(m) = e.mystery_harmonic {
             check(m.axis < 3, "mystery_harmonic.axis", "must be 0, 1 or 2")?;

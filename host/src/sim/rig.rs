@@ -114,6 +114,12 @@ impl SimRig {
         self.session.truth()
     }
 
+    /// A simulated chamber around the rig steps to `setpoint_c` now (`host::thermal::live`'s
+    /// tests): the die follows at the given air ramp and lag.
+    pub fn set_chamber(&mut self, setpoint_c: f64, ramp_c_per_min: f64, die_tau_s: f64) {
+        self.session.set_chamber(self.now_s, setpoint_c, ramp_c_per_min, die_tau_s);
+    }
+
     /// Bytes produced since the last call.
     pub fn take_output(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.out)

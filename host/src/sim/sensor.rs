@@ -4,6 +4,7 @@
 //! axis `e_i`, its own sensitivity `k_i` and offset, white noise, rounding to i16 and clipping.
 
 use super::effects::{Effects, GSensitivity, MysteryHarmonic, Nonlinearity, OffsetDrift};
+use super::thermal::{ChamberStep, TemperatureDependence};
 use nalgebra::{Matrix3, Vector3};
 use protocol::FullScale;
 use rand::Rng;
@@ -68,6 +69,19 @@ impl SensorTruth {
         Self { s, tilt_deg, k_rel, offset_dps }
     }
 
+    /// The sensor at `temp_c`: sensitivities and directions moved by `dep` (the offsets are the
+    /// reference's; [`Thermal::offset_drift_dps`] moves them).
+    pub fn at_temperature(&self, dep: &TemperatureDependence, temp_c: f64) -> Self {
+        let factor = dep.sensitivity_factor(temp_c);
+        let s = [0, 1, 2].map(|i| dep.direction(i, &self.s[i], temp_c));
+        Self {
+            s,
+            tilt_deg: [0, 1, 2].map(|i| s[i][i].clamp(-1.0, 1.0).acos().to_degrees()),
+            k_rel: [0, 1, 2].map(|i| self.k_rel[i] * factor[i]),
+            offset_dps: self.offset_dps,
+        }
+    }
+
     /// Sensitivities, counts per °/s.
     pub fn k_counts_per_dps(&self, fs: FullScale) -> [f64; 3] {
         self.k_rel.map(|k| k * nominal_counts_per_dps(fs))
@@ -99,11 +113,21 @@ pub struct Thermal {
     pub out_temp_at_0c: f64,
     /// Warm-up and offset drift, if on.
     pub drift: Option<OffsetDrift>,
+    /// Offset, sensitivity and direction as functions of temperature, if on: the offset then
+    /// follows it rather than `drift.dps_per_c` (one sensor, one temperature coefficient).
+    pub dependence: Option<TemperatureDependence>,
+    /// The chamber step before this session, if any: the die follows it, and the warm-up of
+    /// `drift` is over (the rig stayed powered through the chamber programme), so its `rise_c` is
+    /// the die's steady self-heating.
+    pub chamber: Option<ChamberStep>,
 }
 
 impl Thermal {
     /// Die temperature at `t_s` after power-up, °C.
     pub fn temperature_c(&self, t_s: f64) -> f64 {
+        if let Some(c) = &self.chamber {
+            return c.die_c(c.capture_after_s + t_s) + self.drift.map_or(0.0, |d| d.rise_c);
+        }
         match &self.drift {
             Some(d) if d.tau_s > 0.0 => self.ambient_c + d.rise_c * (1.0 - (-t_s.max(0.0) / d.tau_s).exp()),
             _ => self.ambient_c,
@@ -117,6 +141,9 @@ impl Thermal {
 
     /// Offset change from the reference value at `t_s`, °/s per axis.
     pub fn offset_drift_dps(&self, t_s: f64) -> [f64; 3] {
+        if let Some(dep) = &self.dependence {
+            return dep.offset_change_dps(self.temperature_c(t_s));
+        }
         match &self.drift {
             Some(d) => {
                 let dt = self.temperature_c(t_s) - self.ambient_c;
@@ -215,7 +242,13 @@ mod tests {
 
     #[test]
     fn warm_up_moves_temperature_register_and_offsets_together() {
-        let th = Thermal { ambient_c: 25.0, out_temp_at_0c: 50.0, drift: Some(OffsetDrift::default()) };
+        let th = Thermal {
+            ambient_c: 25.0,
+            out_temp_at_0c: 50.0,
+            drift: Some(OffsetDrift::default()),
+            dependence: None,
+            chamber: None,
+        };
         assert_eq!(th.out_temp_raw(0.0), 25);
         // After 5 time constants the rise is complete to 0.7 %: 10 °C warmer, 10 LSB lower.
         assert_eq!(th.out_temp_raw(450.0), 15);

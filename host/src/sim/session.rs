@@ -12,6 +12,7 @@ use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
 use super::motion::{BaseState, EdgeCrossing, Encoder, IndexPlate, Motor};
 use super::sensor::{quantise, SenseChain, SensorTruth, Thermal};
 use super::stream::FrameWriter;
+use super::thermal::{ChamberStep, TemperatureDependence, ThermalTruth};
 use super::truth::{RunTruth, Truth};
 use super::SimConfig;
 use crate::geometry::{omega2, Pose};
@@ -52,6 +53,9 @@ const FULL_DUTY_DPS: f64 = 1080.0;
 /// Duty needed to overcome bearing and gear friction, per mille (assumed).
 const FRICTION_DUTY_PERMILLE: f64 = 20.0;
 
+/// Die-temperature change after which the sensing chain is recomputed, °C (see `next_sample`).
+const CHAIN_STEP_C: f64 = 1e-3;
+
 /// Independent random streams of one seed: the sensor is the same whatever is simulated.
 #[derive(Clone, Copy)]
 enum Stream {
@@ -63,8 +67,16 @@ enum Stream {
 }
 
 fn rng(seed: u64, stream: Stream) -> ChaCha8Rng {
+    salted_rng(seed, stream, 0)
+}
+
+/// Streams per chamber setpoint: the setpoints of one programme share the sensor and the rig
+/// but not their noise (`salt` is the setpoint's index; 0 is a session without a chamber).
+const STREAMS_PER_SALT: u64 = 8;
+
+fn salted_rng(seed: u64, stream: Stream, salt: u32) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
-    r.set_stream(stream as u64);
+    r.set_stream(stream as u64 + STREAMS_PER_SALT * u64::from(salt));
     r
 }
 
@@ -75,6 +87,9 @@ struct ActiveRun {
     rate_dps: f64,
     start_s: f64,
     chain: SenseChain,
+    /// Die temperature the chain's sensitivities and directions are for, °C (temperature
+    /// dependence only).
+    chain_temp_c: f64,
     lowpass: Option<Filter3>,
     /// Index of the next gyro data-ready on the session-wide lattice.
     next_k: u64,
@@ -162,6 +177,7 @@ impl Session {
         let theta2_start_rad = rig.random_range(0.0..std::f64::consts::TAU);
         // OUT_TEMP offset: arbitrary per part (datasheet Table 5 specifies only the slope).
         let out_temp_at_0c = f64::from(rig.random_range(20i32..60));
+        let salt = cfg.chamber.map_or(0, |c| c.index);
         let mut s = Self {
             seed: cfg.seed,
             gyro: cfg.gyro,
@@ -171,7 +187,13 @@ impl Session {
             plate_width_deg: cfg.index_plate_width_deg,
             start_t_us: cfg.start_t_us,
             sensor,
-            thermal: Thermal { ambient_c: AMBIENT_C, out_temp_at_0c, drift: cfg.effects.offset_drift },
+            thermal: Thermal {
+                ambient_c: AMBIENT_C,
+                out_temp_at_0c,
+                drift: cfg.effects.offset_drift,
+                dependence: cfg.effects.temperature_dependence,
+                chamber: cfg.chamber,
+            },
             motor: Motor::new(cfg.effects.speed_ripple),
             encoder: Encoder { counts_per_rev: ENCODER_COUNTS_PER_REV, start_counts: cfg.start_encoder },
             plate: IndexPlate {
@@ -185,11 +207,11 @@ impl Session {
             period_s: 0.0,
             noise_counts: [0.0; 3],
             lowpass_coef: None,
-            noise_rng: rng(cfg.seed, Stream::Noise),
+            noise_rng: salted_rng(cfg.seed, Stream::Noise, salt),
             walk_dps: [0.0; 3],
             walk_t_s: 0.0,
-            walk_rng: rng(cfg.seed, Stream::RandomWalk),
-            jitter_rng: rng(cfg.seed, Stream::Jitter),
+            walk_rng: salted_rng(cfg.seed, Stream::RandomWalk, salt),
+            jitter_rng: salted_rng(cfg.seed, Stream::Jitter, salt),
             jitter: Normal::new(0.0, TIMESTAMP_JITTER_US).expect("finite σ"),
             samples_read: 0,
             run: None,
@@ -268,8 +290,8 @@ impl Session {
     /// data-ready after `t_s`.
     fn new_run(&self, t_s: f64, pose: Pose, run_tag: u8, rate_dps: f64) -> ActiveRun {
         let next_k = ((t_s - self.clock_phase_s) / self.period_s).floor().max(0.0) as u64 + 1;
-        let mount = self.effects.pose_fixture.map_or_else(|| pose.rotation(), |f| f.rotation(pose));
-        let chain = SenseChain::new(&self.sensor, &mount, self.gyro.full_scale, &self.effects);
+        let chain_temp_c = self.thermal.temperature_c(t_s);
+        let chain = self.chain_at(pose, chain_temp_c);
         let base_done = self.motor.state(t_s);
         let mut run = ActiveRun {
             pose,
@@ -277,6 +299,7 @@ impl Session {
             rate_dps,
             start_s: t_s,
             chain,
+            chain_temp_c,
             lowpass: self.lowpass_coef.map(Filter3::new),
             next_k,
             done_s: t_s,
@@ -295,6 +318,16 @@ impl Session {
             f.settle(self.sensed_counts(&run.chain, t0));
         }
         run
+    }
+
+    /// The sensing chain of the gyro in `pose` at die temperature `temp_c`.
+    fn chain_at(&self, pose: Pose, temp_c: f64) -> SenseChain {
+        let mount = self.effects.pose_fixture.map_or_else(|| pose.rotation(), |f| f.rotation(pose));
+        let sensor = match &self.thermal.dependence {
+            Some(dep) => self.sensor.at_temperature(dep, temp_c),
+            None => self.sensor.clone(),
+        };
+        SenseChain::new(&sensor, &mount, self.gyro.full_scale, &self.effects)
     }
 
     /// Emits everything up to `t_s` (a run's frames up to its last data-ready ≤ `t_s`).
@@ -507,6 +540,15 @@ impl Session {
     fn next_sample(&mut self) -> Sample {
         let mut run = self.run.take().expect("a mounted gyro");
         let t_s = self.data_ready_s(run.next_k);
+        if self.thermal.dependence.is_some() {
+            // The sensitivities and directions follow the die; a thousandth of a °C moves them
+            // by < 0.2 ppm, far below any run's σ.
+            let temp_c = self.thermal.temperature_c(t_s);
+            if (temp_c - run.chain_temp_c).abs() > CHAIN_STEP_C {
+                run.chain = self.chain_at(run.pose, temp_c);
+                run.chain_temp_c = temp_c;
+            }
+        }
         let delay_s = self.effects.pure_delay_s();
         let pre = match run.lowpass.as_mut() {
             Some(f) => {
@@ -555,6 +597,21 @@ impl Session {
     /// been taken ([`Self::index_edges_until`]).
     pub fn mount(&mut self, t_s: f64, pose: Pose) {
         self.run = Some(self.new_run(t_s, pose, 0, 0.0));
+    }
+
+    /// The chamber steps to `setpoint_c` at `t_s` (the live emulator's simulated chamber): the
+    /// air ramps from where the die is, the die follows with its lag (its momentum from an
+    /// unfinished step is not carried over).
+    pub fn set_chamber(&mut self, t_s: f64, setpoint_c: f64, ramp_c_per_min: f64, die_tau_s: f64) {
+        let rise_c = self.thermal.drift.map_or(0.0, |d| d.rise_c);
+        let from_c = self.thermal.temperature_c(t_s) - rise_c;
+        let index = self.thermal.chamber.map_or(0, |c| c.index);
+        self.thermal.chamber = Some(ChamberStep {
+            ramp_c_per_min,
+            die_tau_s,
+            capture_after_s: -t_s,
+            ..ChamberStep::new(index, from_c, setpoint_c)
+        });
     }
 
     /// The pose the gyro is mounted in.
@@ -619,7 +676,7 @@ impl Session {
     pub fn truth(&self) -> Truth {
         let fs = self.gyro.full_scale;
         let m = self.sensor.m_counts_per_dps(fs);
-        Truth {
+        let truth = Truth {
             seed: self.seed,
             m_counts_per_dps: [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)])),
             k_counts_per_dps: self.sensor.k_counts_per_dps(fs),
@@ -647,6 +704,55 @@ impl Session {
                 .then(|| f64::from(self.gyro.bandwidth.cutoff_dhz(self.gyro.odr)) / 10.0),
             effects: self.effects,
             runs: self.runs.clone(),
+            thermal: None,
+        };
+        match self.thermal.dependence {
+            Some(dep) => self.at_mean_temperature(truth, dep),
+            None => truth,
+        }
+    }
+
+    /// The truth at the runs' mean die temperature, with the reference values and coefficients
+    /// in its thermal section.
+    fn at_mean_temperature(&self, mut truth: Truth, dep: TemperatureDependence) -> Truth {
+        let fs = self.gyro.full_scale;
+        let die_mean_c = self.mean_die_c();
+        let at = self.sensor.at_temperature(&dep, die_mean_c);
+        let m = at.m_counts_per_dps(fs);
+        let k_ref = self.sensor.k_counts_per_dps(fs);
+        let change = dep.offset_change_dps(die_mean_c);
+        truth.thermal = Some(ThermalTruth {
+            dependence: dep,
+            m_ref_counts_per_dps: truth.m_counts_per_dps,
+            offset_ref_counts: truth.offset_counts,
+            k_ref_counts_per_dps: truth.k_counts_per_dps,
+            s_ref: truth.s,
+            chamber: self.thermal.chamber,
+            die_mean_c,
+        });
+        truth.m_counts_per_dps = [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)]));
+        truth.k_counts_per_dps = at.k_counts_per_dps(fs);
+        truth.s = at.s.map(|v| [v[0], v[1], v[2]]);
+        truth.tilt_deg = at.tilt_deg;
+        truth.offset_counts = [0, 1, 2].map(|i| truth.offset_counts[i] + k_ref[i] * change[i]);
+        truth
+    }
+
+    /// Mean die temperature over the finished runs, °C (sampled every second, by duration).
+    fn mean_die_c(&self) -> f64 {
+        let (mut sum, mut n) = (0.0, 0.0);
+        for r in &self.runs {
+            let steps = (r.duration_s.ceil() as u64).max(1);
+            for j in 0..steps {
+                let t = r.start_s + (j as f64 + 0.5) * r.duration_s / steps as f64;
+                sum += self.thermal.temperature_c(t);
+                n += 1.0;
+            }
+        }
+        if n > 0.0 {
+            sum / n
+        } else {
+            self.thermal.temperature_c(0.0)
         }
     }
 }

@@ -62,6 +62,10 @@ pub struct Truth {
     pub effects: Effects,
     /// Runs, in stream order.
     pub runs: Vec<RunTruth>,
+    /// With temperature dependence: the coefficients and the reference values (`m_counts_per_dps`
+    /// and `offset_counts` above are then those at the runs' mean die temperature).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thermal: Option<super::thermal::ThermalTruth>,
 }
 
 /// One run as simulated.

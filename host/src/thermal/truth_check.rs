@@ -1,0 +1,133 @@
+//! The thermal model against a simulated sensor's truth: the bars of issue 27 as numbers, for
+//! the tests and the bench (`host/benches/thermal.rs`).
+//!
+//! The model's temperature scale is OUT_TEMP anchored on the chamber (`out_temp_at_0c`); the
+//! simulator's is the die's own. A die at `T` reads `c_true − T`, so the model's `T_model` is
+//! the truth's `T_model + (c_true − c_model)` (to OUT_TEMP's rounding, which the model carries
+//! as each setpoint's temperature σ).
+
+use super::model::ThermalModel;
+use super::{Quantity, SetpointCal, ThermalError};
+use crate::sim::thermal::ThermalTruth;
+
+/// Step of the central differences that take the truth's Taylor coefficients, °C: the
+/// simulated offset and sensitivity are exact quadratics (exact at any step); the direction's
+/// rotation is linear to 1e-6 over it.
+const TAYLOR_STEP_C: f64 = 5.0;
+
+/// One quantity of one axis of the truth at the die's own temperature `temp_c`.
+pub fn truth_value(truth: &ThermalTruth, axis: usize, quantity: Quantity, temp_c: f64) -> f64 {
+    let (offset, k, s) = truth.axis_at(axis, temp_c);
+    match quantity {
+        Quantity::OffsetCounts => offset,
+        Quantity::SensitivityCountsPerDps => k,
+        Quantity::DirectionNext => s[(axis + 1) % 3],
+        Quantity::DirectionOther => s[(axis + 2) % 3],
+    }
+}
+
+/// Taylor coefficients (constant first, up to the cube) of `f` at 0 by central differences.
+fn taylor(f: impl Fn(f64) -> f64) -> [f64; 4] {
+    let h = TAYLOR_STEP_C;
+    let (m2, m1, z, p1, p2) = (f(-2.0 * h), f(-h), f(0.0), f(h), f(2.0 * h));
+    [
+        z,
+        (p1 - m1) / (2.0 * h),
+        (p1 - 2.0 * z + m1) / (2.0 * h * h),
+        (p2 - 2.0 * p1 + 2.0 * m1 - m2) / (12.0 * h * h * h),
+    ]
+}
+
+/// One coefficient against the truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoefficientCheck {
+    /// The curve, e.g. "x offset [counts]".
+    pub curve: String,
+    /// Power of (T − reference).
+    pub degree: usize,
+    /// Fitted value, its σ, and the truth.
+    pub fitted: f64,
+    /// σ of `fitted`.
+    pub sigma: f64,
+    /// The truth's coefficient on the model's scale.
+    pub truth: f64,
+    /// (fitted − truth)/σ.
+    pub z: f64,
+}
+
+/// Every fitted coefficient against the truth's Taylor coefficient of the same degree, and,
+/// for each curve, the largest effect of the truth's terms above its order at the range's ends
+/// in units of the curve's σ there (terms the order left out must be below the data's reach).
+pub fn coefficients(
+    model: &ThermalModel,
+    truth: &ThermalTruth,
+    c_true: f64,
+) -> (Vec<CoefficientCheck>, Vec<(String, f64)>) {
+    let shift = c_true - model.out_temp_at_0c;
+    let mut checks = Vec::new();
+    let mut omitted = Vec::new();
+    for (curve, (axis, q)) in model.curves.iter().zip(Quantity::all()) {
+        let t = taylor(|x| truth_value(truth, axis, q, x + model.reference_c + shift));
+        for (d, c) in curve.coef.iter().enumerate() {
+            checks.push(CoefficientCheck {
+                curve: curve.label(),
+                degree: d,
+                fitted: c.value,
+                sigma: c.sigma,
+                truth: t[d],
+                z: c.z(t[d]),
+            });
+        }
+        let worst = model
+            .range_c
+            .iter()
+            .map(|&temp| {
+                let x = temp - model.reference_c;
+                let left: f64 = (curve.order + 1..4).map(|d| t[d] * x.powi(d as i32)).sum();
+                left.abs() / curve.at(model.reference_c, temp).sigma
+            })
+            .fold(0.0, f64::max);
+        omitted.push((curve.label(), worst));
+    }
+    (checks, omitted)
+}
+
+/// The rate predicted at a held-out setpoint: the model refitted without setpoint `held` (same
+/// orders) predicts, at that setpoint's die temperature, the rate for the reading the true
+/// sensor gives there for `rate_dps` (the model at `held`'s die temperature; `model` gives the
+/// orders). Returns the z of each component, (predicted − true)/σ,
+/// σ including OUT_TEMP's rounding through each curve's slope.
+pub fn held_out_rate_z(
+    setpoints: &[SetpointCal],
+    model: &ThermalModel,
+    held: usize,
+    held_truth: &crate::sim::Truth,
+    rate_dps: [f64; 3],
+) -> Result<[f64; 3], ThermalError> {
+    let mut sorted: Vec<&SetpointCal> = setpoints.iter().collect();
+    sorted.sort_by(|a, b| a.setpoint_c.total_cmp(&b.setpoint_c));
+    let target = sorted[held];
+    let others: Vec<SetpointCal> = sorted.iter().filter(|s| !std::ptr::eq(**s, target)).map(|s| (*s).clone()).collect();
+    let refit = ThermalModel::fit_with(&others, Some(&model.orders()))?;
+    // On the refit's own scale: its anchor is the other setpoints' (see `ThermalModel`).
+    let temp_c = refit.temp_c_from_raw_mean(target.out_temp_mean_lsb);
+    let raw = held_truth.m() * nalgebra::Vector3::from(rate_dps) + held_truth.offset();
+    let (rate, sigma) = refit.rate_at_reading([raw[0], raw[1], raw[2]], temp_c, refit.temp_sigma_c)?;
+    Ok([0, 1, 2].map(|i| (rate[i] - rate_dps[i]) / sigma[i]))
+}
+
+/// Each quantity of the model at a single-setpoint session's die temperature against that
+/// session's own calibration, in units of their combined σ.
+pub fn single_setpoint_z(model: &ThermalModel, single: &SetpointCal) -> Result<Vec<(String, f64)>, ThermalError> {
+    let temp_c = model.temp_c_from_raw_mean(single.out_temp_mean_lsb);
+    Quantity::all()
+        .zip(&model.curves)
+        .map(|((axis, q), curve)| {
+            let at = curve.at(model.reference_c, temp_c);
+            let slope_sigma = curve.slope_at(model.reference_c, temp_c) * model.temp_sigma_c;
+            let mine = single.value(axis, q);
+            let sigma = at.sigma.hypot(mine.sigma).hypot(slope_sigma);
+            Ok((curve.label(), (at.value - mine.value) / sigma))
+        })
+        .collect()
+}
