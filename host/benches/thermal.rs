@@ -29,17 +29,10 @@ use std::time::Instant;
 
 const SETPOINTS_C: [f64; 5] = [-20.0, 0.0, 25.0, 50.0, 70.0];
 const RATES_DPS: [f64; 3] = [180.0, 90.0, -180.0];
-const EFFECTS: [&str; 9] = [
-    "filter_delay",
-    "index_offset_deg",
-    "offset_drift",
-    "speed_ripple",
-    "earth_rotation",
-    "gear_transmission",
-    "g_sensitivity",
-    "table_tilt",
-    "bias_random_walk",
-];
+/// The realistic set but the pose-2 fixture (module documentation).
+fn effects() -> Vec<&'static str> {
+    sim::Effects::REALISTIC.into_iter().filter(|e| *e != "pose_fixture").collect()
+}
 const REFERENCE_RATE_DPS: [f64; 3] = [100.0, -50.0, 150.0];
 /// Index of the separate 25 °C session's noise streams (apart from the programme's 1…5).
 const SINGLE_SESSION_INDEX: u32 = 100;
@@ -48,11 +41,11 @@ fn env_or(name: &str, default: f64) -> f64 {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
-fn base(seed: u64, duration_s: f64, effects: bool) -> SimConfig {
+fn base(seed: u64, duration_s: f64, effects_on: bool) -> SimConfig {
     let runs =
         Pose::ALL.iter().flat_map(|&pose| RATES_DPS.map(|rate_dps| RunSpec { pose, rate_dps, duration_s })).collect();
     let mut cfg = SimConfig::with_runs(seed, runs);
-    for e in EFFECTS.iter().filter(|_| effects) {
+    for e in effects().iter().filter(|_| effects_on) {
         cfg.effects.enable(e).expect("a known effect");
     }
     cfg
@@ -155,7 +148,7 @@ fn main() {
     let seeds = env_or("BENCH_SEEDS", 10.0) as u64;
     let duration_s = env_or("BENCH_DURATION_S", 60.0);
     let effects = std::env::var("BENCH_NO_EFFECTS").is_err();
-    let named: &[&str] = if effects { &EFFECTS } else { &[] };
+    let named: Vec<&str> = if effects { self::effects() } else { Vec::new() };
     println!("thermal bench: {seeds} seeds, setpoints {SETPOINTS_C:?} °C, runs {RATES_DPS:?} °/s × 2 poses × {duration_s} s, effects {named:?}");
     println!("seed  floor  coef max|z| rms z  held-out rate: max|z| rms z, max err °/s (25 °C cal alone)  25 °C: max|z| rms z   wall s");
     let mut all: Vec<SeedFigures> = Vec::new();

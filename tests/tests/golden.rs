@@ -36,20 +36,6 @@ struct Golden {
     m: Vec<(f64, f64)>,
 }
 
-/// The realistic rig's effects (the all-effects bench's set, each at the simulator's default).
-const REALISTIC: [&str; 10] = [
-    "filter_delay",
-    "index_offset_deg",
-    "offset_drift",
-    "speed_ripple",
-    "earth_rotation",
-    "gear_transmission",
-    "g_sensitivity",
-    "table_tilt",
-    "pose_fixture",
-    "bias_random_walk",
-];
-
 /// Seed 11 of the simulator: both poses at 180, 90 and −180 °/s (`host calibrate`'s default
 /// design), 30 s per run, every realistic effect on.
 fn realistic_runs() -> Vec<Run> {
@@ -58,7 +44,7 @@ fn realistic_runs() -> Vec<Run> {
         .flat_map(|pose| [180.0, 90.0, -180.0].map(|rate_dps| RunSpec { pose, rate_dps, duration_s: 30.0 }))
         .collect();
     let mut cfg = SimConfig::with_runs(11, runs);
-    for e in REALISTIC {
+    for e in host::sim::Effects::REALISTIC {
         cfg.effects.enable(e).unwrap();
     }
     decode(&simulate(&cfg).expect("simulates").bytes).runs

@@ -16,21 +16,8 @@ use std::time::Instant;
 /// The `host` binary cargo built beside the bench.
 pub const HOST: &str = env!("CARGO_BIN_EXE_host");
 
-/// Every physical effect of issue 10 (the realistic rig), each at the simulator's default size.
-/// The simulator's other switches (`delay_ms`, `nonlinearity`, `gear_ratio_error`,
-/// `mystery_harmonic`) stay off.
-pub const REALISTIC_EFFECTS: [&str; 10] = [
-    "filter_delay",
-    "index_offset_deg",
-    "offset_drift",
-    "speed_ripple",
-    "earth_rotation",
-    "gear_transmission",
-    "g_sensitivity",
-    "table_tilt",
-    "pose_fixture",
-    "bias_random_walk",
-];
+/// The realistic rig's effects ([`host::sim::Effects::REALISTIC`]).
+pub const REALISTIC_EFFECTS: [&str; 10] = host::sim::Effects::REALISTIC;
 
 /// Seconds per run, spin-up included, of a plan that gives none: the session an operator runs
 /// by default.

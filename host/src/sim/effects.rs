@@ -363,6 +363,23 @@ impl std::fmt::Display for EffectSpecError {
 impl std::error::Error for EffectSpecError {}
 
 impl Effects {
+    /// Every physical effect of the realistic rig (issue 10), each at its default size: what
+    /// the all-effects bench, the trust matrix's `all` and the golden session switch on. The
+    /// other switches (`delay_ms`, `nonlinearity`, `gear_ratio_error`, `mystery_harmonic`,
+    /// `temperature_dependence`) stay off.
+    pub const REALISTIC: [&'static str; 10] = [
+        "filter_delay",
+        "index_offset_deg",
+        "offset_drift",
+        "speed_ripple",
+        "earth_rotation",
+        "gear_transmission",
+        "g_sensitivity",
+        "table_tilt",
+        "pose_fixture",
+        "bias_random_walk",
+    ];
+
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
     pub const NAMES: [(&'static str, &'static str); 14] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
