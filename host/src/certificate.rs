@@ -1,8 +1,10 @@
 //! The results part of the calibration certificate in `report.html`: each result with its
 //! standard uncertainty and its expanded uncertainty at k = 2 in the GUM's wording, the angles
-//! between the axes, and the correction matrix a firmware applies.
+//! between the axes, the correction matrix a firmware applies, and the sensor's previous
+//! calibrations from the records with each change in units of the combined σ.
 
 use crate::calib::CalReport;
+use crate::records::views::History;
 use crate::report::html::escape;
 use nalgebra::Matrix3;
 use std::fmt::Write as _;
@@ -34,8 +36,8 @@ fn head(o: &mut String, cells: &[&str]) {
     o.push_str("</tr>\n");
 }
 
-/// The certificate's results section.
-pub fn html_section(r: &CalReport) -> String {
+/// The certificate's results section, ending with the sensor's `history`.
+pub fn html_section(r: &CalReport, history: &History) -> String {
     let k = COVERAGE_FACTOR;
     let mut o = String::from("<section class=\"certificate\">\n<h2>Results with expanded uncertainty (k = 2)</h2>\n");
     o.push_str("<table>\n");
@@ -137,6 +139,31 @@ pub fn html_section(r: &CalReport) -> String {
             &["M is singular: no correction".into(), String::new(), String::new(), String::new(), String::new()],
         ),
     }
-    o.push_str("</table>\n</section>\n");
+    o.push_str("</table>\n");
+    o.push_str(&history_html(history));
+    o.push_str("</section>\n");
+    o
+}
+
+/// The sensor's previous calibrations: per record and axis the sensitivity and tilt then and
+/// the change to this calibration in combined σ, and every parameter that moved beyond 3σ.
+pub fn history_html(history: &History) -> String {
+    let mut o = String::from("<h3>Previous calibrations of this sensor</h3>\n");
+    let _ = writeln!(o, "<p>{}</p>", escape(&history.headline()));
+    let rows = history.rows();
+    if rows.is_empty() {
+        return o;
+    }
+    o.push_str("<table class=\"history\">\n");
+    let header = History::header();
+    head(&mut o, &header.iter().map(String::as_str).collect::<Vec<_>>());
+    for r in &rows {
+        row(&mut o, r);
+    }
+    o.push_str("</table>\n<ul>\n");
+    for l in history.beyond_lines() {
+        let _ = writeln!(o, "<li>{}</li>", escape(&l));
+    }
+    o.push_str("</ul>\n");
     o
 }

@@ -614,7 +614,11 @@ fn records_cmd(spec: &records::DbSpec, format: records::views::Format, cmd: Reco
     };
     let text = match cmd {
         RecordsCmd::List { sensor } => views::list_as(&store::list(c.as_mut(), sensor.as_deref())?, format),
-        RecordsCmd::Show { id } => views::show_as(&get(c.as_mut(), id)?, format),
+        RecordsCmd::Show { id } => {
+            let r = get(c.as_mut(), id)?;
+            let history = records::history(c.as_mut(), &r, Some(id))?;
+            views::show_as(&r, &history, format)
+        }
         RecordsCmd::Compare { a, b } => views::compare_as(&get(c.as_mut(), a)?, &get(c.as_mut(), b)?, format),
         RecordsCmd::Summary { html } => {
             let latest = store::latest_per_sensor(c.as_mut())?;
@@ -858,12 +862,6 @@ fn calibrate(
     let loop_json = out_dir.join("loop.json");
     files::write_atomic(&loop_json, serde_json::to_string(&lr)?)?;
     let checks = spec.map(|s| s.check(lr.final_report(), noise.as_ref()));
-    let extra = checks.as_deref().map(host::spec::html_section).unwrap_or_default()
-        + &host::certificate::html_section(lr.final_report())
-        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
-    let html = write_report(out_dir, &lr, &prov, &extra)
-        .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
-    note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
     let verdict = match lr.verdict() {
         calib::Verdict::AtNoiseFloor => "at noise floor",
         calib::Verdict::UnexplainedStructure if lr.unvouched.is_some() => "not vouched for",
@@ -875,6 +873,14 @@ fn calibrate(
         let pass = if host::spec::passed(c) { 1.0 } else { 0.0 };
         rec.params.push(records::Param { name: "spec_pass".into(), value: pass, sigma: None, unit: "1".into() });
     }
+    // The sensor's previous calibrations, from the database this one is recorded into.
+    let history = records::history_before_recording(db, &rec);
+    let extra = checks.as_deref().map(host::spec::html_section).unwrap_or_default()
+        + &host::certificate::html_section(lr.final_report(), &history)
+        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
+    let html = write_report(out_dir, &lr, &prov, &extra)
+        .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
+    note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
     let recorded = match db {
         None => {
             note("not recorded (--no-db)");

@@ -236,6 +236,10 @@ fn the_certificate_gives_expanded_uncertainties_angles_and_the_correction() {
     )));
     assert!(html.contains("stated as the standard uncertainty of measurement multiplied by the coverage factor k = 2"));
     assert!(html.contains("<h3>Correction applied by a firmware</h3>"));
+    // Without a database, the sensor's history is not looked up, and the certificate says so.
+    assert!(html.contains(
+        "<h3>Previous calibrations of this sensor</h3>\n<p>Previous calibrations: not looked up (--no-db: no records database read).</p>"
+    ));
     assert_eq!(html.matches("<th scope=\"col\">(K S)⁻¹ [°/s per count]</th>").count(), 1);
 }
 

@@ -151,3 +151,114 @@ fn list_show_and_compare_as_json_and_csv() {
     assert_eq!(cmp["changed_beyond_sigma"], 3.0);
     assert_eq!(cmp["parameters"].as_array().unwrap().len(), csv.lines().count() - 1);
 }
+
+/// The parameters of record `id` (`records show --format json`), by name: (value, σ).
+fn params_of(scratch: &Path, db: &str, id: i64) -> (serde_json::Value, Vec<(String, f64, Option<f64>)>) {
+    let o = host(scratch, &["records", "show", &id.to_string(), "--db", db, "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let params = v["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p["name"].as_str().unwrap().to_string(), p["value"].as_f64().unwrap(), p["sigma"].as_f64()))
+        .collect();
+    (v, params)
+}
+
+/// The serial's previous calibrations on the certificate and in `records show`: two simulated
+/// sensors (seeds 5 and 6) recorded under one serial, then the second capture again. Each
+/// earlier record is listed with its k and tilt per axis and the change to this calibration in
+/// combined σ, (this − then)/√(σ_this² + σ_then²), flagged beyond 3σ.
+#[test]
+fn show_and_the_report_list_the_serials_previous_calibrations_with_each_change_in_sigma() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let db = format!("sqlite:{}", dir.join("r.sqlite").display());
+    let mut caps = Vec::new();
+    for seed in ["5", "6"] {
+        let cap = dir.join(format!("s{seed}.cap"));
+        let o = host(dir, &["simulate", "--out", cap.to_str().unwrap(), "--seed", seed, "--duration", "6"]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        caps.push(cap);
+    }
+    let cal = |cap: &Path, out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut args = vec!["calibrate", "--replay", cap.to_str().unwrap(), "--out-dir", out.to_str().unwrap()];
+        args.extend(["--sensor", "SN-H", "--db", &db]);
+        args.extend(extra);
+        let o = host(dir, &args);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        std::fs::read_to_string(out.join("report.html")).unwrap()
+    };
+    let first = cal(&caps[0], "a", &[]);
+    assert!(first.contains("<p>No previous calibration of SN-H in the records database.</p>"), "{first}");
+    let second = cal(&caps[1], "b", &[]);
+    let third = cal(&caps[1], "c", &["--again"]);
+
+    let (show1, p1) = params_of(dir, &db, 1);
+    assert_eq!(show1["history"]["previous"].as_array().unwrap().len(), 0);
+    let (show2, p2) = params_of(dir, &db, 2);
+    let (show3, _) = params_of(dir, &db, 3);
+    let find = |p: &[(String, f64, Option<f64>)], n: &str| p.iter().find(|q| q.0 == n).cloned().unwrap();
+
+    // Record 2 against record 1: another simulated sensor, so its sensitivities moved far
+    // beyond their uncertainty.
+    let h = &show2["history"];
+    assert_eq!(h["looked_up"], true);
+    assert_eq!(h["sensor_serial"], "SN-H");
+    let prev = h["previous"].as_array().unwrap();
+    assert_eq!(prev.len(), 1);
+    assert_eq!(prev[0]["id"], 1);
+    assert_eq!(prev[0]["calibrated_utc"], show1["calibrated_utc"]);
+    let date1 = show1["calibrated_utc"].as_str().unwrap();
+    let text = stdout(&host(dir, &["records", "show", "2", "--db", &db]));
+    assert!(text.contains("1 previous calibration(s) of SN-H"), "{text}");
+    let mut any_beyond = false;
+    for ax in ["x", "y", "z"] {
+        let mut cells = vec!["1".to_string(), date1.to_string(), ax.to_string()];
+        let mut flagged = Vec::new();
+        for q in ["k", "tilt"] {
+            let name = format!("{q}_{ax}");
+            let (_, then, s_then) = find(&p1, &name);
+            let (_, this, s_this) = find(&p2, &name);
+            let z = (this - then) / s_this.unwrap().hypot(s_then.unwrap());
+            let entry = prev[0]["parameters"].as_array().unwrap().iter().find(|p| p["name"] == name.as_str()).unwrap();
+            assert_eq!(entry["then"].as_f64().unwrap(), then);
+            assert_eq!(entry["this"].as_f64().unwrap(), this);
+            let got = entry["z"].as_f64().unwrap();
+            assert!((got - z).abs() <= 1e-12 * z.abs().max(1.0), "{name}: z {got} against {z}");
+            assert_eq!(entry["changed"], z.abs() > 3.0, "{name}");
+            if z.abs() > 3.0 {
+                flagged.push(q);
+            }
+            cells.push(format!("{then:.6}"));
+            cells.push(format!("{z:+.2}"));
+        }
+        any_beyond |= !flagged.is_empty();
+        cells.push(if flagged.is_empty() { "no".into() } else { flagged.join(", ") });
+        let row = cells.iter().map(|c| format!("<td>{c}</td>")).collect::<String>();
+        assert!(second.contains(&format!("<tr>{row}</tr>")), "report.html lacks <tr>{row}</tr>:\n{second}");
+        let words: Vec<&str> = cells.iter().map(String::as_str).collect();
+        assert!(
+            text.lines()
+                .any(|l| l.split_whitespace().collect::<Vec<_>>() == words.join(" ").split(' ').collect::<Vec<_>>()),
+            "records show 2 lacks {words:?}:\n{text}"
+        );
+    }
+    let kx = find(&p2, "k_x").1 - find(&p1, "k_x").1;
+    assert!(any_beyond, "two simulated sensors, yet no k or tilt beyond 3σ (Δk_x {kx})");
+    assert!(second.contains("<li>record 1: "), "{second}");
+
+    // Record 3, the same capture as record 2 again: both earlier records listed, nothing
+    // changed since record 2.
+    let prev = show3["history"]["previous"].as_array().unwrap();
+    assert_eq!(prev.iter().map(|p| p["id"].as_i64().unwrap()).collect::<Vec<_>>(), [1, 2]);
+    for p in prev[1]["parameters"].as_array().unwrap() {
+        assert_eq!(p["change"].as_f64().unwrap(), 0.0, "{p}");
+        assert_eq!(p["changed"], false, "{p}");
+    }
+    assert_eq!(prev[1]["changed"].as_array().unwrap().len(), 0);
+    assert!(third.contains("2 previous calibration(s) of SN-H"), "{third}");
+    assert!(third.contains("<td>2</td>") && third.contains("<td>+0.00</td>"), "{third}");
+}

@@ -42,7 +42,21 @@ fn report() -> &'static Path {
         host(&args);
         let out = dir.join("cal");
         let db = format!("sqlite:{}", dir.join("records.sqlite").display());
-        host(&["calibrate", "--replay", cap, "--out-dir", out.to_str().unwrap(), "--db", &db]);
+        // Twice under one serial, so the certificate lists the sensor's previous calibration.
+        let first = dir.join("cal-first");
+        host(&["calibrate", "--replay", cap, "--out-dir", first.to_str().unwrap(), "--db", &db, "--sensor", "SN-L"]);
+        host(&[
+            "calibrate",
+            "--replay",
+            cap,
+            "--out-dir",
+            out.to_str().unwrap(),
+            "--db",
+            &db,
+            "--sensor",
+            "SN-L",
+            "--again",
+        ]);
         out.join("report.html")
     })
 }
@@ -200,6 +214,8 @@ fn every_table_fits_a_1400_px_window_by_its_min_content_width() {
     let before_after = before_after.expect("the before/after table with its truth columns");
     assert_eq!(before_after[0].len(), 7);
     assert!(before_after.len() >= 3, "the linear model and at least two effects: {}", before_after.len());
+    let history = tables.iter().find(|t| t[0].iter().any(|c| c.text == "Δk/σ"));
+    assert_eq!(history.expect("the certificate's table of the previous calibration").len(), 4, "header and 3 axes");
     for (i, t) in tables.iter().enumerate() {
         let need = min_content_px(t, css);
         let first: Vec<&str> = t[0].iter().map(|c| c.text.as_str()).collect();

@@ -188,3 +188,38 @@ pub fn store_record(spec: &DbSpec, rec: &Record) -> Result<i64> {
     let mut c = spec.open()?;
     Ok(store::insert(c.as_mut(), rec).with_context(|| format!("{spec} refused the record"))?.0)
 }
+
+/// The previous calibrations of `this` record's sensor in `c` (its records with an id below
+/// `before`, every one when `None`), oldest first, each with its changes to `this` in σ.
+pub fn history(c: &mut dyn Conn, this: &Record, before: Option<i64>) -> Result<views::History> {
+    let Some(serial) = this.sensor_serial.as_deref() else {
+        return Ok(views::History::Unread("no sensor serial: calibrate with --sensor".into()));
+    };
+    let mut earlier = Vec::new();
+    for r in store::list(c, Some(serial))? {
+        match r.id {
+            Some(id) if before.is_none_or(|b| id < b) => earlier.extend(store::get(c, id)?),
+            _ => {}
+        }
+    }
+    Ok(views::History::of(serial, this, &earlier))
+}
+
+/// The history a calibration about to be recorded in `db` gets on its certificate: none with
+/// `--no-db`, an empty one when the database does not exist yet; a database that cannot be read
+/// is said, not an error (the record step reports it).
+pub fn history_before_recording(db: Option<&DbSpec>, this: &Record) -> views::History {
+    let Some(db) = db else { return views::History::Unread("--no-db: no records database read".into()) };
+    if this.sensor_serial.is_none() {
+        return views::History::Unread("no sensor serial: calibrate with --sensor".into());
+    }
+    if let DbSpec::Sqlite(p) = db {
+        if !p.exists() {
+            return views::History::of(this.sensor_serial.as_deref().unwrap_or_default(), this, &[]);
+        }
+    }
+    match db.open().and_then(|mut c| history(c.as_mut(), this, None)) {
+        Ok(h) => h,
+        Err(e) => views::History::Unread(format!("{db} could not be read: {e:#}")),
+    }
+}

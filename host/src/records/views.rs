@@ -89,13 +89,19 @@ pub fn list_as(records: &[Record], format: Format) -> String {
     }
 }
 
-/// `show` in `format`: JSON holds the identity, every parameter, the noise figures and the
-/// stored calibration.json; CSV one line per parameter.
-pub fn show_as(r: &Record, format: Format) -> String {
+/// `show` in `format`: the text and JSON hold the identity, every parameter, the noise figures
+/// and the sensor's previous calibrations with each change in σ (`history`), JSON also the stored
+/// calibration.json; CSV one line per parameter (the changes: `compare --format csv`).
+pub fn show_as(r: &Record, history: &History, format: Format) -> String {
     match format {
-        Format::Text => show(r),
+        Format::Text => {
+            show(r)
+                + "
+" + &history.text()
+        }
         Format::Json => {
             let mut v = record_json(r);
+            v["history"] = history.json();
             v["parameters"] = serde_json::to_value(&r.params).expect("JSON of plain values");
             v["noise"] = serde_json::to_value(&r.noise).expect("JSON of plain values");
             v["calibration"] = serde_json::from_str(&r.result_json).unwrap_or(serde_json::Value::Null);
@@ -272,6 +278,175 @@ pub fn compare(a: &Record, b: &Record) -> String {
     let n = ch.iter().filter(|c| c.z.is_some_and(|z| z.abs() > CHANGED_Z)).count();
     let _ = writeln!(o, "\n{n} of {} parameters changed by more than {CHANGED_Z} σ", ch.len());
     o
+}
+
+/// The parameters a calibration's history lists per axis: the sensitivity and the tilt of the
+/// sensing axis from its package axis (its direction), `k_{axis}` and `tilt_{axis}`.
+pub const HISTORY_QUANTITIES: [(&str, &str); 2] = [("k", "counts/(deg/s)"), ("tilt", "deg")];
+
+/// One earlier calibration of a sensor against this one: [`changes`] from it to this.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Earlier {
+    /// The earlier record's id.
+    pub id: i64,
+    /// When it was calibrated, UTC.
+    pub calibrated_utc: String,
+    /// Every parameter in both, a = then, b = this, z = (this − then)/√(σ_this² + σ_then²).
+    pub changes: Vec<Change>,
+}
+
+impl Earlier {
+    /// The earlier record `then` against `this`.
+    pub fn of(then: &Record, this: &Record) -> Self {
+        Earlier { id: then.id.unwrap_or(0), calibrated_utc: then.calibrated_utc.clone(), changes: changes(then, this) }
+    }
+
+    /// The change of parameter `name`.
+    pub fn change(&self, name: &str) -> Option<&Change> {
+        self.changes.iter().find(|c| c.name == name)
+    }
+
+    /// The parameters that changed beyond [`CHANGED_Z`] combined σ.
+    pub fn beyond(&self) -> Vec<&Change> {
+        self.changes.iter().filter(|c| c.z.is_some_and(|z| z.abs() > CHANGED_Z)).collect()
+    }
+}
+
+/// A calibration's history: the same sensor's earlier records, or why there is none to show.
+#[derive(Debug, Clone, PartialEq)]
+pub enum History {
+    /// Not looked up, and why (no database, no serial, a database that cannot be read).
+    Unread(String),
+    /// The sensor and its earlier calibrations, oldest first (empty: the first one).
+    Read {
+        /// Sensor serial.
+        serial: String,
+        /// Earlier calibrations against this one.
+        earlier: Vec<Earlier>,
+    },
+}
+
+impl History {
+    /// The history of `this` given the sensor's `earlier` records (with their parameters).
+    pub fn of(serial: &str, this: &Record, earlier: &[Record]) -> Self {
+        History::Read { serial: serial.to_string(), earlier: earlier.iter().map(|e| Earlier::of(e, this)).collect() }
+    }
+
+    /// One line saying what the history holds, or why it is not there.
+    pub fn headline(&self) -> String {
+        match self {
+            History::Unread(why) => format!("Previous calibrations: not looked up ({why})."),
+            History::Read { serial, earlier } if earlier.is_empty() => {
+                format!("No previous calibration of {serial} in the records database.")
+            }
+            History::Read { serial, earlier } => format!(
+                "{} previous calibration(s) of {serial}; Δ/σ = (this − then)/√(σ_this² + σ_then²), the change \
+                 in units of the combined standard uncertainty; |Δ|/σ > {CHANGED_Z} is a change beyond the uncertainty.",
+                earlier.len()
+            ),
+        }
+    }
+
+    /// As JSON: the state and, per earlier record, every parameter's change.
+    pub fn json(&self) -> serde_json::Value {
+        match self {
+            History::Unread(why) => serde_json::json!({ "looked_up": false, "reason": why }),
+            History::Read { serial, earlier } => serde_json::json!({
+                "looked_up": true,
+                "sensor_serial": serial,
+                "changed_beyond_sigma": CHANGED_Z,
+                "previous": earlier.iter().map(|e| serde_json::json!({
+                    "id": e.id,
+                    "calibrated_utc": e.calibrated_utc,
+                    "parameters": e.changes.iter().map(|c| serde_json::json!({
+                        "name": c.name, "unit": c.unit, "then": c.a, "this": c.b, "change": c.b - c.a,
+                        "z": c.z, "changed": c.z.is_some_and(|z| z.abs() > CHANGED_Z),
+                    })).collect::<Vec<_>>(),
+                    "changed": e.beyond().iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
+                })).collect::<Vec<_>>(),
+            }),
+        }
+    }
+
+    /// The rows of the history table, one per earlier record and axis: record, date, axis, then
+    /// per [`HISTORY_QUANTITIES`] the earlier value and Δ/σ, and the quantities beyond 3σ.
+    pub fn rows(&self) -> Vec<Vec<String>> {
+        let History::Read { earlier, .. } = self else { return Vec::new() };
+        let mut rows = Vec::new();
+        for e in earlier {
+            for ax in ['x', 'y', 'z'] {
+                let mut row = vec![e.id.to_string(), e.calibrated_utc.clone(), ax.to_string()];
+                let mut flagged = Vec::new();
+                for (q, _) in HISTORY_QUANTITIES {
+                    let c = e.change(&format!("{q}_{ax}"));
+                    row.push(c.map_or("-".into(), |c| format!("{:.6}", c.a)));
+                    row.push(c.and_then(|c| c.z).map_or("-".into(), |z| format!("{z:+.2}")));
+                    if c.and_then(|c| c.z).is_some_and(|z| z.abs() > CHANGED_Z) {
+                        flagged.push(q);
+                    }
+                }
+                row.push(if flagged.is_empty() { "no".into() } else { flagged.join(", ") });
+                rows.push(row);
+            }
+        }
+        rows
+    }
+
+    /// The history table's header, matching [`History::rows`].
+    pub fn header() -> Vec<String> {
+        let mut h = vec!["record".to_string(), "calibrated (UTC)".into(), "axis".into()];
+        for (q, unit) in HISTORY_QUANTITIES {
+            h.push(format!("{q} then [{unit}]"));
+            h.push(format!("Δ{q}/σ"));
+        }
+        h.push(format!("beyond {CHANGED_Z}σ"));
+        h
+    }
+
+    /// Per earlier record, every parameter beyond 3σ (not only k and tilt), one line each.
+    pub fn beyond_lines(&self) -> Vec<String> {
+        let History::Read { earlier, .. } = self else { return Vec::new() };
+        earlier
+            .iter()
+            .map(|e| {
+                let b = e.beyond();
+                let with_z = e.changes.iter().filter(|c| c.z.is_some()).count();
+                if b.is_empty() {
+                    format!("record {}: none of {with_z} parameters changed beyond {CHANGED_Z} σ", e.id)
+                } else {
+                    let names: Vec<String> =
+                        b.iter().map(|c| format!("{} ({:+.1} σ)", c.name, c.z.unwrap_or(f64::NAN))).collect();
+                    format!(
+                        "record {}: {} of {with_z} parameters changed beyond {CHANGED_Z} σ: {}",
+                        e.id,
+                        b.len(),
+                        names.join(", ")
+                    )
+                }
+            })
+            .collect()
+    }
+
+    /// As text, for `host records show`.
+    pub fn text(&self) -> String {
+        let mut o = self.headline() + "\n";
+        let rows = self.rows();
+        if rows.is_empty() {
+            return o;
+        }
+        let mut table = vec![Self::header()];
+        table.extend(rows);
+        let widths: Vec<usize> =
+            (0..table[0].len()).map(|j| table.iter().map(|r| r[j].chars().count()).max().unwrap_or(0)).collect();
+        for r in &table {
+            let cells: Vec<String> = r.iter().zip(&widths).map(|(c, w)| format!("{c:>w$}")).collect();
+            let _ = writeln!(o, "{}", cells.join("  ").trim_end());
+        }
+        for l in self.beyond_lines() {
+            let _ = writeln!(o, "{l}");
+        }
+        o
+    }
 }
 
 /// Robust spread: median and MAD-based σ (1.4826 · MAD, the σ of a Gaussian with that MAD).
