@@ -476,6 +476,7 @@ impl<'a> Context<'a> {
             &s.estimate.params,
             self.nominal,
             &self.opts.consider,
+            self.opts.alpha,
         )
     }
 

@@ -23,6 +23,7 @@ use super::derived::derive;
 use super::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
 use super::effects::Effect;
 use super::extended::{accumulate_pairs, normal_equations, Fitted, Gram, LoopData, Reach, Selection};
+use super::stats::chi2_upper_quantile;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -240,6 +241,7 @@ fn with_candidates(f: &Fitted, cands: &[Candidate]) -> (Vec<Col>, Selection, Pla
 
 /// The consider covariance of `f` (fitted with `weights`) for every catalogued effect it lacks.
 /// `base` are the 12 base parameters' indices in `f`'s covariance; `k` the sensitivities.
+/// `alpha` is the loop's family-wise level, which the test of an effect it tried uses.
 #[allow(clippy::too_many_arguments)]
 pub fn consider(
     data: &LoopData,
@@ -250,6 +252,7 @@ pub fn consider(
     params: &[f64; 12],
     nominal: f64,
     overrides: &ConsiderOverrides,
+    alpha: f64,
 ) -> Consideration {
     let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
     let cands = candidates(data, f, cx, k, overrides);
@@ -295,7 +298,9 @@ pub fn consider(
         let info = &c_mat - b.transpose() * &s_mat;
         // The residual's correlation with the effect, beyond what the model's own step takes.
         let grad = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
-        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd, c.tried) else {
+        let threshold = |dof: usize| chi2_upper_quantile(dof, alpha / cands.len() as f64);
+        let tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
+        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd, tried) else {
             continue;
         };
         if lambdas.is_empty() {
@@ -332,10 +337,17 @@ fn max3(v: [f64; 3]) -> f64 {
 /// The covariance (posterior variance plus the square of the posterior mean) of an effect's
 /// parameters in the directions the runs do not separate, from its partial information `info`,
 /// the residual's gradient `grad` along its columns and its prior σs `sd`; with those
-/// directions' information λ. An effect the loop did not try (`tried` false) has every
+/// directions' information λ. An effect the loop did not try (`tried` None) has every
 /// direction counted: no test ruled out what the runs see of it, and its posterior mean is what
-/// they say it is. None when the information is not finite.
-fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64], tried: bool) -> Option<(DMatrix<f64>, Vec<f64>)> {
+/// they say it is. One it tried (`tried` the loop's χ² threshold for a number of degrees of
+/// freedom) has its separated directions left to the test, unless the residual's score along
+/// them passes that threshold. None when the information is not finite.
+fn posterior(
+    info: &DMatrix<f64>,
+    grad: &DVector<f64>,
+    sd: &[f64],
+    tried: Option<&dyn Fn(usize) -> f64>,
+) -> Option<(DMatrix<f64>, Vec<f64>)> {
     let n = sd.len();
     let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
     let mut w = &d * info * &d;
@@ -345,12 +357,19 @@ fn posterior(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64], tried: bool) 
     }
     let eig = w.symmetric_eigen();
     let g_w = &d * grad;
+    let lambdas: Vec<f64> = eig.eigenvalues.iter().map(|l| l.max(0.0)).collect();
+    // The score (Lagrange-multiplier) statistic of the separated directions, gᵀI⁻¹g over them:
+    // what the loop's test of the effect reads. Past its threshold the model lacks an effect
+    // the runs see (its candidate rule, gated by the residual's diagnostics, never let the loop
+    // score it), so no test speaks for those directions either.
+    let separated: Vec<usize> = (0..n).filter(|&i| lambdas[i] >= SEPARATED_SNR2).collect();
+    let score: f64 = separated.iter().map(|&i| eig.eigenvectors.column(i).dot(&g_w).powi(2) / lambdas[i]).sum();
+    let tested = tried.is_some_and(|threshold| separated.is_empty() || score <= threshold(separated.len()));
     let mut var = DMatrix::zeros(n, n);
     let mut mean = DVector::zeros(n);
     let mut unseparated = Vec::new();
-    for (i, &lambda) in eig.eigenvalues.iter().enumerate() {
-        let lambda = lambda.max(0.0);
-        if tried && lambda >= SEPARATED_SNR2 {
+    for (i, &lambda) in lambdas.iter().enumerate() {
+        if tested && lambda >= SEPARATED_SNR2 {
             continue;
         }
         unseparated.push(lambda);
@@ -370,24 +389,36 @@ mod tests {
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], true).expect("finite");
+        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], Some(&|_| f64::INFINITY)).expect("finite");
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
-        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0], true).expect("finite");
+        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
         assert_eq!(n.len(), 1);
         assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
         // A direction seen well (whitened λ = 3²·1e6 ≥ 25) of an effect the loop did not try is
         // counted: its posterior variance is 1/(1 + λ) of the prior's.
         let info2 = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c2, n2) = posterior(&info2, &DVector::zeros(2), &[2.0, 3.0], false).expect("finite");
+        let (c2, n2) = posterior(&info2, &DVector::zeros(2), &[2.0, 3.0], None).expect("finite");
         assert_eq!(n2.len(), 2);
         assert!((c2[(1, 1)] - 9.0 / (1.0 + 9e6)).abs() < 1e-15, "{c2}");
+        // A tried effect whose separated direction the residual pulls on past the test's
+        // threshold (whitened g = 3·3000, score 9000²/9e6 = 9 > 0.5) was never tested: it is counted, with
+        // the posterior mean g_w/(1 + λ) = 9000/(1 + 9e6) of its whitened σ (3).
+        let g = DVector::from_column_slice(&[0.0, 3000.0]);
+        let (c3, n3) = posterior(&info2, &g, &[2.0, 3.0], Some(&|_| 0.5)).expect("finite");
+        assert_eq!(n3.len(), 2);
+        let mean = 3.0 * 9000.0 / (1.0 + 9e6);
+        assert!((c3[(1, 1)] - (9.0 / (1.0 + 9e6) + mean * mean)).abs() < 1e-15, "{c3}");
+        // Below the threshold (9 ≤ 10) the test speaks for it.
+        let (c4, n4) = posterior(&info2, &g, &[2.0, 3.0], Some(&|_| 10.0)).expect("finite");
+        assert_eq!((n4.len(), c4[(1, 1)]), (1, 0.0));
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
-        let (c, _) = posterior(&info, &DVector::from_element(1, 2.0), &[1.0], true).expect("finite");
+        let (c, _) =
+            posterior(&info, &DVector::from_element(1, 2.0), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
         assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
     }
 
