@@ -221,16 +221,7 @@ fn rust_export_compiles_no_std_and_agrees_with_apply_over_all_of_int16() {
         let dir = dir.path();
         let module = e.render(Format::Rust).unwrap();
         std::fs::write(dir.join("gyrocal.rs"), &module).unwrap();
-        let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
-        // no_std: the module alone as a library that links no std.
-        std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
-        let o = Command::new(&rustc)
-            .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
-            .arg(dir)
-            .arg(dir.join("lib.rs"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        let rustc = builds_without_std(dir);
         std::fs::write(
             dir.join("main.rs"),
             r#"include!("gyrocal.rs");
@@ -552,15 +543,7 @@ fn rust_export_applies_the_drift_and_the_g_sensitivity_as_the_library_does() {
         let dir = scratch(&format!("rustwith{n}"));
         let dir = dir.path();
         std::fs::write(dir.join("gyrocal.rs"), e.render(Format::Rust).unwrap()).unwrap();
-        let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
-        std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
-        let o = Command::new(&rustc)
-            .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
-            .arg(dir)
-            .arg(dir.join("lib.rs"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
+        let rustc = builds_without_std(dir);
         std::fs::write(
             dir.join("main.rs"),
             r#"include!("gyrocal.rs");
@@ -657,4 +640,19 @@ fn the_drift_model_reads_back_from_calibration_json() {
     v[DRIFT_MODEL_KEY] = serde_json::json!({"kind": "warm_up", "amplitude_counts": [1.0, 2.0, 3.0], "tau_s": 60.0});
     let back = Export::from_json(&v.to_string()).unwrap();
     assert_eq!(back.drift, Some(DriftModel::WarmUp { amplitude_counts: [1.0, 2.0, 3.0], tau_s: 60.0 }));
+}
+
+/// Compiles `dir/gyrocal.rs` alone as a `no_std` library that denies warnings (metadata only),
+/// and returns the `rustc` it used.
+fn builds_without_std(dir: &std::path::Path) -> String {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
+    let o = Command::new(&rustc)
+        .args(["--edition", "2021", "--crate-type", "rlib", "--emit", "metadata", "--out-dir"])
+        .arg(dir)
+        .arg(dir.join("lib.rs"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "no_std build failed:\n{}", String::from_utf8_lossy(&o.stderr));
+    rustc
 }

@@ -1,6 +1,7 @@
-//! The library's modules import one way: no import circle among the modules of `host/src`, and
-//! the calibration (`calib/`) reaches neither into the simulator nor into the presentation
-//! (`present/`, `report/`): it returns data that they show. Read from the sources: every
+//! The library's structure, read from its sources: its modules import one way (no import
+//! circle among the modules of `host/src`, and the calibration, `calib/`, reaches neither into
+//! the simulator nor into the presentation, `present/` and `report/`: it returns data that they
+//! show), and no function of the calibration engine runs over 100 lines. Read from the sources: every
 //! `crate::a::b` and `super::a` path outside comments and test modules is an arrow from the
 //! module that writes it to the module it names.
 
@@ -194,4 +195,73 @@ fn a_circle_is_found() {
     let found = circles(&g);
     assert_eq!(found.len(), 1);
     assert_eq!(found[0].iter().cloned().collect::<BTreeSet<_>>(), ["a", "b", "c"].map(String::from).into());
+}
+
+// No function of the calibration engine (`host/src/calib/`) runs over 100 lines, its body's
+// closing brace included: a longer one holds more than one step of the method and is split
+// into the steps (the project's code standard). A function starts at a line `fn name(` (any
+// visibility) and ends at the first later line that is its indentation followed by `}`, which
+// rustfmt guarantees.
+
+const MAX_LINES: usize = 100;
+
+/// The name of the function a line opens, and the line's indentation.
+fn opens_fn(line: &str) -> Option<(&str, usize)> {
+    let indent = line.len() - line.trim_start().len();
+    let mut words = line.split_whitespace();
+    let mut word = words.next()?;
+    while matches!(word, "pub" | "const" | "async" | "unsafe" | "extern") || word.starts_with("pub(") {
+        word = words.next()?;
+    }
+    if word != "fn" || line.trim_end().ends_with(';') {
+        return None;
+    }
+    let name = words.next()?.split(['(', '<']).next()?;
+    Some((name, indent))
+}
+
+/// (name, lines) of every function of `text` longer than [`MAX_LINES`].
+fn long_functions(text: &str) -> Vec<(String, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if let Some((name, indent)) = opens_fn(lines[i]) {
+            let close = format!("{}}}", " ".repeat(indent));
+            let end = (i + 1..lines.len()).find(|&j| lines[j].starts_with(&close)).unwrap_or(lines.len() - 1);
+            let n = end - i + 1;
+            if n > MAX_LINES {
+                out.push((name.to_string(), n));
+            }
+            // Nested functions are inside this one's count: go on after it.
+            i = end;
+        }
+        i += 1;
+    }
+    out
+}
+
+#[test]
+fn no_function_of_the_calibration_engine_runs_over_100_lines() {
+    let calib = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/calib");
+    let mut files = Vec::new();
+    rust_files(&calib, &mut files);
+    assert!(files.len() > 20, "{files:?}");
+    let long: Vec<String> = files
+        .iter()
+        .flat_map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            long_functions(&text).into_iter().map(move |(name, n)| format!("{}: {name}, {n} lines", f.display()))
+        })
+        .collect();
+    assert_eq!(long, Vec::<String>::new());
+}
+
+/// The reader itself: a 101-line function is found, a 100-line one and a declaration are not.
+#[test]
+fn a_long_function_is_found() {
+    let body =
+        |name: &str, n: usize| format!("    pub(crate) fn {name}() {{\n{}    }}\n", "        x();\n".repeat(n - 2));
+    let text = format!("{}{}    fn f();\n", body("long", 101), body("short", 100));
+    assert_eq!(long_functions(&text), vec![("long".to_string(), 101)]);
 }
