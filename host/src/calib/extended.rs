@@ -18,7 +18,7 @@
 //! the linear algebra is nalgebra's.
 
 use super::axes::{is_clipped, AXES};
-use super::effects::terms::{decay, dot, AxisTerms, Ctx, Needs, Own, Shifts};
+use super::effects::terms::{decay, dot, AxisTerms, Ctx, IndexEdge, Needs, Own, Shifts};
 use super::effects::{Effect, MAX_DELAY_S, MAX_HARMONIC_ORDER};
 use super::error::CalError;
 use super::kinematics::{temperature_at, KinSample, KinSamples, Kinematics, RunKinematics};
@@ -541,10 +541,11 @@ impl ColPlan {
 
 /// The sensor table's transmission error in pose `pose` at mesh angle `mesh_rad`: the effective
 /// θ2 from the index-referenced `theta2_rad`, the factor on θ2' and its derivative in the mesh
-/// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ).
+/// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ),
+/// the angle less the error the run's index pulse saw (`edge`).
 #[inline]
-fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh_rad: f64) -> (f64, f64, f64) {
-    let (mut th_eff, mut ripple, mut dripple) = (theta2_rad, 1.0, 0.0);
+fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh_rad: f64, edge: &IndexEdge) -> (f64, f64, f64) {
+    let (mut th_eff, mut ripple, mut dripple) = (theta2_rad - edge.shift_rad, 1.0, 0.0);
     for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == pose) {
         let nf = f64::from(n);
         let (sn, cn) = (nf * mesh_rad).sin_cos();
@@ -582,6 +583,8 @@ pub struct Evaluator<'a> {
     /// Per stretch and knot spacing of [`DRIFT_KNOT_SPACINGS_S`]: the first knot's time, s, and
     /// knots per second.
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
+    /// Per run, the transmission error where its index pulse ties θ2 to 0.
+    index_edge: Vec<IndexEdge>,
     /// The model's linear columns, split for [`Evaluator::predict`].
     lin_plan: ColPlan,
     /// The coefficients of `lin_plan.dense` on the three axes.
@@ -634,10 +637,21 @@ impl<'a> Evaluator<'a> {
             .collect();
         let lin_plan = ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c)));
         let lin_beta = lin_plan.dense.iter().map(|&(j, _)| model.beta.each_ref().map(|b| b[j])).collect();
+        let shifts = shifts_of(model);
+        let index_edge = data
+            .kin
+            .runs
+            .iter()
+            .map(|rk| {
+                let ripple = shifts.ripple.iter().filter(|h| h.1 == rk.pose).map(|&(n, _, a, b)| (n, a, b));
+                IndexEdge::new(rk.plate_half_width_rad, rk.steady_rate_dps.to_radians(), shifts.gear_lag_s, ripple)
+            })
+            .collect();
         Self {
             data,
             model,
-            shifts: shifts_of(model),
+            shifts,
+            index_edge,
             rot_t: data
                 .kin
                 .runs
@@ -720,7 +734,7 @@ impl<'a> Evaluator<'a> {
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
         let mesh_rad = theta2 + sh.gear_lag_s * theta1_rate_rad_s;
-        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, mesh_rad);
+        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, mesh_rad, &self.index_edge[r]);
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
@@ -928,7 +942,13 @@ impl<'a> Evaluator<'a> {
     /// What of the model an effect's column reads.
     #[inline]
     fn cx(&self) -> Ctx<'_> {
-        Ctx { shifts: &self.shifts, s_hat: &self.s_hat, lin: &self.model.lin, beta: &self.model.beta }
+        Ctx {
+            shifts: &self.shifts,
+            index_edge: &self.index_edge,
+            s_hat: &self.s_hat,
+            lin: &self.model.lin,
+            beta: &self.model.beta,
+        }
     }
 
     /// A linear column's value on axis `a`.

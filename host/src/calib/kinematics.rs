@@ -366,6 +366,9 @@ pub struct RunKinematics {
     /// where θ2 = 0: the magnetic gears' pole-pass error follows the base's rotation against the
     /// ground, which only the encoder sees; θ1 = this + θ2/ratio.
     pub theta1_at_index_rad: f64,
+    /// Half the index plate's width as a θ2 angle, rad: the pulse edges, whose midpoint is
+    /// θ2 = 0, lie at ±this.
+    pub plate_half_width_rad: f64,
 }
 
 impl RunKinematics {
@@ -818,6 +821,7 @@ fn run_kinematics(
     let theta1_at_index_rad = ref_counts.rem_euclid(cpr) / cpr * std::f64::consts::TAU;
     Ok(RunKinematics {
         theta1_at_index_rad,
+        plate_half_width_rad: std::f64::consts::PI * p.line.width_counts / period,
         run: p.number,
         pose: run.pose,
         label,

@@ -49,9 +49,10 @@ impl Behaviour for GearLag {
     }
 
     /// Moving the gear angle moves the rippled angle by (ripple − 1) and the rippled speed by
-    /// θ2'·∂ripple/∂θ.
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+    /// θ2'·∂ripple/∂θ; it also moves the error the index pulse saw.
+    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
         p.theta1_rate_rad_s * (t.e2 * (p.dtheta_eff - 1.0) + t.ez * p.drate_eff_dps)
+            - t.e2 * cx.index_edge[p.run].dshift_dlag
     }
 
     /// None: it moves only the transmission error's phase, never M or the offsets.

@@ -96,7 +96,8 @@ impl Behaviour for TableHarmonic {
         }
     }
 
-    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+    /// The angle's part less what the index pulse saw of it ([`super::terms::IndexEdge`]).
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
         let Own::Shared(k) = own else { return 0.0 };
         let (pose, quadrature) = of(k);
         if pose != p.pose {
@@ -104,10 +105,11 @@ impl Behaviour for TableHarmonic {
         }
         let n = f64::from(self.0);
         let (sn, cn) = (n * p.mesh_rad).sin_cos();
+        let (edge_s, edge_c) = cx.index_edge[p.run].harmonic[self.0 as usize];
         if quadrature {
-            -t.e2 * cn / n + t.ez * p.rate2_dps * sn
+            -t.e2 * (cn - edge_c) / n + t.ez * p.rate2_dps * sn
         } else {
-            t.e2 * sn / n + t.ez * p.rate2_dps * cn
+            t.e2 * (sn - edge_s) / n + t.ez * p.rate2_dps * cn
         }
     }
 
