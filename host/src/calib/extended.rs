@@ -539,16 +539,19 @@ impl ColPlan {
     }
 }
 
-/// The sensor table's transmission error in pose `pose` at mesh angle `mesh_rad`: the effective
+/// sin and cos of n× the gear mesh's angle, index n (`Point::mesh_sin_cos`).
+type MeshHarmonics = [(f64, f64); MAX_HARMONIC_ORDER + 1];
+
+/// The sensor table's transmission error in pose `pose` at the mesh angle's harmonics `mesh`: the effective
 /// θ2 from the index-referenced `theta2_rad`, the factor on θ2' and its derivative in the mesh
 /// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ),
 /// the angle less the error the run's index pulse saw (`edge`).
 #[inline]
-fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh_rad: f64, edge: &IndexEdge) -> (f64, f64, f64) {
+fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh: &MeshHarmonics, edge: &IndexEdge) -> (f64, f64, f64) {
     let (mut th_eff, mut ripple, mut dripple) = (theta2_rad - edge.shift_rad, 1.0, 0.0);
     for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == pose) {
         let nf = f64::from(n);
-        let (sn, cn) = (nf * mesh_rad).sin_cos();
+        let (sn, cn) = mesh[n as usize];
         th_eff += (a * sn - b * cn) / nf;
         ripple += a * cn + b * sn;
         dripple += nf * (b * cn - a * sn);
@@ -585,6 +588,8 @@ pub struct Evaluator<'a> {
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
     /// Per run, the transmission error where its index pulse ties θ2 to 0.
     index_edge: Vec<IndexEdge>,
+    /// The harmonic orders of the gear mesh's angle the model and the pass use.
+    mesh_orders: Vec<usize>,
     /// The model's linear columns, split for [`Evaluator::predict`].
     lin_plan: ColPlan,
     /// The coefficients of `lin_plan.dense` on the three axes.
@@ -647,11 +652,19 @@ impl<'a> Evaluator<'a> {
                 IndexEdge::new(rk.plate_half_width_rad, rk.steady_rate_dps.to_radians(), shifts.gear_lag_s, ripple)
             })
             .collect();
+        let mut mesh_orders: Vec<usize> = shifts.ripple.iter().map(|h| h.0 as usize).collect();
+        mesh_orders.extend(cols.iter().filter_map(|c| match c {
+            Col::Shared(SharedPar { effect: Effect::TableHarmonic(n), .. }) => Some(*n as usize),
+            _ => None,
+        }));
+        mesh_orders.sort_unstable();
+        mesh_orders.dedup();
         Self {
             data,
             model,
             shifts,
             index_edge,
+            mesh_orders,
             rot_t: data
                 .kin
                 .runs
@@ -733,8 +746,8 @@ impl<'a> Evaluator<'a> {
         // against the index (1:1 gears): the index-referenced θ2, lagging by the gear lag. The
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
-        let mesh_rad = theta2 + sh.gear_lag_s * theta1_rate_rad_s;
-        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, mesh_rad, &self.index_edge[r]);
+        let mesh_sin_cos = self.mesh_harmonics(theta2 + sh.gear_lag_s * theta1_rate_rad_s);
+        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, &mesh_sin_cos, &self.index_edge[r]);
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
@@ -804,7 +817,7 @@ impl<'a> Evaluator<'a> {
             rate2_eff_dps: rate2_eff,
             dtheta_eff: ripple,
             drate_eff_dps: rate2 * dripple,
-            mesh_rad,
+            mesh_sin_cos,
             pose: rk.pose,
             d_earth,
             d_filter,
@@ -842,7 +855,7 @@ impl<'a> Evaluator<'a> {
             t_rel_s: f64::NAN,
             t_scaled: f64::NAN,
             temp_c: f64::NAN,
-            mesh_rad: f64::NAN,
+            mesh_sin_cos: [(f64::NAN, f64::NAN); MAX_HARMONIC_ORDER + 1],
             pose: self.data.kin.runs[r].pose,
             d_earth: [nan3; 3],
             d_filter: nan3,
@@ -898,7 +911,6 @@ impl<'a> Evaluator<'a> {
         p.theta2_rad = th;
         p.rate2_dps = rate2;
         p.rate2_eff_dps = rate2;
-        p.mesh_rad = th;
         p.d_earth[0] = to_package(&earth_basis((0.0, 0.0), (se, ce))[0]);
         p.theta1_rate_rad_s = rate1.to_radians();
         p.theta1_rate_dps = rate1;
@@ -937,6 +949,21 @@ impl<'a> Evaluator<'a> {
     #[inline]
     pub fn axis_rate(&self, p: &Point, a: usize) -> f64 {
         dot(&self.s_hat[a], &p.omega)
+    }
+
+    /// sin and cos of the harmonics of mesh angle `mesh_rad` that the model and the pass use
+    /// (NaN for the others): one `sincos` per order, or the recurrence of [`harmonics_of`] when
+    /// more than a few orders are in use (a candidate pass over every order).
+    #[inline]
+    fn mesh_harmonics(&self, mesh_rad: f64) -> MeshHarmonics {
+        if self.mesh_orders.len() > 4 {
+            return harmonics_of(mesh_rad);
+        }
+        let mut h = [(f64::NAN, f64::NAN); MAX_HARMONIC_ORDER + 1];
+        for &n in &self.mesh_orders {
+            h[n] = libm::sincos(n as f64 * mesh_rad);
+        }
+        h
     }
 
     /// What of the model an effect's column reads.
@@ -1116,7 +1143,8 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Every column of a knot-free `plan` on axis `a` at `p`, by position: what
-    /// [`Evaluator::fill`] gives. `common` as for [`Evaluator::fill_nonzero`].
+    /// [`Evaluator::fill`] gives. `common` holds `plan`'s axis-independent values at `p`
+    /// (`common_values`).
     fn fill_dense(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut [f64]) {
         let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
         for ((kernel, &v), x) in plan.kernels.iter().zip(common).zip(out.iter_mut()) {
@@ -1125,27 +1153,6 @@ impl<'a> Evaluator<'a> {
                 _ => v,
             };
         }
-    }
-
-    /// The non-zero columns of `plan` on axis `a` at `p`, as (position, value): what
-    /// [`Evaluator::fill`] gives, without the zeros (the knots after the rest).
-    /// `common` holds `plan`'s axis-independent values at `p` (`common_values`).
-    fn fill_nonzero(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut Vec<(usize, f64)>) {
-        out.clear();
-        // The shared columns' chain-rule factors, for the plans that have shared columns.
-        let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
-        out.extend(
-            plan.dense
-                .iter()
-                .zip(&plan.kernels)
-                .zip(common)
-                .map(|((&(j, _), kernel), &v)| match *kernel {
-                    Kernel::PerAxis(c) => (j, self.column_value(c, p, a, &t)),
-                    _ => (j, v),
-                })
-                .filter(|&(_, v)| v != 0.0),
-        );
-        self.for_each_knot(plan, p, |j, w| out.push((j, w)));
     }
 }
 
@@ -1272,25 +1279,77 @@ impl Gram {
 }
 
 /// Adds Σ xᵢ·xⱼ over `rows` (each `l` column values) to the upper triangle of the l×l `xtx`,
-/// for j < `reach[i]` ([`Reach`]): column pair by column pair, four side by side in registers,
-/// each sum taking the rows in order.
+/// for j < `reach[i]` ([`Reach`]), each sum taking the rows in order (so the sums are the same
+/// however the pairs are grouped). Four consecutive columns i with the same reach share their
+/// pass over the rows: a 4×4 tile of sums in registers, 16 independent chains, where one row of
+/// four sums waited on its own previous add (the fold was 47 % of `host calibrate`). Only the
+/// upper triangle of `xtx` is read ([`Gram::drain_rows`], [`Gram::symmetrise`]).
 fn add_row_products<'r>(xtx: &mut [f64], l: usize, reach: &[usize], rows: impl Iterator<Item = &'r [f64]> + Clone) {
-    for ii in 0..l {
-        let mut jj = ii;
+    const T: usize = 4;
+    let mut ii = 0;
+    while ii < l {
         let end = reach[ii];
-        while jj < end {
-            let w = (end - jj).min(4);
-            let mut acc = [0.0f64; 4];
-            acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
-            for row in rows.clone() {
-                let xi = row[ii];
-                for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
-                    *s += xi * xj;
-                }
+        if ii + T <= end && reach[ii..ii + T].iter().all(|&e| e == end) {
+            // The tile on the diagonal sums its lower triangle too, which nothing reads.
+            let mut jj = ii;
+            while jj + T <= end {
+                add_tile(xtx, l, ii, jj, rows.clone());
+                jj += T;
             }
-            xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
-            jj += w;
+            for k in ii..ii + T {
+                add_pairs(xtx, l, k, jj..end, rows.clone());
+            }
+            ii += T;
+        } else {
+            add_pairs(xtx, l, ii, ii..end, rows.clone());
+            ii += 1;
         }
+    }
+}
+
+/// Adds Σ xᵢ·xⱼ for i = `ii`, j in `js`, four j side by side.
+#[inline]
+fn add_pairs<'r>(
+    xtx: &mut [f64],
+    l: usize,
+    ii: usize,
+    js: std::ops::Range<usize>,
+    rows: impl Iterator<Item = &'r [f64]> + Clone,
+) {
+    let mut jj = js.start;
+    while jj < js.end {
+        let w = (js.end - jj).min(4);
+        let mut acc = [0.0f64; 4];
+        acc[..w].copy_from_slice(&xtx[ii * l + jj..ii * l + jj + w]);
+        for row in rows.clone() {
+            let xi = row[ii];
+            for (s, &xj) in acc.iter_mut().zip(&row[jj..jj + w]) {
+                *s += xi * xj;
+            }
+        }
+        xtx[ii * l + jj..ii * l + jj + w].copy_from_slice(&acc[..w]);
+        jj += w;
+    }
+}
+
+/// Adds Σ xᵢ·xⱼ for the 4×4 tile i in `ii..ii + 4`, j in `jj..jj + 4`.
+#[inline]
+fn add_tile<'r>(xtx: &mut [f64], l: usize, ii: usize, jj: usize, rows: impl Iterator<Item = &'r [f64]>) {
+    let mut acc = [[0.0f64; 4]; 4];
+    for (r, a) in acc.iter_mut().enumerate() {
+        a.copy_from_slice(&xtx[(ii + r) * l + jj..(ii + r) * l + jj + 4]);
+    }
+    for row in rows {
+        let xj: &[f64; 4] = row[jj..jj + 4].try_into().expect("four columns");
+        let xi: &[f64; 4] = row[ii..ii + 4].try_into().expect("four columns");
+        for (a, &x) in acc.iter_mut().zip(xi) {
+            for (s, &y) in a.iter_mut().zip(xj) {
+                *s += x * y;
+            }
+        }
+    }
+    for (r, a) in acc.iter().enumerate() {
+        xtx[(ii + r) * l + jj..(ii + r) * l + jj + 4].copy_from_slice(a);
     }
 }
 
@@ -1576,25 +1635,130 @@ impl Touched {
 }
 
 impl Gram {
-    /// One sample of axis `a`: its non-zero columns `nz` (index, value) and residual `e`, every
-    /// pair `reach` names into the upper triangle (`symmetrise` fills the rest). Only the
-    /// non-zero columns: the free drift's knots are 2 of dozens per sample, so the update costs
-    /// what the dense part does.
+    /// One sample of axis `a` with residual `e`: the sums of its non-zero knots `knots`
+    /// (position, value) with themselves and with the other columns (values `row`, paired
+    /// through `split`), for the pairs `reach` names; the other columns' own sums are
+    /// [`KnotSplit`]'s.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn add_sparse(&mut self, a: usize, nz: &[(usize, f64)], e: f64, reach: &Reach, touched: &mut Touched) {
+    fn add_knots(
+        &mut self,
+        a: usize,
+        knots: &[(usize, f64)],
+        (split, row): (&KnotSplit, &[f64]),
+        e: f64,
+        reach: &Reach,
+        touched: &mut Touched,
+    ) {
         let l = self.l;
         let g = &mut self.xtx[a];
-        for (k, &(ii, xi)) in nz.iter().enumerate() {
-            touched.mark(ii);
-            self.xte[a][ii] += xi * e;
-            for &(jj, xj) in &nz[k..] {
-                if reach.pairs(ii, jj) {
-                    g[ii.min(jj) * l + ii.max(jj)] += xi * xj;
+        for (k, &(jk, wk)) in knots.iter().enumerate() {
+            touched.mark(jk);
+            self.xte[a][jk] += wk * e;
+            for &(p, at) in &split.pairs[jk] {
+                g[at] += row[p] * wk;
+            }
+            for &(jj, wj) in &knots[k..] {
+                if reach.pairs(jk, jj) {
+                    g[jk.min(jj) * l + jk.max(jj)] += wk * wj;
                 }
             }
         }
-        self.ete[a] += e * e;
-        self.n[a] += 1;
+    }
+}
+
+/// The sums of a plan with free-drift knots. Its other columns ([`ColPlan::dense`]) are non-zero
+/// at nearly every sample: they are summed a block of rows at a time, as the plan without knots
+/// is ([`RowBlock`]), into a Gram of their own that a chunk's end adds to the pass's. The knots,
+/// 2 of dozens per sample, are summed sample by sample against the rest. Every sum still takes
+/// the samples in order. Summed together pair by pair through memory, sample by sample, the
+/// two were half of `host calibrate`'s time once the drift had knots.
+struct KnotSplit {
+    /// Position of each of the plan's other columns in the pass's list (increasing).
+    map: Vec<usize>,
+    /// Per position in the pass's list (empty but for knots): the other columns the knot is
+    /// summed with, as (index into `map`, index of the pair's sum in the upper triangle).
+    pairs: Vec<Vec<(usize, usize)>>,
+    blocks: [RowBlock; 3],
+    /// Their sums since the chunk began.
+    sums: Gram,
+    knots: Vec<(usize, f64)>,
+    any: bool,
+}
+
+impl KnotSplit {
+    fn new(plan: &ColPlan, reach: &Reach) -> Self {
+        let map: Vec<usize> = plan.dense.iter().map(|d| d.0).collect();
+        let own = Reach(map.iter().map(|&c| map.partition_point(|&q| q < reach.0[c])).collect());
+        let l = reach.0.len();
+        let mut pairs = vec![Vec::new(); l];
+        for &j in plan.knots.iter().flat_map(|g| g.at.iter().flatten()) {
+            pairs[j] = map
+                .iter()
+                .enumerate()
+                .filter(|&(_, &i)| reach.pairs(i, j))
+                .map(|(p, &i)| (p, i.min(j) * l + i.max(j)))
+                .collect();
+        }
+        Self {
+            blocks: std::array::from_fn(|_| RowBlock::new(&own)),
+            sums: Gram::new(map.len()),
+            map,
+            pairs,
+            knots: Vec::new(),
+            any: false,
+        }
+    }
+
+    /// Sample `p` on axis `a` with residual `e` (`common` as for [`Evaluator::fill_dense`]).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn add(
+        &mut self,
+        ev: &Evaluator,
+        (p, plan, common): (&Point, &ColPlan, &[f64]),
+        a: usize,
+        e: f64,
+        local: &mut Gram,
+        reach: &Reach,
+        touched: &mut Touched,
+    ) {
+        let mut knots = std::mem::take(&mut self.knots);
+        knots.clear();
+        ev.for_each_knot(plan, p, |j, w| knots.push((j, w)));
+        let row = self.blocks[a].push(e);
+        ev.fill_dense(p, plan, a, common, row);
+        let row = &self.blocks[a].x[self.blocks[a].x.len() - self.map.len()..];
+        local.add_knots(a, &knots, (self, row), e, reach, touched);
+        self.knots = knots;
+        if self.blocks[a].is_full() {
+            self.blocks[a].add_to(&mut self.sums, a);
+        }
+        self.any = true;
+    }
+
+    /// At a chunk's end: the other columns' sums into `local`, their rows marked `touched`.
+    fn flush(&mut self, local: &mut Gram, touched: &mut Touched) {
+        for (a, b) in self.blocks.iter_mut().enumerate() {
+            b.add_to(&mut self.sums, a);
+        }
+        if !std::mem::take(&mut self.any) {
+            return;
+        }
+        let (m, l) = (self.map.len(), local.l);
+        for a in 0..3 {
+            for (p, &i) in self.map.iter().enumerate() {
+                local.xte[a][i] += std::mem::take(&mut self.sums.xte[a][p]);
+                for (q, &j) in self.map.iter().enumerate().skip(p) {
+                    local.xtx[a][i * l + j] += std::mem::take(&mut self.sums.xtx[a][p * m + q]);
+                }
+            }
+            local.ete[a] += std::mem::take(&mut self.sums.ete[a]);
+            local.n[a] += std::mem::take(&mut self.sums.n[a]);
+        }
+        for &i in &self.map {
+            touched.mark(i);
+        }
     }
 }
 
@@ -1610,7 +1774,6 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
     let l = cols.len();
     debug_assert_eq!(reach.0.len(), l);
     let plan = ColPlan::of(cols.iter().copied());
-    let mut nz: Vec<(usize, f64)> = Vec::with_capacity(l);
     let (mut common, mut model_common) = (Vec::with_capacity(l), Vec::new());
     // Without knots every column is in `plan.dense`, in column order.
     let dense = plan.knots.is_empty();
@@ -1635,6 +1798,7 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
             let all_rows: Vec<usize> = (0..l).collect();
             let valid = &data.runs[r].valid;
             let mut cursor = Cursor::default();
+            let mut split = (!dense).then(|| KnotSplit::new(&plan, reach));
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
                 // `local` was drained: its three XᵀX are equal (zero).
@@ -1664,27 +1828,29 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
                             continue;
                         }
                         let e = f64::from(count) - pred[a];
-                        // Only the non-zero columns: the free drift's knots are 2 of dozens
-                        // per sample, so the Gram update costs what the dense part does. Each
-                        // pair goes to the upper triangle (`symmetrise` fills the rest).
+                        // Each pair goes to the upper triangle (`symmetrise` fills the rest).
                         if dense {
-                            // Every column at every sample, in column order: the same sums as
-                            // the sparse update below, without its bookkeeping, which was most
-                            // of a plain pass; the rows are summed a block at a time.
+                            // Every column at every sample, in column order, the rows summed a
+                            // block at a time.
                             ev.fill_dense(p, &plan, a, &common, block[a].push(e));
                             if block[a].is_full() {
                                 block[a].add_to(&mut local, a);
                             }
                             continue;
                         }
-                        ev.fill_nonzero(p, &plan, a, &common, &mut nz);
-                        local.add_sparse(a, &nz, e, reach, &mut touched);
+                        // With knots: the rest a block at a time, the knots sample by sample.
+                        if let Some(split) = split.as_mut() {
+                            split.add(&ev, (p, &plan, &common), a, e, &mut local, reach, &mut touched);
+                        }
                     }
                 }
                 for (a, b) in block.iter_mut().enumerate() {
                     b.add_to(&mut local, a);
                 }
                 shared.add_to(&mut local, &mut same);
+                if let Some(split) = split.as_mut() {
+                    split.flush(&mut local, &mut touched);
+                }
                 total.drain_rows(&mut local, if dense { &all_rows } else { &touched.rows });
                 touched.clear();
             }

@@ -104,7 +104,7 @@ impl Behaviour for TableHarmonic {
             return 0.0;
         }
         let n = f64::from(self.0);
-        let (sn, cn) = (n * p.mesh_rad).sin_cos();
+        let (sn, cn) = p.mesh_sin_cos[self.0 as usize];
         let (edge_s, edge_c) = cx.index_edge[p.run].harmonic[self.0 as usize];
         if quadrature {
             -t.e2 * (cn - edge_c) / n + t.ez * p.rate2_dps * sn

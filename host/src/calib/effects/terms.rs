@@ -269,9 +269,10 @@ pub struct Point {
     /// Smoothed temperature from the capture mean, °C (NaN unless a column needs it, or the
     /// evaluator is `Evaluator::new`'s).
     pub temp_c: f64,
-    /// The gear mesh's angle, rad: the transmission error's argument (index-referenced θ2 with
-    /// the gear lag).
-    pub mesh_rad: f64,
+    /// sin and cos of n× the gear mesh's angle (index-referenced θ2 with the gear lag: the
+    /// transmission error's argument), index n, for the harmonic orders the model and the pass
+    /// use (NaN for the others): each once per sample, not once per column and axis.
+    pub mesh_sin_cos: [(f64, f64); MAX_HARMONIC_ORDER + 1],
     /// The run's pose (the transmission error has a parameter set per pose).
     pub pose: Pose,
     /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame; the first is
