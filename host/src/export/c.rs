@@ -291,24 +291,50 @@ static const gyrocal_row GYROCAL_ROWS[GYROCAL_OUT_TEMP_MAX_LSB - GYROCAL_OUT_TEM
  * the range, deg/s, for every int16 reading (2^(e-19), 2^e >= the largest coefficient of a row). */
 #define GYROCAL_SPLIT_BOUND_DPS {bound:e}
 
+/* Warm-up and g-sensitivity in the rate, deg/s, package frame, of the base calibration (zero
+ * where its model has none; see "Left out" above). Warm-up: (K S)^-1 c at power-up, decaying as
+ * exp(-t/T). g-sensitivity: (K S)^-1 diag(k) G, deg/s per g along package x, y, z. */
+static const float GYROCAL_WARMUP_RATE_DPS[3] = {wu};
+#define GYROCAL_WARMUP_TAU_S {tau}f
+static const float GYROCAL_G_RATE_DPS_PER_G[3][3] = {{
+    {g0},
+    {g1},
+    {g2},
+}};
+
 {FLOAT_GUARD}
-/* The rate vector in the package frame, deg/s, from one raw reading (counts) at the OUT_TEMP
+{THERMAL_C_FUNCTIONS}"#,
+        c0 = f32_literal(t.model.out_temp_at_0c),
+        cold = f32_literal(t.temp_range_c()[0]),
+        warm = f32_literal(t.temp_range_c()[1]),
+        bound = t.bound_dps(),
+        wu = v(terms.warm_up_dps),
+        tau = f32_literal(terms.warm_up_tau_s),
+        g0 = v(g[0]),
+        g1 = v(g[1]),
+        g2 = v(g[2]),
+    );
+    o
+}
+
+/// The thermal header's functions (everything but the numbers, which precede them).
+const THERMAL_C_FUNCTIONS: &str = r#"/* The rate vector in the package frame, deg/s, from one raw reading (counts) at the OUT_TEMP
  * reading temp_raw, as the unevaluated sum hi[i] + lo[i] of two floats (|lo| <= half an ulp of
  * hi): within GYROCAL_SPLIT_BOUND_DPS of `host apply --temp-c` at that reading's die temperature
  * over the whole int16 range. Returns GYROCAL_OK, or GYROCAL_ERR_OUT_OF_RANGE with NaN in hi and
  * lo when temp_raw is outside GYROCAL_OUT_TEMP_MIN_LSB..GYROCAL_OUT_TEMP_MAX_LSB. */
 static inline int gyrocal_apply_split(const int16_t raw[3], int8_t temp_raw, float hi[3], float lo[3])
-{{
+{
     const float x = (float)raw[0], y = (float)raw[1], z = (float)raw[2];
     const int reading = temp_raw;
     const gyrocal_row *r;
     int i;
-    if (reading < GYROCAL_OUT_TEMP_MIN_LSB || reading > GYROCAL_OUT_TEMP_MAX_LSB) {{
+    if (reading < GYROCAL_OUT_TEMP_MIN_LSB || reading > GYROCAL_OUT_TEMP_MAX_LSB) {
         for (i = 0; i < 3; i++) hi[i] = lo[i] = NAN;
         return GYROCAL_ERR_OUT_OF_RANGE;
-    }}
+    }
     r = &GYROCAL_ROWS[reading - GYROCAL_OUT_TEMP_MIN_LSB];
-    for (i = 0; i < 3; i++) {{
+    for (i = 0; i < 3; i++) {
         const float *h = r->m_inv_hi[i], *m = r->m_inv_mid[i], *l = r->m_inv_lo[i];
         /* Exact (multiples of the row's grid below 2^24 steps), in any order, with or without FMA. */
         const float a = h[0] * x + h[1] * y + h[2] * z - r->offset_rate_hi[i];
@@ -322,28 +348,17 @@ static inline int gyrocal_apply_split(const int16_t raw[3], int8_t temp_raw, flo
         hi[i] = s + u;
         bv = hi[i] - s;
         lo[i] = (s - (hi[i] - bv)) + (u - bv);
-    }}
+    }
     return GYROCAL_OK;
-}}
+}
 
 /* The rate vector as floats, deg/s: hi of gyrocal_apply_split, its sum rounded once (half a float
  * ulp: 7.6e-6 deg/s below 256 deg/s, 6.1e-5 below 2048 deg/s). Returns as gyrocal_apply_split. */
 static inline int gyrocal_apply(const int16_t raw[3], int8_t temp_raw, float rate_dps[3])
-{{
+{
     float lo[3];
     return gyrocal_apply_split(raw, temp_raw, rate_dps, lo);
-}}
-
-/* Warm-up and g-sensitivity in the rate, deg/s, package frame, of the base calibration (zero
- * where its model has none; see "Left out" above). Warm-up: (K S)^-1 c at power-up, decaying as
- * exp(-t/T). g-sensitivity: (K S)^-1 diag(k) G, deg/s per g along package x, y, z. */
-static const float GYROCAL_WARMUP_RATE_DPS[3] = {wu};
-#define GYROCAL_WARMUP_TAU_S {tau}f
-static const float GYROCAL_G_RATE_DPS_PER_G[3][3] = {{
-    {g0},
-    {g1},
-    {g2},
-}};
+}
 
 /* gyrocal_apply with the warm-up and the g-sensitivity removed (the thermal model is the
  * temperature dependence). t_s: seconds since power-up. specific_force_g: what an accelerometer
@@ -352,36 +367,24 @@ static const float GYROCAL_G_RATE_DPS_PER_G[3][3] = {{
  * Export::apply_thermal_with. Returns as gyrocal_apply_split (NaN rates outside the range). */
 static inline int gyrocal_apply_with(const int16_t raw[3], int8_t temp_raw, float t_s,
                                      const float *specific_force_g, float rate_dps[3])
-{{
+{
     float hi[3], lo[3];
     const float decay = expf(-t_s / GYROCAL_WARMUP_TAU_S);
     const int status = gyrocal_apply_split(raw, temp_raw, hi, lo);
     int i;
-    for (i = 0; i < 3; i++) {{
+    for (i = 0; i < 3; i++) {
         float terms = GYROCAL_WARMUP_RATE_DPS[i] * decay;
-        if (specific_force_g) {{
+        if (specific_force_g) {
             const float *g = GYROCAL_G_RATE_DPS_PER_G[i];
             terms += g[0] * specific_force_g[0] + g[1] * specific_force_g[1] + g[2] * specific_force_g[2];
-        }}
+        }
         rate_dps[i] = hi[i] + (lo[i] - terms);
-    }}
+    }
     return status;
-}}
+}
 
 #endif /* GYROCAL_H */
-"#,
-        c0 = f32_literal(t.model.out_temp_at_0c),
-        cold = f32_literal(t.temp_range_c()[0]),
-        warm = f32_literal(t.temp_range_c()[1]),
-        bound = t.bound_dps(),
-        wu = v(terms.warm_up_dps),
-        tau = f32_literal(terms.warm_up_tau_s),
-        g0 = v(g[0]),
-        g1 = v(g[1]),
-        g2 = v(g[2]),
-    );
-    o
-}
+"#;
 
 /// One row of the C table, with its reading and die temperature as a comment.
 fn c_row(r: &ThermalRow) -> String {
