@@ -944,14 +944,51 @@ fn calibrate_thermal(
         }
         setpoints.push(thermal::setpoint_from_files(setpoint_c, &sub_out, &files)?);
     }
+    // Every setpoint's captures: the thermal model's record names them all.
+    let captures: Vec<String> = setpoints
+        .iter()
+        .filter_map(|(_, v)| Provenance::from_calibration_json(&v.to_string()))
+        .flat_map(|p| p.captures.into_iter().map(|c| c.sha256))
+        .collect();
     let model = thermal::write_model(out_dir, setpoints)?;
     note(&format!(
         "wrote {} with the thermal model and {}",
         out_dir.join("calibration.json").display(),
         out_dir.join(thermal::THERMAL_REPORT).display()
     ));
+    let recorded = match record_to.db {
+        None => {
+            note("thermal model not recorded (--no-db)");
+            Ok(())
+        }
+        Some(db) => record_thermal(db, out_dir, &captures, status == ExitCode::SUCCESS)
+            .map(|id| note(&format!("thermal model recorded as {id} in {db}"))),
+    };
     files::stdout(&present::text(&model))?;
+    recorded?;
     Ok(status)
+}
+
+/// Records a thermal calibration (`out_dir/calibration.json`: the base setpoint's calibration
+/// with the thermal model) with every setpoint's captures; returns its id.
+fn record_thermal(
+    db: &records::DbSpec,
+    out_dir: &Path,
+    captures: &[String],
+    every_setpoint_passed: bool,
+) -> Result<i64> {
+    let path = out_dir.join("calibration.json");
+    let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    let report: calib::CalReport =
+        serde_json::from_str(&text).with_context(|| format!("{} is not a calibration report", path.display()))?;
+    let prov =
+        Provenance::from_calibration_json(&text).with_context(|| format!("{} holds no provenance", path.display()))?;
+    let verdict = if every_setpoint_passed { "at noise floor" } else { "a setpoint did not pass (see its record)" };
+    let mut rec = records::record_from(&report, &prov, verdict, text);
+    rec.captures_sha256 = captures.join(",");
+    records::store_record(db, &rec).with_context(|| {
+        format!("the thermal calibration is saved in {} but was not recorded in {db}", out_dir.display())
+    })
 }
 
 /// Refuses captures already in a record of `db` (same SHA-256), naming the record: the same

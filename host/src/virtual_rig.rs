@@ -3,7 +3,7 @@
 //! tested, without hardware.
 //!
 //! ```text
-//! host virtual-rig [--speedup N | --lockstep] [--ideal-gyro] [--noiseless-gyro] [--duration SECONDS]
+//! host virtual-rig [--speedup N | --lockstep [--chamber]] [--ideal-gyro] [--noiseless-gyro] [--duration SECONDS]
 //!                  [--loss P] [--garbage-every S] [--drop KIND:N]... [--seed N] [--watchdog-reset]
 //! ```
 //!
@@ -13,6 +13,8 @@
 //! rig sends (`Hello`, `Ack`, `RunStarted`, `RunStopped`, `Sample`, `Motor`, `Index`,
 //! `Counters`, `Temperature`, `Fault`), repeatable. `--seed` fixes the randomness (default 1).
 //! `--watchdog-reset` starts the rig as after a watchdog reset (it reports `WatchdogReset`).
+//! `--chamber` (lockstep) puts the rig in a simulated thermal chamber ([`VirtualChamber`]), set
+//! by `chamber <setpoint_c>` lines on standard input between the `step` lines.
 //! Every command but `Heartbeat` that reaches the rig intact is logged on standard error,
 //! `virtual rig: received Stop (seq 12) at 14.210 s` (simulated time), and so is every `Fault`
 //! and `RunStopped` the rig sends, before the line may lose it (`virtual rig: sent Fault
@@ -90,6 +92,11 @@ pub struct Options {
     /// Start as after a watchdog reset (the rig reports WatchdogReset).
     #[arg(long)]
     pub watchdog_reset: bool,
+    /// A thermal chamber around the rig (lockstep only): the die starts at the lab's 25 °C and
+    /// follows the chamber set by `chamber <setpoint_c>` lines on standard input; the gyro's
+    /// offset, sensitivity, direction and OUT_TEMP follow the die (`VirtualChamber`).
+    #[arg(long, requires = "lockstep")]
+    pub chamber: bool,
 }
 
 fn positive(s: &str) -> Result<f64, String> {
@@ -123,6 +130,72 @@ pub const VIRTUAL_GYRO_KS: [[f64; 3]; 3] =
 /// The virtual rig's zero-rate offsets, °/s.
 pub const VIRTUAL_GYRO_OFFSET_DPS: [f64; 3] = [1.2, -0.8, 2.5];
 
+/// OUT_TEMP at a die of 0 °C in the virtual chamber, LSB: the register's offset is not specified
+/// (L3G4200D datasheet Table 5, −1 LSB/°C); any value inside the simulator's 20…60 does.
+pub const CHAMBER_OUT_TEMP_AT_0C: f64 = 40.0;
+
+/// The lab's temperature, where the virtual chamber's die starts, °C (the datasheet's 25 °C).
+pub const CHAMBER_START_C: f64 = 25.0;
+
+/// `--chamber`: the die follows the chamber through the simulator's air ramp and first-order
+/// lag (`sim::thermal::ChamberStep`, 2 °C/min and 180 s), and the gyro's offset, sensitivity and
+/// direction follow the die with the simulator's datasheet-sized tempcos
+/// (`sim::thermal::TemperatureDependence::default`, about the die's 25 °C values).
+#[derive(Debug, Clone)]
+pub struct VirtualChamber {
+    step: crate::sim::thermal::ChamberStep,
+    /// When the chamber was last set, ns of rig time.
+    set_at_ns: u64,
+    dependence: crate::sim::thermal::TemperatureDependence,
+    /// The gyro at 25 °C: rows k_i s_iᵀ and offsets, °/s.
+    ks_25c: [[f64; 3]; 3],
+    offset_25c_dps: [f64; 3],
+}
+
+impl VirtualChamber {
+    /// A chamber at the lab's temperature around a gyro whose 25 °C values are the plant's.
+    pub fn new(plant: &Plant) -> Self {
+        Self {
+            step: crate::sim::thermal::ChamberStep::new(0, CHAMBER_START_C, CHAMBER_START_C),
+            set_at_ns: 0,
+            dependence: crate::sim::thermal::TemperatureDependence::default(),
+            ks_25c: plant.sensor_ks,
+            offset_25c_dps: plant.sensor_offset_dps,
+        }
+    }
+
+    /// The die temperature at `now_ns`, °C.
+    pub fn die_c(&self, now_ns: u64) -> f64 {
+        self.step.die_c(now_ns.saturating_sub(self.set_at_ns) as f64 * 1e-9)
+    }
+
+    /// Sets the chamber at `now_ns`: its air ramps from the die's temperature then (the air and
+    /// the die are taken as equal at that moment: exact once settled).
+    pub fn set(&mut self, setpoint_c: f64, now_ns: u64) {
+        let from_c = self.die_c(now_ns);
+        self.step = crate::sim::thermal::ChamberStep::new(self.step.index + 1, from_c, setpoint_c);
+        self.set_at_ns = now_ns;
+    }
+
+    /// The gyro at the die's temperature now: OUT_TEMP, offsets and K S of the plant.
+    pub fn apply(&self, now_ns: u64, plant: &mut Plant) {
+        use nalgebra::Vector3;
+        let die_c = self.die_c(now_ns);
+        let out_temp = (CHAMBER_OUT_TEMP_AT_0C - die_c).round().clamp(f64::from(i8::MIN), f64::from(i8::MAX));
+        plant.temp_raw = out_temp as i8;
+        let d = &self.dependence;
+        let offset = d.offset_change_dps(die_c);
+        let factor = d.sensitivity_factor(die_c);
+        for i in 0..3 {
+            let row = Vector3::from(self.ks_25c[i]);
+            let k = row.norm();
+            let s = d.direction(i, &(row / k), die_c);
+            plant.sensor_ks[i] = (s * k * factor[i]).into();
+            plant.sensor_offset_dps[i] = self.offset_25c_dps[i] + offset[i];
+        }
+    }
+}
+
 /// Serves the virtual rig on a new pty until killed, `--duration` is over, or (lockstep)
 /// standard input ends. Prints the pty path as the first line of standard output.
 pub fn serve(opts: &Options) -> Result<()> {
@@ -138,6 +211,7 @@ pub fn serve(opts: &Options) -> Result<()> {
         eprintln!("virtual gyro: K S = {VIRTUAL_GYRO_KS:?}, offset = {VIRTUAL_GYRO_OFFSET_DPS:?} °/s");
     }
     let chip = if opts.noiseless_gyro { L3g4200dModel::new() } else { L3g4200dModel::with_noise(opts.seed) };
+    let chamber = opts.chamber.then(|| VirtualChamber::new(&plant));
     let vr = VirtualRig::restarted(plant, chip, 0, opts.watchdog_reset);
     println!("{path}");
     std::io::stdout().flush().ok();
@@ -162,6 +236,7 @@ pub fn serve(opts: &Options) -> Result<()> {
         mounted_tag: None,
         line: Line::new(line),
         commands: StreamDecoder::new(),
+        chamber,
     };
     if opts.lockstep {
         lockstep(&mut server)?;
@@ -203,6 +278,8 @@ struct Server {
     line: Line,
     /// The host's frames as the rig receives them, for the command log.
     commands: StreamDecoder,
+    /// `--chamber`: the thermal chamber around the rig.
+    chamber: Option<VirtualChamber>,
 }
 
 impl Server {
@@ -228,6 +305,9 @@ impl Server {
     /// Runs one USB-like poll period of simulated time, or up to `limit_ns` if sooner.
     fn run_chunk(&mut self, limit_ns: u64) {
         let next = (self.vr.now_ns() + CHUNK_NS).min(limit_ns);
+        if let Some(c) = &self.chamber {
+            c.apply(self.vr.now_ns(), &mut self.vr.plant);
+        }
         self.vr.run_until(next, &mut self.wire, |_| {});
         let tag = self.vr.rig.run_tag();
         if tag != self.mounted_tag {
@@ -313,6 +393,10 @@ fn lockstep(server: &mut Server) -> Result<()> {
             Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
         };
         let mut words = line.split_whitespace();
+        if let Some(rest) = line.strip_prefix("chamber ") {
+            set_chamber(server, rest)?;
+            continue;
+        }
         let (Some("step"), Some(Ok(ns)), Some(Ok(bytes)), None) =
             (words.next(), words.next().map(str::parse::<u64>), words.next().map(str::parse::<u64>), words.next())
         else {
@@ -337,6 +421,21 @@ fn lockstep(server: &mut Server) -> Result<()> {
             return Ok(());
         }
     }
+}
+
+/// A `chamber <setpoint_c>` line: the chamber set now (and logged, as the commands are).
+fn set_chamber(server: &mut Server, setpoint: &str) -> Result<()> {
+    let now_ns = server.vr.now_ns();
+    let Some(c) = server.chamber.as_mut() else { bail!("a `chamber` line needs --chamber") };
+    let setpoint_c: f64 = setpoint
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite())
+        .with_context(|| format!("expected `chamber <setpoint_c>` on standard input, got `chamber {setpoint}`"))?;
+    c.set(setpoint_c, now_ns);
+    eprintln!("virtual rig: chamber set to {setpoint_c} °C at {:.3} s", now_ns as f64 * 1e-9);
+    Ok(())
 }
 
 /// Frame kinds `--drop` knows, as the rig's messages are named.

@@ -31,8 +31,10 @@ fn simulate_calibrate_and_apply_a_thermal_session() {
     assert_eq!(manifest["setpoints"][0]["setpoint_c"], -20.0);
     assert!(manifest["setpoints"][4]["settle_s"].as_f64().unwrap() > 1200.0, "a full settle window at least");
 
-    let o = host(&["calibrate", "--replay", sim_s, "--out-dir", out_s, "--no-db"]);
+    let db = format!("sqlite:{}", dir.path().join("records.sqlite").display());
+    let o = host(&["calibrate", "--replay", sim_s, "--out-dir", out_s, "--db", &db, "--sensor", "G-27"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("thermal model recorded as 6 in sqlite:"), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("Thermal model: 5 setpoints"), "{text}");
     assert_eq!(text.lines().filter(|l| l.contains(" held out ")).count(), 60, "{text}");
@@ -63,11 +65,92 @@ fn simulate_calibrate_and_apply_a_thermal_session() {
         stderr(&o)
     );
     assert_eq!(stderr(&o).lines().count(), 1);
+    records_and_exports_hold_the_model(&db, cal_s, &cal);
     // A calibration without a thermal model says so.
     let plain = out.join("sp1_m20c").join("calibration.json");
     let o = host(&["apply", "--cal", plain.to_str().unwrap(), "--counts", "1,2,3", "--temp-c", "0"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("holds no thermal model"), "{}", stderr(&o));
+}
+
+/// The thermal calibration's record (after the five setpoints' own) holds the model: `records
+/// show` prints its range and coefficients, JSON the same numbers as `calibration.json`, and
+/// compared with the 25 °C setpoint's record it has coefficients the other has not; `export`
+/// writes the C and Rust forms with the OUT_TEMP input and the range.
+fn records_and_exports_hold_the_model(db: &str, cal_path: &str, cal: &serde_json::Value) {
+    let o = host(&["records", "--db", db, "list"]);
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 7, "{}", String::from_utf8_lossy(&o.stdout));
+    let o = host(&["records", "--db", db, "show", "6"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("thermal model: setpoints -20, 0, 25, 50, 70 °C; holds for die"), "{text}");
+    assert!(text.contains("thermal_offset_x_c1"), "{text}");
+    let o = host(&["records", "--db", db, "--format", "json", "show", "6"]);
+    let shown: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let slope =
+        shown["thermal"]["coefficients"].as_array().unwrap().iter().find(|c| c["name"] == "thermal_offset_x_c1");
+    let x_offset = &cal["thermal"]["curves"][0];
+    assert_eq!(x_offset["quantity"], "offset_counts");
+    assert_eq!(slope.unwrap()["value"], x_offset["coef"][1]["value"]);
+    assert_eq!(shown["thermal"]["range_c"], cal["thermal"]["range_c"]);
+    let o = host(&["records", "--db", db, "compare", "3", "6"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("only B holds a thermal model"), "{text}");
+    let o = host(&["export", "--cal", cal_path, "--format", "c"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let header = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        header.contains("static inline int gyrocal_apply(const int16_t raw[3], int8_t temp_raw, float rate_dps[3])")
+    );
+    assert!(header.contains("Valid for temp_raw "), "{header}");
+    c_header_agrees_with_apply(&header, cal_path, cal["thermal"]["out_temp_at_0c"].as_f64().unwrap());
+    let o = host(&["export", "--cal", cal_path, "--format", "rust"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("pub fn apply(&self, raw: [i16; 3], temp_raw: i8)"));
+}
+
+/// The exported header, compiled, at the OUT_TEMP reading of a 40 °C die gives what `host apply
+/// --temp-c` prints at that reading's die temperature (`out_temp_at_0c − reading`), to the
+/// printed 1e-4 °/s; at a reading beyond the range it returns the error code.
+fn c_header_agrees_with_apply(header: &str, cal_path: &str, out_temp_at_0c: f64) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("gyrocal.h"), header).unwrap();
+    let main = r#"#include <stdio.h>
+#include <stdlib.h>
+#include "gyrocal.h"
+int main(int argc, char **argv) {
+    const int16_t raw[3] = {5700, -2850, 8550};
+    float w[3];
+    const int status = gyrocal_apply(raw, (int8_t)atoi(argv[1]), w);
+    printf("%d %.6f %.6f %.6f\n", status, w[0], w[1], w[2]);
+    return 0;
+}
+"#;
+    std::fs::write(dir.path().join("main.c"), main).unwrap();
+    let exe = dir.path().join("apply");
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let o = std::process::Command::new(&cc)
+        .args(["-std=c99", "-Wall", "-Werror", "-O2", "-o"])
+        .arg(&exe)
+        .arg(dir.path().join("main.c"))
+        .arg("-lm")
+        .output()
+        .expect("the C compiler runs");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = |reading: i32| -> Vec<f64> {
+        let o = std::process::Command::new(&exe).arg(reading.to_string()).output().unwrap();
+        String::from_utf8_lossy(&o.stdout).split_whitespace().map(|v| v.parse::<f64>().unwrap_or(f64::NAN)).collect()
+    };
+    let reading = (out_temp_at_0c - 40.0).round() as i32;
+    let got = run(reading);
+    let temp_c = format!("{}", out_temp_at_0c - f64::from(reading));
+    let o = host(&["apply", "--cal", cal_path, "--counts", "5700,-2850,8550", "--temp-c", &temp_c]);
+    let want: Vec<f64> = String::from_utf8_lossy(&o.stdout).trim().split(',').map(|v| v.parse().unwrap()).collect();
+    assert_eq!(got[0], 0.0);
+    for i in 0..3 {
+        assert!((got[i + 1] - want[i]).abs() <= 1e-4, "axis {i}: C {} vs host apply {}", got[i + 1], want[i]);
+    }
+    let beyond = run((out_temp_at_0c - 90.0).round() as i32);
+    assert_eq!(beyond[0], 1.0, "a 90 °C die is outside −20…70 °C: {beyond:?}");
+    assert!(beyond[1].is_nan());
 }
 
 #[test]

@@ -6,6 +6,9 @@ mod c;
 mod kalibr;
 mod rust;
 mod table;
+mod temperature;
+
+pub use temperature::{ThermalRow, ThermalTable};
 
 use crate::calib::{CalReport, Calibration};
 use crate::provenance::Provenance;
@@ -158,6 +161,9 @@ pub struct Export {
     /// The offset drift, when the calibration's model holds one (`calibration.json`'s
     /// `drift_model`).
     pub drift: Option<DriftModel>,
+    /// The thermal model, when the calibration is a thermal session's (`calibration.json`'s
+    /// `thermal`): the C and Rust exports then take the OUT_TEMP reading as an input.
+    pub thermal: Option<crate::thermal::ThermalModel>,
 }
 
 /// 1-σ uncertainties from the report's covariance diagonal.
@@ -187,6 +193,10 @@ impl Export {
             Some(d) => {
                 Some(serde_json::from_value(d).with_context(|| format!("{DRIFT_MODEL_KEY} does not read back"))?)
             }
+        };
+        let thermal = match field(crate::thermal::CALIBRATION_KEY) {
+            None => None,
+            Some(t) => Some(serde_json::from_value(t).context("its thermal section is not a thermal model")?),
         };
         let (calibration, gyro, sigma) = match serde_json::from_str::<CalReport>(text) {
             Ok(report) => {
@@ -220,6 +230,7 @@ impl Export {
             noise,
             g_sensitivity_dps_per_g,
             drift,
+            thermal,
         })
     }
 
@@ -258,29 +269,66 @@ impl Export {
     /// reference the exports' `apply_with` is held to. `v = K S ω + v_off + d + diag(k) G f`,
     /// so `ω = (K S)⁻¹ (v − v_off) − (K S)⁻¹ d − (K S)⁻¹ diag(k) G f`.
     pub fn apply_with(&self, raw: [i16; 3], inputs: &Inputs) -> [f64; 3] {
-        let t = self.rate_terms();
         let base = self.calibration.apply(raw);
+        let terms = self.terms_dps(inputs, true);
+        std::array::from_fn(|i| base[i] - terms[i])
+    }
+
+    /// [`Self::apply_with`] for a thermal calibration at an OUT_TEMP reading: the thermal model's
+    /// rate there ([`ThermalTable::apply`], `host apply --temp-c`) less the warm-up and the
+    /// g-sensitivity terms of the base calibration ([`RateTerms`]); the session's linear
+    /// temperature drift is not applied, the model's offset curves being the temperature
+    /// dependence. The reference of the thermal exports' `gyrocal_apply_with`.
+    pub fn apply_thermal_with(
+        &self,
+        table: &ThermalTable,
+        raw: [i16; 3],
+        out_temp_lsb: i8,
+        inputs: &Inputs,
+    ) -> Result<[f64; 3], crate::thermal::ThermalError> {
+        let base = table.apply(raw, out_temp_lsb)?;
+        let terms = self.terms_dps(inputs, false);
+        Ok(std::array::from_fn(|i| base[i] - terms[i]))
+    }
+
+    /// What the drift (its temperature part only with `temperature_drift`) and the
+    /// g-sensitivity add to the rate, °/s.
+    fn terms_dps(&self, inputs: &Inputs, temperature_drift: bool) -> [f64; 3] {
+        let t = self.rate_terms();
         let decay = (-inputs.t_s / t.warm_up_tau_s).exp();
-        let dtemp_c = (inputs.out_temp_lsb - t.reference_out_temp_lsb) / OUT_TEMP_LSB_PER_C;
+        let dtemp_c =
+            if temperature_drift { (inputs.out_temp_lsb - t.reference_out_temp_lsb) / OUT_TEMP_LSB_PER_C } else { 0.0 };
         let f = inputs.specific_force_g.unwrap_or([0.0; 3]);
         std::array::from_fn(|i| {
             let g: f64 = (0..3).map(|j| t.g_dps_per_g[i][j] * f[j]).sum();
-            base[i] - t.warm_up_dps[i] * decay - t.temperature_dps_per_c[i] * dtemp_c - g
+            t.warm_up_dps[i] * decay + t.temperature_dps_per_c[i] * dtemp_c + g
         })
+    }
+
+    /// The thermal model tabulated for the C and Rust exports, when the calibration has one.
+    pub fn thermal_table(&self) -> Result<Option<ThermalTable>> {
+        self.thermal.clone().map(|m| ThermalTable::of(m, MAX_OFFSET_COUNTS)).transpose()
     }
 
     /// What the C and Rust exports leave out, one line each (ASCII), for their header.
     pub fn left_out(&self) -> Vec<String> {
         let mut out = Vec::new();
+        let thermal = self.thermal.is_some();
         match &self.drift {
             None => out.push("offset drift: none in this calibration's model (the drift terms are zero)".into()),
             Some(DriftModel::SessionOnly { model, offsets_are }) => out.push(format!(
                 "offset drift: '{model}' describes the calibration session's own time span only and is not \
                  exported (the drift terms are zero); the offsets are those at {offsets_are}"
             )),
+            Some(DriftModel::WarmUp { .. }) if thermal => {}
             Some(DriftModel::WarmUp { .. }) => {
                 out.push("offset drift with die temperature (this calibration's drift model is the warm-up)".into())
             }
+            Some(DriftModel::Temperature { .. }) if thermal => out.push(
+                "the base session's linear offset drift with die temperature: the thermal model's offset curves \
+                 replace it"
+                    .into(),
+            ),
             Some(DriftModel::Temperature { .. }) => {
                 out.push("offset warm-up in time (this calibration's drift model is the die temperature)".into())
             }
@@ -288,7 +336,16 @@ impl Export {
         if self.g_sensitivity_dps_per_g.is_none() {
             out.push("g-sensitivity: not in this calibration's model (its terms are zero)".into());
         }
-        out.push("sensitivity and direction changing with temperature, non-linearity: not modelled".into());
+        if thermal {
+            out.push(
+                "the change with temperature of the warm-up and g-sensitivity terms: they are the base session's \
+                 (the setpoint nearest 25 °C)"
+                    .into(),
+            );
+            out.push("non-linearity: not modelled".into());
+        } else {
+            out.push("sensitivity and direction changing with temperature, non-linearity: not modelled".into());
+        }
         out.push("uncertainties: 1-sigma in calibration.json, k = 2 on report.html's certificate".into());
         out.push("noise figures (ARW, bias instability, RRW): calibration.json and report.html".into());
         out.into_iter().map(|l| sanitise(&l)).collect()
@@ -305,9 +362,7 @@ impl Export {
     /// The split of each row of `(K S)⁻¹` and of `(K S)⁻¹ v_off` that lets single precision
     /// reproduce the double-precision correction ([`SplitRow`]).
     pub fn split(&self) -> SplitRows {
-        let b = self.offset_rate_dps();
-        let rows = std::array::from_fn(|i| split_row(self.m_inv_dps_per_count[i], b[i]));
-        SplitRows { rows }
+        split_rows(self.m_inv_dps_per_count, self.calibration.offset_counts)
     }
 
     /// Sensor serial, or `unknown`.
@@ -334,8 +389,14 @@ impl Export {
             }
         }
         Ok(match format {
-            Format::C => c::render(self),
-            Format::Rust => rust::render(self),
+            Format::C => match self.thermal_table()? {
+                None => c::render(self),
+                Some(table) => c::render_thermal(self, &table),
+            },
+            Format::Rust => match self.thermal_table()? {
+                None => rust::render(self),
+                Some(table) => rust::render_thermal(self, &table),
+            },
             Format::Kalibr => kalibr::render(self),
             Format::Json => table::render_json(self),
             Format::Csv => table::render_csv(self),
@@ -400,6 +461,13 @@ const SPLIT_BITS: i32 = 7;
 /// < 2²⁴ steps). The L3G4200D's zero-rate level is ±75 °/s at most (datasheet, ±2000 °/s),
 /// ≈ 1070 counts; an offset near this limit is a broken sensor, not a calibration.
 pub const MAX_OFFSET_COUNTS: f64 = 8192.0;
+
+/// The split of `(K S)⁻¹` and of `(K S)⁻¹ v_off` for single precision ([`SplitRow`]).
+pub fn split_rows(m_inv_dps_per_count: [[f64; 3]; 3], offset_counts: [f64; 3]) -> SplitRows {
+    let inv = Matrix3::from_fn(|i, j| m_inv_dps_per_count[i][j]);
+    let b: [f64; 3] = (inv * Vector3::from(offset_counts)).into();
+    SplitRows { rows: std::array::from_fn(|i| split_row(m_inv_dps_per_count[i], b[i])) }
+}
 
 fn split_row(m: [f64; 3], b: f64) -> SplitRow {
     let largest = m.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -474,3 +542,6 @@ pub(crate) fn sanitise(s: &str) -> String {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod thermal_tests;

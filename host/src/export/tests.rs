@@ -25,6 +25,11 @@ fn wide_export() -> Export {
 }
 
 fn export_of(fs: FullScale, m: [[f64; 3]; 3], off: [f64; 3]) -> Export {
+    Export::from_json(&export_json(fs, m, off)).unwrap()
+}
+
+/// `calibrate`'s JSON of a calibration with provenance (sensor G-0042, ±`fs`, ODR 800 Hz).
+pub(super) fn export_json(fs: FullScale, m: [[f64; 3]; 3], off: [f64; 3]) -> String {
     let cal = Calibration::new("linear: v = K S ω + v_off".into(), fs, m, off).unwrap();
     let prov = Provenance {
         identity: Identity {
@@ -40,13 +45,12 @@ fn export_of(fs: FullScale, m: [[f64; 3]; 3], off: [f64; 3]) -> Export {
         captures: vec![CaptureDigest { file: "a.cap".into(), bytes: 3, sha256: "ab".into() }],
         die_temperature: None,
     };
-    let text = prov.attach(serde_json::from_str(&cal.to_json()).unwrap()).to_string();
-    Export::from_json(&text).unwrap()
+    prov.attach(serde_json::from_str(&cal.to_json()).unwrap()).to_string()
 }
 
 /// Raw readings over the whole int16 range: every value of each axis in turn (65 536 × 3), the
 /// other two axes drawn uniformly from all of int16, and the eight corners. Fixed seed.
-fn readings() -> Vec<[i16; 3]> {
+pub(super) fn readings() -> Vec<[i16; 3]> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
     let mut v: Vec<[i16; 3]> =
         (0..8).map(|c| std::array::from_fn(|i| if c >> i & 1 == 1 { i16::MAX } else { i16::MIN })).collect();
@@ -61,7 +65,7 @@ fn readings() -> Vec<[i16; 3]> {
 }
 
 /// A fresh directory for one test, removed when dropped (also when the test fails).
-fn scratch(name: &str) -> tempfile::TempDir {
+pub(super) fn scratch(name: &str) -> tempfile::TempDir {
     tempfile::Builder::new().prefix(&format!("host-export-{name}-")).tempdir().expect("temporary directory")
 }
 
@@ -96,7 +100,7 @@ fn run_on_readings(exe: &Path, raw: &[[i16; 3]]) -> Vec<Output> {
 }
 
 /// Half an f32 ulp of `v`, °/s.
-fn half_ulp(v: f32) -> f64 {
+pub(super) fn half_ulp(v: f32) -> f64 {
     f64::from(f32::EPSILON) / 2.0 * 2f64.powf(f64::from(v.abs()).log2().floor())
 }
 
@@ -130,8 +134,8 @@ fn compile_c(e: &Export, name: &str) -> (tempfile::TempDir, PathBuf, String) {
     let dir = scratch(name);
     let header = e.render(Format::C).unwrap();
     std::fs::write(dir.path().join("gyrocal.h"), &header).unwrap();
-    std::fs::write(
-        dir.path().join("main.c"),
+    let exe = cc(
+        dir.path(),
         r#"#include <stdio.h>
 #include <string.h>
 #include "gyrocal.h"
@@ -150,20 +154,27 @@ int main(void) {
     return 0;
 }
 "#,
-    )
-    .unwrap();
-    let exe = dir.path().join("apply");
+    );
+    (dir, exe, header)
+}
+
+/// Writes `main_c` into `dir` beside its `gyrocal.h`, compiles it strictly (C99, pedantic, every
+/// warning an error) and returns the program.
+pub(super) fn cc(dir: &Path, main_c: &str) -> PathBuf {
+    std::fs::write(dir.join("main.c"), main_c).unwrap();
+    let exe = dir.join("apply");
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
     // -ffp-contract=fast lets the compiler fuse multiply-adds (as GCC does by default outside ISO
     // mode, and on a Cortex-M4F): the exact sums must not care.
     let o = Command::new(&cc)
         .args(["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-ffp-contract=fast", "-o"])
         .arg(&exe)
-        .arg(dir.path().join("main.c"))
+        .arg(dir.join("main.c"))
+        .arg("-lm")
         .output()
         .unwrap_or_else(|err| panic!("cannot run the C compiler {cc:?}: {err}"));
     assert!(o.status.success(), "cc failed:\n{}", String::from_utf8_lossy(&o.stderr));
-    (dir, exe, header)
+    exe
 }
 
 #[test]
@@ -429,7 +440,7 @@ fn exports_with_terms() -> [Export; 2] {
 
 /// The inputs of reading `i`: t over the first 10 min, OUT_TEMP over ±20 LSB round the
 /// reference, the specific force turning on a cone (1 g) and absent every fifth reading.
-fn inputs_of(i: usize) -> Inputs {
+pub(super) fn inputs_of(i: usize) -> Inputs {
     let a = i as f64 * 0.37;
     Inputs {
         t_s: (i % 600) as f64 + 0.25,
@@ -644,7 +655,7 @@ fn the_drift_model_reads_back_from_calibration_json() {
 
 /// Compiles `dir/gyrocal.rs` alone as a `no_std` library that denies warnings (metadata only),
 /// and returns the `rustc` it used.
-fn builds_without_std(dir: &std::path::Path) -> String {
+pub(super) fn builds_without_std(dir: &std::path::Path) -> String {
     let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
     std::fs::write(dir.join("lib.rs"), "#![no_std]\n#![deny(warnings)]\ninclude!(\"gyrocal.rs\");\n").unwrap();
     let o = Command::new(&rustc)

@@ -15,7 +15,7 @@ use crate::provenance::Provenance;
 use anyhow::{Context, Result};
 use db::Conn;
 use std::path::PathBuf;
-pub use store::{NoiseRow, Param, Record};
+pub use store::{NoiseRow, Param, Record, ThermalRecord};
 
 /// Environment variable naming the database when `--db` is not given.
 pub const DB_ENV: &str = "GYROCAL_DB";
@@ -177,9 +177,50 @@ pub fn record_from(report: &CalReport, prov: &Provenance, verdict: &str, result_
         full_scale_dps: i64::from(report.gyro.full_scale.range_dps()),
         captures_sha256: prov.captures.iter().map(|c| c.sha256.as_str()).collect::<Vec<_>>().join(","),
         verdict: verdict.into(),
-        result_json,
         params: params_from_report(report),
         noise: Vec::new(),
+        thermal: crate::thermal::session::model_in(&result_json).ok().flatten().as_ref().map(ThermalRecord::of),
+        result_json,
+    }
+}
+
+impl ThermalRecord {
+    /// What a record keeps of a thermal model: its range and every coefficient with its σ, named
+    /// `thermal_{quantity}_{axis}_c{degree}` (quantity `offset`, `k`, or `s_` with the package
+    /// axis of the direction component: `thermal_s_xy_c1` is x's direction toward y, per °C).
+    pub fn of(m: &crate::thermal::ThermalModel) -> Self {
+        use crate::thermal::Quantity;
+        let axes = ['x', 'y', 'z'];
+        let mut coefficients = Vec::new();
+        for (c, (axis, q)) in m.curves.iter().zip(crate::thermal::Quantity::all()) {
+            let (name, unit) = match q {
+                Quantity::OffsetCounts => (format!("offset_{}", axes[axis]), "counts"),
+                Quantity::SensitivityCountsPerDps => (format!("k_{}", axes[axis]), "counts/(deg/s)"),
+                Quantity::DirectionNext => (format!("s_{}{}", axes[axis], axes[(axis + 1) % 3]), "1"),
+                Quantity::DirectionOther => (format!("s_{}{}", axes[axis], axes[(axis + 2) % 3]), "1"),
+            };
+            for (d, e) in c.coef.iter().enumerate() {
+                let unit = match d {
+                    0 => unit.to_string(),
+                    1 => format!("{unit}/degC"),
+                    _ => format!("{unit}/degC^{d}"),
+                };
+                coefficients.push(Param {
+                    name: format!("thermal_{name}_c{d}"),
+                    value: e.value,
+                    sigma: Some(e.sigma),
+                    unit,
+                });
+            }
+        }
+        coefficients.sort_by(|a, b| a.name.cmp(&b.name));
+        Self {
+            reference_c: m.reference_c,
+            range_c: m.range_c,
+            out_temp_at_0c: m.out_temp_at_0c,
+            setpoints_c: m.setpoints.iter().map(|s| s.setpoint_c).collect(),
+            coefficients,
+        }
     }
 }
 

@@ -59,10 +59,31 @@ CREATE TABLE noise (
     PRIMARY KEY (calibration_id, axis)
 );",
     },
+    Migration {
+        version: 3,
+        what: "thermal models: range and polynomial coefficients with their sigma",
+        sql: "
+CREATE TABLE thermal_model (
+    calibration_id BIGINT NOT NULL PRIMARY KEY REFERENCES calibration (id),
+    reference_c DOUBLE PRECISION NOT NULL,
+    range_min_c DOUBLE PRECISION NOT NULL,
+    range_max_c DOUBLE PRECISION NOT NULL,
+    out_temp_at_0c DOUBLE PRECISION NOT NULL,
+    setpoints_c TEXT NOT NULL
+);
+CREATE TABLE thermal_coefficient (
+    calibration_id BIGINT NOT NULL REFERENCES thermal_model (calibration_id),
+    name TEXT NOT NULL,
+    value DOUBLE PRECISION NOT NULL,
+    sigma DOUBLE PRECISION,
+    unit TEXT NOT NULL,
+    PRIMARY KEY (calibration_id, name)
+);",
+    },
 ];
 
 /// Latest schema version this program writes.
-pub const SCHEMA_VERSION: i64 = 2;
+pub const SCHEMA_VERSION: i64 = 3;
 
 fn ddl(dialect: Dialect, sql: &str) -> String {
     let id = match dialect {
@@ -137,6 +158,23 @@ impl From<&crate::allan::AxisNoise> for NoiseRow {
     }
 }
 
+/// A thermal calibration's model as its record holds it: where it holds and each polynomial
+/// coefficient with its σ (`thermal_{axis}_{quantity}_c{degree}`, the coefficient of
+/// `(T − reference_c)^degree`; [`ThermalRecord::of`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ThermalRecord {
+    /// Temperature the polynomials are expanded about, °C.
+    pub reference_c: f64,
+    /// Die temperatures the model holds for, °C.
+    pub range_c: [f64; 2],
+    /// Die °C = `out_temp_at_0c − OUT_TEMP`.
+    pub out_temp_at_0c: f64,
+    /// The chamber setpoints, °C, coldest first.
+    pub setpoints_c: Vec<f64>,
+    /// Every coefficient of every curve, in curve order (as stored: by name).
+    pub coefficients: Vec<Param>,
+}
+
 /// A stored calibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Record {
@@ -169,6 +207,8 @@ pub struct Record {
     pub params: Vec<Param>,
     /// Noise figures (empty without an Allan analysis).
     pub noise: Vec<NoiseRow>,
+    /// The thermal model, for a thermal calibration.
+    pub thermal: Option<ThermalRecord>,
 }
 
 const COLUMNS: &str = "id, record_uid, sensor_serial, operator, rig, calibrated_utc, host_version, rig_firmware, \
@@ -191,6 +231,7 @@ fn record_from_row(r: &[Val]) -> Result<Record> {
         result_json: text(11)?,
         params: Vec::new(),
         noise: Vec::new(),
+        thermal: None,
     })
 }
 
@@ -247,6 +288,9 @@ pub fn insert(c: &mut dyn Conn, rec: &Record) -> Result<(i64, bool)> {
                 ],
             )?;
         }
+        if let Some(t) = &rec.thermal {
+            insert_thermal(c, id, t)?;
+        }
         Ok((id, true))
     })();
     match &r {
@@ -256,6 +300,80 @@ pub fn insert(c: &mut dyn Conn, rec: &Record) -> Result<(i64, bool)> {
         }
     }
     r
+}
+
+/// A record's thermal model, inside [`insert`]'s transaction.
+fn insert_thermal(c: &mut dyn Conn, id: i64, t: &ThermalRecord) -> Result<()> {
+    let setpoints: Vec<String> = t.setpoints_c.iter().map(f64::to_string).collect();
+    c.query(
+        "INSERT INTO thermal_model (calibration_id, reference_c, range_min_c, range_max_c, out_temp_at_0c, \
+         setpoints_c) VALUES ($1, $2, $3, $4, $5, $6)",
+        &[
+            Val::Int(id),
+            Val::Real(Some(t.reference_c)),
+            Val::Real(Some(t.range_c[0])),
+            Val::Real(Some(t.range_c[1])),
+            Val::Real(Some(t.out_temp_at_0c)),
+            Val::Text(Some(setpoints.join(","))),
+        ],
+    )?;
+    for p in &t.coefficients {
+        c.query(
+            "INSERT INTO thermal_coefficient (calibration_id, name, value, sigma, unit) VALUES ($1, $2, $3, $4, $5)",
+            &[
+                Val::Int(id),
+                Val::Text(Some(p.name.clone())),
+                Val::Real(Some(p.value)),
+                Val::Real(p.sigma),
+                Val::Text(Some(p.unit.clone())),
+            ],
+        )?;
+    }
+    Ok(())
+}
+
+/// A record's thermal model (`None` for a calibration at one temperature, and for every record
+/// of a database before schema v3).
+fn get_thermal(c: &mut dyn Conn, id: i64) -> Result<Option<ThermalRecord>> {
+    let rows = c.query(
+        "SELECT reference_c, range_min_c, range_max_c, out_temp_at_0c, setpoints_c FROM thermal_model \
+         WHERE calibration_id = $1",
+        &[Val::Int(id)],
+    )?;
+    let Some(r) = rows.first() else { return Ok(None) };
+    let real = |i: usize| r[i].real().with_context(|| format!("thermal_model column {i} is NULL"));
+    let setpoints_c = r[4]
+        .text()
+        .unwrap_or_default()
+        .split(',')
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse::<f64>().with_context(|| format!("thermal_model setpoint {s:?}")))
+        .collect::<Result<_>>()?;
+    let coefficients = params_of(c, "thermal_coefficient", id)?;
+    Ok(Some(ThermalRecord {
+        reference_c: real(0)?,
+        range_c: [real(1)?, real(2)?],
+        out_temp_at_0c: real(3)?,
+        setpoints_c,
+        coefficients,
+    }))
+}
+
+/// The name, value, σ and unit rows of `table` (`parameter` or `thermal_coefficient`) of a
+/// record, by name.
+fn params_of(c: &mut dyn Conn, table: &str, id: i64) -> Result<Vec<Param>> {
+    Ok(c.query(
+        &format!("SELECT name, value, sigma, unit FROM {table} WHERE calibration_id = $1 ORDER BY name"),
+        &[Val::Int(id)],
+    )?
+    .iter()
+    .map(|r| Param {
+        name: r[0].text().unwrap_or_default(),
+        value: r[1].real().unwrap_or(f64::NAN),
+        sigma: r[2].real(),
+        unit: r[3].text().unwrap_or_default(),
+    })
+    .collect())
 }
 
 /// Records, oldest first, optionally of one sensor (without parameters).
@@ -286,19 +404,7 @@ pub fn get(c: &mut dyn Conn, id: i64) -> Result<Option<Record>> {
     let rows = c.query(&format!("SELECT {COLUMNS} FROM calibration WHERE id = $1"), &[Val::Int(id)])?;
     let Some(row) = rows.first() else { return Ok(None) };
     let mut rec = record_from_row(row)?;
-    rec.params = c
-        .query(
-            "SELECT name, value, sigma, unit FROM parameter WHERE calibration_id = $1 ORDER BY name",
-            &[Val::Int(id)],
-        )?
-        .iter()
-        .map(|r| Param {
-            name: r[0].text().unwrap_or_default(),
-            value: r[1].real().unwrap_or(f64::NAN),
-            sigma: r[2].real(),
-            unit: r[3].text().unwrap_or_default(),
-        })
-        .collect();
+    rec.params = params_of(c, "parameter", id)?;
     rec.noise = c
         .query(
             "SELECT axis, arw_deg_per_sqrt_h, bias_instability_deg_per_h, rrw_deg_per_h_per_sqrt_h FROM noise \
@@ -313,6 +419,7 @@ pub fn get(c: &mut dyn Conn, id: i64) -> Result<Option<Record>> {
             rrw_deg_per_h_per_sqrt_h: r[3].real(),
         })
         .collect();
+    rec.thermal = get_thermal(c, id)?;
     Ok(Some(rec))
 }
 

@@ -3,7 +3,7 @@
 //! and under `CI=true` they fail: a store that was never exercised must not look like a pass.
 
 use super::db::Conn;
-use super::store::{self, NoiseRow, Param, Record, SCHEMA_VERSION};
+use super::store::{self, NoiseRow, Param, Record, ThermalRecord, SCHEMA_VERSION};
 use super::views;
 use super::DbSpec;
 use std::collections::HashSet;
@@ -84,7 +84,104 @@ fn record(uid: &str, sensor: &str, params: &[(&str, f64, Option<f64>)]) -> Recor
             bias_instability_deg_per_h: None,
             rrw_deg_per_h_per_sqrt_h: Some(0.5),
         }],
+        thermal: None,
     }
+}
+
+/// A thermal record: `record` with a model over −20…70 °C whose x offset slope is `slope` ± 0.02
+/// counts/°C (the other coefficients fixed), and, with `quadratic`, a curvature of the x offset.
+fn thermal_record(uid: &str, slope: f64, quadratic: bool) -> Record {
+    let mut r = record(uid, "G-7", &[("tilt_x", 1.0, Some(0.3))]);
+    let c = |name: &str, value: f64, sigma: f64, unit: &str| Param {
+        name: name.into(),
+        value,
+        sigma: Some(sigma),
+        unit: unit.into(),
+    };
+    let mut coefficients = vec![
+        c("thermal_k_x_c0", 57.3, 1e-3, "counts/(deg/s)"),
+        c("thermal_offset_x_c0", 12.4, 0.05, "counts"),
+        c("thermal_offset_x_c1", slope, 0.02, "counts/degC"),
+    ];
+    if quadratic {
+        coefficients.push(c("thermal_offset_x_c2", 5.7e-3, 4e-4, "counts/degC^2"));
+    }
+    r.thermal = Some(ThermalRecord {
+        reference_c: 25.0,
+        range_c: [-20.5, 70.5],
+        out_temp_at_0c: 12.3,
+        setpoints_c: vec![-20.0, 0.0, 25.0, 50.0, 70.0],
+        coefficients,
+    });
+    r
+}
+
+/// A thermal record stores and reads back its model; `show` prints it in every format and
+/// `compare` puts each coefficient's change in combined σ.
+fn thermal_models_are_stored_shown_and_compared(db: &TestDb) {
+    let mut c = db.open();
+    let (a, b) = (thermal_record("t1", 1.71, true), thermal_record("t2", 1.80, false));
+    let (ida, _) = store::insert(c.as_mut(), &a).unwrap();
+    let (idb, _) = store::insert(c.as_mut(), &b).unwrap();
+    let got_a = store::get(c.as_mut(), ida).unwrap().unwrap();
+    assert_eq!(got_a.thermal, a.thermal);
+    let got_b = store::get(c.as_mut(), idb).unwrap().unwrap();
+    let text = views::show(&got_a);
+    assert!(text.contains("thermal model: setpoints -20, 0, 25, 50, 70 °C; holds for die -20.50…70.50 °C"), "{text}");
+    assert!(text.contains("thermal_offset_x_c2            +5.700000e-3     4.000e-4  counts/degC^2"), "{text}");
+    let json: serde_json::Value =
+        serde_json::from_str(&views::show_as(&got_a, &views::History::Unread(String::new()), views::Format::Json))
+            .unwrap();
+    assert_eq!(json["thermal"]["coefficients"][3]["name"], "thermal_offset_x_c2");
+    assert_eq!(json["thermal"]["range_c"][1], 70.5);
+    let csv = views::show_as(&got_a, &views::History::Unread(String::new()), views::Format::Csv);
+    assert!(csv.contains(&format!("{ida},thermal_offset_x_c1,1.71,0.02,counts/degC")), "{csv}");
+    // (1.80 − 1.71) / √(0.02² + 0.02²) = 3.18 σ: changed; the curvature is in A only.
+    let ch = views::changes(&got_a, &got_b);
+    let slope = ch.iter().find(|c| c.name == "thermal_offset_x_c1").unwrap();
+    assert!((slope.z.unwrap() - 0.09 / 0.02f64.hypot(0.02)).abs() < 1e-9, "{slope:?}");
+    assert_eq!(ch.iter().find(|c| c.name == "thermal_k_x_c0").unwrap().z, Some(0.0));
+    let cmp = views::compare(&got_a, &got_b);
+    assert!(cmp.contains("1 of 4 parameters changed"), "{cmp}");
+    assert!(cmp.contains("thermal coefficients in A only (orders differ): thermal_offset_x_c2"), "{cmp}");
+    let cmp: serde_json::Value = serde_json::from_str(&views::compare_as(&got_a, &got_b, views::Format::Json)).unwrap();
+    assert_eq!(cmp["thermal_coefficients_only_in"]["a"][0], "thermal_offset_x_c2");
+    // A record without a model beside one with: said, not compared.
+    let (idp, _) = store::insert(c.as_mut(), &record("p", "G-7", &[])).unwrap();
+    let plain = store::get(c.as_mut(), idp).unwrap().unwrap();
+    assert!(views::compare(&got_a, &plain).contains("only A holds a thermal model"));
+}
+
+/// A database at schema v2 (before thermal models) with a record opens at the latest version:
+/// the old record reads back without a model, and a thermal record can be stored beside it.
+fn migrates_from_v2(db: &TestDb) {
+    let mut c: Box<dyn Conn> = match &db.spec {
+        DbSpec::Sqlite(p) => Box::new(super::db::Sqlite::open(p).unwrap()),
+        DbSpec::Postgres(u) => Box::new(super::db::Postgres::connect(u, db.schema.as_deref()).unwrap()),
+    };
+    assert_eq!(store::migrate_to(c.as_mut(), 2).unwrap(), 0);
+    c.query(
+        "INSERT INTO calibration (record_uid, calibrated_utc, host_version, full_scale_dps, captures_sha256, verdict, result_json) \
+         VALUES ($1, $2, $3, $4, $5, $6, $7)",
+        &[
+            super::db::Val::Text(Some("v2".into())),
+            super::db::Val::Text(Some("2026-01-01T00:00:00Z".into())),
+            super::db::Val::Text(Some("0.1.0".into())),
+            super::db::Val::Int(500),
+            super::db::Val::Text(Some("dd".into())),
+            super::db::Val::Text(Some("at noise floor".into())),
+            super::db::Val::Text(Some("{}".into())),
+        ],
+    )
+    .unwrap();
+    drop(c);
+    let mut c = db.open();
+    assert_eq!(store::schema_version(c.as_mut()).unwrap(), 3);
+    let old = store::list(c.as_mut(), None).unwrap()[0].id.unwrap();
+    let old = store::get(c.as_mut(), old).unwrap().unwrap();
+    assert_eq!((old.uid.as_str(), old.thermal.as_ref()), ("v2", None));
+    let (id, _) = store::insert(c.as_mut(), &thermal_record("t", 1.7, false)).unwrap();
+    assert_eq!(store::get(c.as_mut(), id).unwrap().unwrap().thermal.unwrap().coefficients.len(), 3);
 }
 
 fn round_trip_and_duplicates(db: &TestDb) {
@@ -196,7 +293,13 @@ macro_rules! both_backends {
     };
 }
 
-both_backends!(round_trip_and_duplicates, eight_concurrent_writers, migrates_from_v1);
+both_backends!(
+    round_trip_and_duplicates,
+    eight_concurrent_writers,
+    migrates_from_v1,
+    migrates_from_v2,
+    thermal_models_are_stored_shown_and_compared
+);
 
 #[test]
 fn summary_names_the_outlier_among_twenty_sensors() {

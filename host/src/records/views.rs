@@ -104,12 +104,13 @@ pub fn show_as(r: &Record, history: &History, format: Format) -> String {
             v["history"] = history.json();
             v["parameters"] = serde_json::to_value(&r.params).expect("JSON of plain values");
             v["noise"] = serde_json::to_value(&r.noise).expect("JSON of plain values");
+            v["thermal"] = serde_json::to_value(&r.thermal).expect("JSON of plain values");
             v["calibration"] = serde_json::from_str(&r.result_json).unwrap_or(serde_json::Value::Null);
             serde_json::to_string_pretty(&v).expect("JSON of plain values") + "\n"
         }
         Format::Csv => csv_text(
             std::iter::once(vec!["id".into(), "name".into(), "value".into(), "sigma".into(), "unit".into()]).chain(
-                r.params.iter().map(|p| {
+                r.params.iter().chain(r.thermal.iter().flat_map(|t| &t.coefficients)).map(|p| {
                     vec![
                         r.id.unwrap_or(0).to_string(),
                         p.name.clone(),
@@ -144,6 +145,7 @@ pub fn compare_as(a: &Record, b: &Record, format: Format) -> String {
                 "b": record_json(b),
                 "changed_beyond_sigma": CHANGED_Z,
                 "parameters": params,
+                "thermal_coefficients_only_in": {"a": only_in_one(a, b).0, "b": only_in_one(a, b).1},
             });
             serde_json::to_string_pretty(&v).expect("JSON of plain values") + "\n"
         }
@@ -220,6 +222,31 @@ pub fn show(r: &Record) -> String {
             );
         }
     }
+    if let Some(t) = &r.thermal {
+        o.push_str(&thermal_text(t));
+    }
+    o
+}
+
+/// A record's thermal model: where it holds, then every coefficient with its σ.
+fn thermal_text(t: &super::ThermalRecord) -> String {
+    let mut o = String::new();
+    let setpoints: Vec<String> = t.setpoints_c.iter().map(|s| format!("{s}")).collect();
+    let _ = writeln!(
+        o,
+        "\nthermal model: setpoints {} °C; holds for die {:.2}…{:.2} °C (die °C = {:.3} − OUT_TEMP); \
+         polynomials in T − {} °C",
+        setpoints.join(", "),
+        t.range_c[0],
+        t.range_c[1],
+        t.out_temp_at_0c,
+        t.reference_c
+    );
+    let _ = writeln!(o, "coefficient                    value            1-σ  unit");
+    for p in &t.coefficients {
+        let sigma = p.sigma.map_or("-".to_string(), |s| format!("{s:.3e}"));
+        let _ = writeln!(o, "{:28} {:>+14.6e}  {:>11}  {}", p.name, p.value, sigma, p.unit);
+    }
     o
 }
 
@@ -242,12 +269,17 @@ pub struct Change {
 /// false-alarm rate per parameter under Gaussian errors.
 pub const CHANGED_Z: f64 = 3.0;
 
-/// Every parameter present in both, in the first record's order.
+/// Every parameter present in both, in the first record's order, then every thermal
+/// coefficient present in both (thermal records: a coefficient of an order one model did not
+/// choose is in [`only_in_one`]).
 pub fn changes(a: &Record, b: &Record) -> Vec<Change> {
+    let coefficients = |r: &Record| r.thermal.as_ref().map(|t| t.coefficients.clone()).unwrap_or_default();
+    let (ca, cb) = (coefficients(a), coefficients(b));
     a.params
         .iter()
+        .chain(&ca)
         .filter_map(|pa| {
-            let pb = b.params.iter().find(|p| p.name == pa.name)?;
+            let pb = b.params.iter().chain(&cb).find(|p| p.name == pa.name)?;
             let z = match (pa.sigma, pb.sigma) {
                 (Some(sa), Some(sb)) if sa.hypot(sb) > 0.0 => Some((pb.value - pa.value) / sa.hypot(sb)),
                 _ => None,
@@ -255,6 +287,20 @@ pub fn changes(a: &Record, b: &Record) -> Vec<Change> {
             Some(Change { name: pa.name.clone(), unit: pa.unit.clone(), a: pa.value, b: pb.value, z })
         })
         .collect()
+}
+
+/// The thermal coefficients only one of two thermal records holds (their curves' orders
+/// differ), as `(in A only, in B only)`; empty unless both are thermal.
+pub fn only_in_one(a: &Record, b: &Record) -> (Vec<String>, Vec<String>) {
+    let (Some(ta), Some(tb)) = (&a.thermal, &b.thermal) else { return (Vec::new(), Vec::new()) };
+    let missing = |x: &super::ThermalRecord, y: &super::ThermalRecord| -> Vec<String> {
+        x.coefficients
+            .iter()
+            .filter(|p| !y.coefficients.iter().any(|q| q.name == p.name))
+            .map(|p| p.name.clone())
+            .collect()
+    };
+    (missing(ta, tb), missing(tb, ta))
 }
 
 /// The comparison table.
@@ -277,6 +323,36 @@ pub fn compare(a: &Record, b: &Record) -> String {
     }
     let n = ch.iter().filter(|c| c.z.is_some_and(|z| z.abs() > CHANGED_Z)).count();
     let _ = writeln!(o, "\n{n} of {} parameters changed by more than {CHANGED_Z} σ", ch.len());
+    o.push_str(&thermal_notes(a, b));
+    o
+}
+
+/// What a comparison of thermal models should say besides the coefficients: a record without
+/// one, different ranges, coefficients of orders only one model chose.
+fn thermal_notes(a: &Record, b: &Record) -> String {
+    let mut o = String::new();
+    match (&a.thermal, &b.thermal) {
+        (None, None) => {}
+        (Some(_), None) | (None, Some(_)) => {
+            let which = if a.thermal.is_some() { "A" } else { "B" };
+            let _ = writeln!(o, "note: only {which} holds a thermal model; its coefficients are not compared");
+        }
+        (Some(ta), Some(tb)) => {
+            if ta.range_c != tb.range_c {
+                let _ = writeln!(
+                    o,
+                    "note: the thermal models hold for die {:.2}…{:.2} °C (A) and {:.2}…{:.2} °C (B)",
+                    ta.range_c[0], ta.range_c[1], tb.range_c[0], tb.range_c[1]
+                );
+            }
+            let (only_a, only_b) = only_in_one(a, b);
+            for (which, names) in [("A", only_a), ("B", only_b)] {
+                if !names.is_empty() {
+                    let _ = writeln!(o, "thermal coefficients in {which} only (orders differ): {}", names.join(", "));
+                }
+            }
+        }
+    }
     o
 }
 

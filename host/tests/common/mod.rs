@@ -193,6 +193,9 @@ pub struct LockstepBench {
     /// rig runs this many ns more in one step, with no byte from the host, before the host hears
     /// the time, as when a loaded machine deschedules the host.
     pub stall_ns: Arc<std::sync::atomic::AtomicU64>,
+    /// Control lines for the rig (e.g. `chamber 15` of `--chamber`), pushed by a test (from
+    /// [`Self::relay`]'s callback, through a clone) and sent before the host's next step.
+    pub pending_control: Arc<std::sync::Mutex<Vec<String>>>,
     /// Cleared when the bench is dropped; until then [`hang_guard`] may end the rig.
     alive: Arc<std::sync::Mutex<bool>>,
 }
@@ -205,7 +208,7 @@ const HANG_GUARD: Duration = Duration::from_secs(300);
 /// Kills the rig `pid` if the bench is still alive after [`HANG_GUARD`]: its standard output
 /// then ends, so the test's reads return and the test fails on what it asserts, with the rig's
 /// log, instead of hanging.
-fn hang_guard(pid: u32, alive: Arc<std::sync::Mutex<bool>>) {
+fn hang_guard(pid: u32, alive: Arc<std::sync::Mutex<bool>>, guard: Duration) {
     thread::spawn(move || {
         let t0 = std::time::Instant::now();
         loop {
@@ -213,8 +216,8 @@ fn hang_guard(pid: u32, alive: Arc<std::sync::Mutex<bool>>) {
             if !*alive {
                 return;
             }
-            if t0.elapsed() > HANG_GUARD {
-                eprintln!("lockstep bench: no end after {HANG_GUARD:?} of wall time: the virtual rig is killed");
+            if t0.elapsed() > guard {
+                eprintln!("lockstep bench: no end after {guard:?} of wall time: the virtual rig is killed");
                 // SAFETY: `pid` is the rig, still a child of this process: the bench reaps it only
                 // after clearing `alive`, which waits for this lock, so no reused id is hit.
                 unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
@@ -228,6 +231,12 @@ fn hang_guard(pid: u32, alive: Arc<std::sync::Mutex<bool>>) {
 
 impl LockstepBench {
     pub fn start(name: &str, args: &[&str]) -> Self {
+        Self::start_with_guard(name, args, HANG_GUARD)
+    }
+
+    /// [`Self::start`] for a test of hours of rig time (a thermal session's settle windows),
+    /// whose wall time is minutes: the rig is taken to be deadlocked after `guard`.
+    pub fn start_with_guard(name: &str, args: &[&str], guard: Duration) -> Self {
         use std::io::BufRead;
         let mut rig = host_command()
             .args(["virtual-rig", "--lockstep"])
@@ -254,7 +263,7 @@ impl LockstepBench {
         let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
         let stall_ns = Arc::new(std::sync::atomic::AtomicU64::new(0));
         let alive = Arc::new(std::sync::Mutex::new(true));
-        hang_guard(rig.id(), alive.clone());
+        hang_guard(rig.id(), alive.clone(), guard);
         Self {
             rig,
             control_in: Some(control_in),
@@ -264,6 +273,7 @@ impl LockstepBench {
             socket,
             listener,
             stall_ns,
+            pending_control: Arc::new(std::sync::Mutex::new(Vec::new())),
             alive,
         }
     }
@@ -331,6 +341,12 @@ impl LockstepBench {
                     )
                 }
                 Err(_) => return now_ns,
+            }
+            let pending: Vec<String> = std::mem::take(&mut *self.pending_control.lock().unwrap());
+            for line in pending {
+                if writeln!(self.control(), "{line}").is_err() {
+                    return now_ns; // the rig is gone (killed by the test)
+                }
             }
             if self.control().write_all(step.as_bytes()).and_then(|()| self.control().flush()).is_err() {
                 return now_ns; // the rig is gone (killed by the test)
