@@ -517,6 +517,20 @@ fn undeclared_pose_fixture_is_found_named_and_corrected() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
+/// A fixture turned 1° (ten times the default), not declared: the fixture is a candidate from
+/// the first step, so it is chosen before a 1× transmission error and fine drift knots can take
+/// it (they did, and stayed: exit 0 at 9σ), and the turn is exact (Rodrigues), where its first
+/// order left e²/2 = 150 ppm for a spurious table tilt. Found first; within 3σ at the floor.
+#[test]
+fn a_fixture_turned_a_whole_degree_is_found_first_and_corrected() {
+    let (r, _) = run_loop(11, &BAR_RATES_DPS, SHORT_S, &["pose_fixture=1"]);
+    assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::PoseFixture), "{}", r.summary());
+    let after = truth_of(r.steps.last().expect("steps"));
+    assert!(after.max_sensitivity_ppm() < 30.0, "{} ppm\n{}", after.max_sensitivity_ppm(), r.summary());
+    assert_within_3_sigma(&after, "pose_fixture=1");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
 /// Earth rotation with no latitude given and runs at one speed, where it cannot be fitted: the
 /// sensitivities' σ carries it (Type B), so the calibration is never confidently wrong.
 #[test]

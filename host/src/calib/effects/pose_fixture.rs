@@ -66,12 +66,13 @@ impl Behaviour for PoseFixture {
         })
     }
 
-    /// Once the phase is modelled (a fixture turn is a phase of pose 2's own), with two poses,
-    /// at one speed too: there the combined phase is common to the poses and the fixture is
-    /// pose 2's difference from it. (Left to two speeds, a 0.1° fixture at one speed was
-    /// neither fitted nor considered and ended 3σ off on every seed of the trust bench.)
+    /// With two poses, from the first step on, at one speed too. A fixture turn is a phase
+    /// of pose 2's own. (Left to two speeds, a 0.1° fixture at one speed was neither fitted nor
+    /// considered, and ended 3σ off on every seed of the trust bench.) Waiting for a phase to be
+    /// modelled first let a 1° turn be taken by a 1× transmission error and 10-s drift knots,
+    /// which stayed once it came in: exit 0 at 9σ.
     fn candidate(&self, s: &Situation) -> bool {
-        s.phase_modelled() && !s.has(Effect::PoseFixture) && s.poses == 2
+        !s.has(Effect::PoseFixture) && s.poses == 2
     }
 
     fn needs(&self, _: Own) -> Needs {
