@@ -568,15 +568,9 @@ fn fixture_jacobian(rt: &[[f64; 3]; 3], v: &[f64; 3], e: &[f64; 3], [a, b]: [f64
     let t2 = e.iter().map(|x| x * x).sum::<f64>();
     // c's series below 1e-4 rad, as for a and b.
     let c = if t2 < 1e-8 { 1.0 / 6.0 - t2 / 120.0 } else { (1.0 - a) / t2 };
-    // exp(±[e]×)·w = w ± a·e × w + b·e × (e × w).
-    let turn = |w: &[f64; 3], sign: f64, a: f64, b: f64| -> [f64; 3] {
-        let ew = cross(e, w);
-        let eew = cross(e, &ew);
-        std::array::from_fn(|i| w[i] + sign * a * ew[i] + b * eew[i])
-    };
     std::array::from_fn(|k| {
         let unit: [f64; 3] = std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 });
-        let w = turn(&cross(v, &turn(&unit, 1.0, b, c)), -1.0, a, b);
+        let w = turn(e, &cross(v, &turn(e, &unit, 1.0, (b, c))), -1.0, (a, b));
         std::array::from_fn(|i| rt[i][0] * w[0] + rt[i][1] * w[1] + rt[i][2] * w[2])
     })
 }
@@ -768,14 +762,11 @@ impl<'a> Evaluator<'a> {
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
         // The pose-2 fixture turned by e: R2 → exp([e]×)·R2, so a table-frame vector v reaches
-        // the package as R2ᵀ(v − a·e × v + b·e × (e × v)) (Rodrigues; a, b: `FixtureTurn`). To
-        // first order only, a fixture turned by 1° left 150 ppm (e²/2) for the other effects to
-        // take: a spurious table tilt, 97 ppm and 3.8σ off on the trust bench.
+        // the package as R2ᵀ·exp(−[e]×)·v, exactly ([`rodrigues`]): to first order only, a 1° turn
+        // left e²/2 = 150 ppm to a spurious table tilt (97 ppm, 3.8σ off on the trust bench).
         let (e, [a, b]) = if rk.pose == Pose::Two { (sh.fixture_rad, self.fixture_turn) } else { ([0.0; 3], [0.0; 2]) };
         let to_package = |v: &[f64; 3]| -> [f64; 3] {
-            let ev = cross(&e, v);
-            let eev = cross(&e, &ev);
-            let f: [f64; 3] = std::array::from_fn(|i| v[i] - a * ev[i] + b * eev[i]);
+            let f = turn(&e, v, -1.0, (a, b));
             std::array::from_fn(|i| rt[i][0] * f[0] + rt[i][1] * f[1] + rt[i][2] * f[2])
         };
         // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame.
@@ -1198,6 +1189,15 @@ fn earth_basis((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> [[f64; 3]; 3] {
 #[inline]
 fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// w ± p·e × w + q·e × (e × w): exp(±[e]×)·w with (p, q) = (a, b) of [`rodrigues`], or the
+/// rotation's left Jacobian J·w (`sign` 1) with (b, (1 − a)/θ²).
+#[inline]
+fn turn(e: &[f64; 3], w: &[f64; 3], sign: f64, (p, q): (f64, f64)) -> [f64; 3] {
+    let ew = cross(e, w);
+    let eew = cross(e, &ew);
+    std::array::from_fn(|i| w[i] + sign * p * ew[i] + q * eew[i])
 }
 
 /// sin θ/θ and (1 − cos θ)/θ² of the rotation vector `e` (θ = |e|): exp([e]×) = I + a·[e]× +
