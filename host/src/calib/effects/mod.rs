@@ -27,6 +27,7 @@ mod index_offset;
 mod phase;
 mod pose_fixture;
 mod rate_scale;
+mod scale_temperature;
 mod table_harmonic;
 mod table_tilt;
 
@@ -177,6 +178,8 @@ registry! {
     GSensitivity => g_sensitivity::GSensitivity,
     /// [`rate_scale::RateScale`].
     RateScale => rate_scale::RateScale,
+    /// [`scale_temperature::ScaleTemperature`].
+    ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`table_harmonic::TableHarmonic`] at this multiple of θ2.
     TableHarmonic(order: u32 in HARMONIC_ORDERS) => table_harmonic::TableHarmonic(order),
     /// [`earth::Earth`], all three components fitted.
@@ -269,7 +272,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 12 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 13 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();
