@@ -263,18 +263,7 @@ pub fn insert(c: &mut dyn Conn, rec: &Record) -> Result<(i64, bool)> {
                 c.query("SELECT id FROM calibration WHERE record_uid = $1", &[Val::Text(Some(rec.uid.clone()))])?;
             return Ok((rows[0][0].int().context("id")?, false));
         };
-        for p in &rec.params {
-            c.query(
-                "INSERT INTO parameter (calibration_id, name, value, sigma, unit) VALUES ($1, $2, $3, $4, $5)",
-                &[
-                    Val::Int(id),
-                    Val::Text(Some(p.name.clone())),
-                    Val::Real(Some(p.value)),
-                    Val::Real(p.sigma),
-                    Val::Text(Some(p.unit.clone())),
-                ],
-            )?;
-        }
+        insert_params(c, "parameter", id, &rec.params)?;
         for n in &rec.noise {
             c.query(
                 "INSERT INTO noise (calibration_id, axis, arw_deg_per_sqrt_h, bias_instability_deg_per_h, \
@@ -317,9 +306,16 @@ fn insert_thermal(c: &mut dyn Conn, id: i64, t: &ThermalRecord) -> Result<()> {
             Val::Text(Some(setpoints.join(","))),
         ],
     )?;
-    for p in &t.coefficients {
+    insert_params(c, "thermal_coefficient", id, &t.coefficients)
+}
+
+/// Rows of `table` (`parameter` or `thermal_coefficient`, which share their columns) for
+/// calibration `id`, inside [`insert`]'s transaction.
+fn insert_params(c: &mut dyn Conn, table: &str, id: i64, params: &[Param]) -> Result<()> {
+    let sql = format!("INSERT INTO {table} (calibration_id, name, value, sigma, unit) VALUES ($1, $2, $3, $4, $5)");
+    for p in params {
         c.query(
-            "INSERT INTO thermal_coefficient (calibration_id, name, value, sigma, unit) VALUES ($1, $2, $3, $4, $5)",
+            &sql,
             &[
                 Val::Int(id),
                 Val::Text(Some(p.name.clone())),
