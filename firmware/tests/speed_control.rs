@@ -154,7 +154,7 @@ fn stop_ramps_down_and_ends_the_run() {
 /// flicker (1 000 cps in a single period) into torque every millisecond, and the table's speed
 /// jitters at 20-400 Hz by a few hundredths of a degree per second, a fraction of a count of
 /// angle. A gyro sees it; the host's θ1' (a straight line through 20 ms of encoder counts,
-/// host/src/calib/kinematics.rs) does not. The calibration treats it as sensor noise, which holds
+/// host/src/calib/data/kinematics.rs) does not. The calibration treats it as sensor noise, which holds
 /// while it stays well below the L3G4200D's own: 0.03 °/s/√Hz over the 405 Hz Nyquist band is
 /// 0.60 °/s rms. The bar: under a tenth of that, at both default speeds.
 #[test]

@@ -432,7 +432,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             lockstep_clock,
             chamber_c,
         } => {
-            let mut considered = calib::consider::ConsiderOverrides::default();
+            let mut considered = calib::analysis::consider::ConsiderOverrides::default();
             for c in &consider {
                 considered.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
             }
@@ -761,7 +761,7 @@ fn calibrate(
     // Each run once: the same data given twice would count twice and shrink every σ by √2.
     let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
     // The moving runs' kinematics, made run by run as the captures are decoded.
-    let mut kinematics = calib::kinematics::Reconstruction::new(opts.cal.kinematics);
+    let mut kinematics = calib::data::kinematics::Reconstruction::new(opts.cal.kinematics);
     for f in files {
         let mut fingerprints = Vec::new();
         let (cap, digest) = read_capture_by_run(f, |mut run, samples| {
@@ -851,7 +851,7 @@ fn calibrate(
     if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
         obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
     }
-    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::extended).
+    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::engine::loop_data).
     let temps: Vec<f64> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| f64::from(t.raw))).collect();
     let out_temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
     if let (Some(d), Some(obj)) = (export::DriftModel::of(&lr, out_temp_mean), value.as_object_mut()) {
@@ -1013,7 +1013,7 @@ fn refuse_recorded_captures(db: &records::DbSpec, prov: &Provenance) -> Result<(
 /// specific force, °/s per g; `None` when the model does not hold it. Read from the effect's
 /// reported parameters, `g-sensitivity along package K, A` (calib's `GSensitivity::reported`).
 fn g_sensitivity(lr: &calib::LoopReport) -> Option<[[f64; 3]; 3]> {
-    use calib::axes::AXES;
+    use calib::result::axes::AXES;
     let params = &lr.steps.last()?.effect_params;
     let find = |a: usize, k: usize| {
         let name = format!("g-sensitivity along package {}, {}", AXES[k], AXES[a]);

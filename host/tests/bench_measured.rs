@@ -29,7 +29,7 @@ mod replay {
 
 mod trust {
     use crate::measured::trust::*;
-    use host::calib::truth_check::direction_z;
+    use host::calib::result::truth_check::direction_z;
     use serde_json::{json, Value};
 
     const XYZ: [char; 3] = ['x', 'y', 'z'];

@@ -671,12 +671,12 @@ fn a_lossy_line_never_certifies_a_calibration_off_the_truth() {
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
 
-/// The largest |z| of `calibration.json` against a true M ([`host::calib::truth_check::z_values`],
+/// The largest |z| of `calibration.json` against a true M ([`host::calib::result::truth_check::z_values`],
 /// as `../shared/validation/check.py` reckons it; JSON's `null` is a NaN and judged infinitely
 /// far off). A file it cannot read is infinitely far off too.
 fn max_z_like_check_py(json: &str, m_true: &[[f64; 3]; 3]) -> f64 {
     serde_json::from_str(json)
         .map_err(|e| e.to_string())
-        .and_then(|c| host::calib::truth_check::z_values(&c, m_true))
+        .and_then(|c| host::calib::result::truth_check::z_values(&c, m_true))
         .map_or(f64::INFINITY, |z| z.into_iter().fold(0.0, f64::max))
 }

@@ -148,7 +148,7 @@ pub fn errors(report: &CalReport, truth: &Truth) -> [AxisError; 3] {
         let cos = (0..3).map(|c| a.s[c].value * s[c]).sum::<f64>().clamp(-1.0, 1.0);
         AxisError {
             k_z: a.k_counts_per_dps.z(truth.k_counts_per_dps[i]),
-            direction_md: host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2),
+            direction_md: host::calib::result::derived::mahalanobis2(d, a.tilt_components_cov_deg2),
             k_ppm: (a.k_counts_per_dps.value / truth.k_counts_per_dps[i] - 1.0) * 1e6,
             direction_deg: cos.acos().to_degrees(),
         }
@@ -189,7 +189,7 @@ pub fn assert_matches_virtual_gyro(report: &CalReport) {
         let d = [a.tilt_components_deg[0] - tilt[0], a.tilt_components_deg[1] - tilt[1]];
         let k_z = a.k_counts_per_dps.z(k);
         let offset_z = a.offset_counts.z(offset);
-        let direction_md = host::calib::derived::mahalanobis2(d, a.tilt_components_cov_deg2);
+        let direction_md = host::calib::result::derived::mahalanobis2(d, a.tilt_components_cov_deg2);
         eprintln!(
             "axis {i}: k {:.3} vs {k:.3} ({k_z:+.2} σ), direction {direction_md:.2} σ, \
              offset {:.2} vs {offset:.2} counts ({offset_z:+.2} σ)",

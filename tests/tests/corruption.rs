@@ -192,7 +192,7 @@ fn garbage_is_summarised_beyond_the_cap() {
 /// truth. |z| as `../shared/validation/check.py` reckons it (21 values).
 #[test]
 fn a_thousand_flipped_bits_never_certify_a_calibration_off_the_truth() {
-    use host::calib::truth_check::max_z_against_m;
+    use host::calib::result::truth_check::max_z_against_m;
     use host::calib::{close_loop, LoopOptions, Verdict};
     let (clean, truth) = committed("demo");
     let mut certified_off = Vec::new();

@@ -81,7 +81,7 @@ pub struct Plant {
 
 impl Plant {
     /// The prototype: RE 30 drive, plate 10° wide centred on θ2 = 0 (the host's reference: θ2 = 0
-    /// at the pulse centre, host/src/calib/kinematics.rs), gyro in pose 1, encoder counter
+    /// at the pulse centre, host/src/calib/data/kinematics.rs), gyro in pose 1, encoder counter
     /// starting 2 s of 0.5 Hz travel short of its 32-bit wrap.
     pub fn prototype() -> Self {
         Self {

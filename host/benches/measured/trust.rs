@@ -6,10 +6,10 @@ use super::replay::{max_abs, triple};
 use serde_json::Value;
 use std::ops::RangeInclusive;
 
-pub use host::calib::truth_check::{Zs, Z_COUNT};
+pub use host::calib::result::truth_check::{Zs, Z_COUNT};
 
 /// The z-values of a calibration against the simulator's truth file (`x.truth.json`, its
-/// `m_counts_per_dps`): [`host::calib::truth_check::z_values`].
+/// `m_counts_per_dps`): [`host::calib::result::truth_check::z_values`].
 pub fn z_values(cal: &Value, truth: &Value) -> Result<Zs, String> {
     let m: [[f64; 3]; 3] = [0, 1, 2]
         .map(|i| triple(&truth["m_counts_per_dps"][i], "truth: m_counts_per_dps[i]"))
@@ -17,7 +17,7 @@ pub fn z_values(cal: &Value, truth: &Value) -> Result<Zs, String> {
         .collect::<Result<Vec<_>, _>>()?
         .try_into()
         .expect("three rows");
-    host::calib::truth_check::z_values(cal, &m)
+    host::calib::result::truth_check::z_values(cal, &m)
 }
 
 /// Above this |z| a result the tool vouches for (exit 0) is confidently wrong.

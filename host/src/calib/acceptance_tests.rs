@@ -1,8 +1,8 @@
 //! Acceptance bars of the calibration on simulated captures without extra effects (2 poses ×
 //! 120 s at 0.5 Hz, 10 seeds), decoded from the simulator's wire bytes.
 
-use super::derived::mahalanobis2;
 use super::*;
+use crate::calib::result::derived::mahalanobis2;
 use crate::capture::decode;
 use crate::sim::{simulate, SimConfig, Truth};
 

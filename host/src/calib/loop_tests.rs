@@ -1,11 +1,13 @@
 //! Tests of the closed loop on simulated captures with effects the model was not told about.
 
-use super::closure::Note;
-use super::diagnostics::FindingKind;
-use super::extended::{Col, Evaluator, LoopData, Model, SharedPar};
-use super::truth_check::TruthErrors;
 use super::*;
-use crate::capture::decode;
+use crate::calib::analysis::closure;
+use crate::calib::analysis::closure::Note;
+use crate::calib::analysis::diagnostics::FindingKind;
+use crate::calib::data::kinematics;
+use crate::calib::engine::{Col, Evaluator, LoopData, Model, SharedPar};
+use crate::calib::result::truth_check::TruthErrors;
+use crate::capture::{decode, Run};
 use crate::geometry::Pose;
 use crate::sim::{simulate, RunSpec, SimConfig, Truth};
 use protocol::FullScale;
@@ -302,15 +304,15 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
         phase: true,
         drift: true,
         rate_scale: true,
-        orders: [true; super::diagnostics::MAX_ORDER + 1],
+        orders: [true; crate::calib::analysis::diagnostics::MAX_ORDER + 1],
     };
-    let cands = super::selection::candidates(&data, &model.effects, &everything);
+    let cands = crate::calib::analysis::selection::candidates(&data, &model.effects, &everything);
     assert!(cands.len() >= 10 && cands.iter().any(|c| c.effect.is_free_drift()), "{}", cands.len());
     let lead = model.cols().len();
     let cols: Vec<Col> = model.cols().into_iter().chain(cands.iter().flat_map(|c| c.cols.iter().copied())).collect();
-    let reach = super::extended::Reach::blocks(lead, cands.iter().map(|c| c.cols.len()));
-    let full = super::extended::accumulate(&data, &model, &cols);
-    let blocks = super::extended::accumulate_pairs(&data, &model, &cols, &reach);
+    let reach = crate::calib::engine::Reach::blocks(lead, cands.iter().map(|c| c.cols.len()));
+    let full = crate::calib::engine::accumulate(&data, &model, &cols);
+    let blocks = crate::calib::engine::accumulate_pairs(&data, &model, &cols, &reach);
     // The block each column is in: the model's (0) or a candidate's (1, 2, ...).
     let block_of: Vec<usize> = std::iter::repeat_n(0, lead)
         .chain(cands.iter().enumerate().flat_map(|(b, c)| std::iter::repeat_n(b + 1, c.cols.len())))
@@ -539,7 +541,7 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
         let (runs, truth) = capture_with(seed, &[180.0], BAR_DURATION_S, &["earth_rotation=60"], FullScale::Dps500);
         let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
         assert!(
-            r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation)),
+            r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation.key())),
             "{:?}",
             r.notes
         );
@@ -579,7 +581,7 @@ fn g_sensitivity_holds_earths_vertical_part_without_a_latitude() {
     assert_eq!(effects.last(), Some(&Effect::EarthRotationHorizontal), "{}", r.summary());
     assert!(r.notes.iter().any(|n| matches!(n, Note::EarthHorizontalOnly { .. })), "{:?}", r.notes);
     assert!(
-        !r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation)),
+        !r.notes.iter().any(|n| matches!(n, Note::Unseparated(t) if t.effect == Effect::EarthRotation.key())),
         "{:?}",
         r.notes
     );
@@ -638,7 +640,7 @@ fn a_random_walk_ends_in_the_free_drift_and_the_tilt_is_found_beside_it() {
 /// (f32 rounding; OUT_TEMP reads whole °C), visited forward, from the middle, or going back.
 #[test]
 fn smoothed_temperatures_are_the_per_sample_ones() {
-    use super::extended::{RunTemperatures, TEMPERATURE_SMOOTHING_S};
+    use crate::calib::engine::{RunTemperatures, TEMPERATURE_SMOOTHING_S};
     let (runs, _) = capture_with(9, &[180.0], 30.0, &["offset_drift"], FullScale::Dps500);
     let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -685,13 +687,13 @@ fn one_speed_carries_an_inseparable_g_sensitivity_in_sigma() {
         .notes
         .iter()
         .find_map(|n| match n {
-            Note::Unseparated(t) if t.effect == Effect::GSensitivity => Some(t.clone()),
+            Note::Unseparated(t) if t.effect == Effect::GSensitivity.key() => Some(t.clone()),
             _ => None,
         })
         .unwrap_or_else(|| panic!("no g-sensitivity term: {:?}", r.notes));
     assert!(term.k_sigma_ppm.iter().all(|&p| p > 100.0), "{term:?}");
     assert!(term.removed_by.contains("two speeds"), "{term:?}");
-    assert_eq!(r.final_report().consider.first().map(|t| t.effect), Some(Effect::GSensitivity));
+    assert_eq!(r.final_report().consider.first().map(|t| t.effect.clone()), Some(Effect::GSensitivity.key()));
     let t = truth_of(r.steps.last().expect("steps"));
     assert!(t.max_sensitivity_ppm() > 50.0, "the effect must bias M for this test to mean anything: {t:?}");
     assert_within_3_sigma(&t, "one speed, g-sensitivity");
@@ -716,13 +718,13 @@ fn the_transmission_error_at_the_index_pulse_does_not_turn_the_axes() {
     let truth = out.truth.sensor();
     let data =
         LoopData::new(kinematics::reconstruct(&decode(&out.bytes).runs, &KinOptions::default()).expect("kinematics"));
-    let linear = super::extended::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
+    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
     let model = linear.model.with(Effect::TableHarmonic(12), Default::default(), vec![0.0; 4]).with(
         Effect::TableHarmonic(24),
         Default::default(),
         vec![0.0; 4],
     );
-    let fitted = super::extended::fit(&data, model, [1.0; 3]).expect("fits");
+    let fitted = crate::calib::engine::fit(&data, model, [1.0; 3]).expect("fits");
     let m = fitted.model.m();
     for a in 0..3 {
         let row = [m[(a, 0)], m[(a, 1)], m[(a, 2)]];
@@ -761,7 +763,7 @@ fn undeclared_temperature_dependent_sensitivity_is_found_named_and_corrected() {
     assert!(r.effects().contains(&Effect::ScaleTemperature), "{}", r.summary());
     let last = r.steps.last().expect("steps");
     for (a, truth) in truth_ppm_per_c.iter().enumerate() {
-        let name = format!("sensitivity vs temperature, {}", crate::calib::axes::AXES[a]);
+        let name = format!("sensitivity vs temperature, {}", crate::calib::result::axes::AXES[a]);
         let p = last.effect_params.iter().find(|p| p.name == name).unwrap_or_else(|| panic!("{name}\n{}", r.summary()));
         let z = (p.estimate.value - truth) / p.estimate.sigma;
         assert!(z.abs() <= Z_1D, "{name}: {} ± {} against {truth}", p.estimate.value, p.estimate.sigma);

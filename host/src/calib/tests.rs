@@ -2,6 +2,7 @@
 
 use super::testgen::{two_pose_runs, GenRun, COUNTS_PER_REV};
 use super::*;
+use crate::calib::data::kinematics;
 use crate::geometry::Pose;
 use protocol::{Bandwidth, GyroConfig};
 

@@ -1,6 +1,6 @@
 //! Exports a calibration into forms a user's firmware or toolchain embeds: a C99 header, a Rust
 //! `const`, Kalibr's IMU YAML, flat JSON and CSV. Every export holds the same correction,
-//! `ω = (K S)⁻¹ (v − v_off)` (the correction of `calib::apply`), and the sensor's identity where known.
+//! `ω = (K S)⁻¹ (v − v_off)` (the correction of `calib::result::apply`), and the sensor's identity where known.
 
 mod c;
 mod kalibr;
@@ -23,7 +23,7 @@ pub const G_SENSITIVITY_KEY: &str = "g_sensitivity_dps_per_g";
 pub const DRIFT_MODEL_KEY: &str = "drift_model";
 
 /// OUT_TEMP's slope, LSB per °C: it falls one count per °C (L3G4200D datasheet, Table 5; the
-/// calibration's own temperature column uses the same, `calib::extended`).
+/// calibration's own temperature column uses the same, `calib::engine::loop_data`).
 pub const OUT_TEMP_LSB_PER_C: f64 = -1.0;
 
 /// The offset drift of the final model, in the form a firmware can evaluate.
@@ -58,7 +58,7 @@ pub enum DriftModel {
 
 impl DriftModel {
     /// The drift of the loop's final model (`None` without one). The loop reports drift terms
-    /// in °/s of each sensing axis (its coefficient over |row of M|, `calib::closure`), so
+    /// in °/s of each sensing axis (its coefficient over |row of M|, `calib::analysis::closure`), so
     /// counts are that times |row of M|. `out_temp_mean_lsb` is the runs' mean OUT_TEMP.
     pub fn of(lr: &crate::calib::LoopReport, out_temp_mean_lsb: Option<f64>) -> Option<Self> {
         use crate::calib::Effect;

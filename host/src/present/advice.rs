@@ -2,9 +2,10 @@
 //! rate the Earth cannot have.
 
 use super::PlusMinus;
-use crate::calib::closure::{Ask, EarthExcess, Note};
-use crate::calib::consider::{ConsiderTerm, SEPARATED_SNR2};
-use crate::calib::consistency::Consistency;
+use crate::calib::analysis::closure::{Ask, EarthExcess, Note};
+use crate::calib::analysis::consider::SEPARATED_SNR2;
+use crate::calib::analysis::consistency::Consistency;
+use crate::calib::result::consider_term::ConsiderTerm;
 
 /// A run the data cannot do without, as the operator is asked for it.
 pub fn ask(a: &Ask) -> String {
@@ -93,7 +94,7 @@ fn unseparated(t: &ConsiderTerm) -> String {
     };
     format!(
         "{} is not separated by these runs: at a plausible size (1σ: {sizes}; {}) it adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Runs that remove it: {}{longer}.",
-        t.effect.name(),
+        t.name,
         t.source,
         worst(t.k_sigma_ppm),
         worst(t.direction_sigma_deg),

@@ -2,7 +2,7 @@
 //! with the runs' and the mount's σ apart, offset, and direction with its σ.
 
 use super::PlusMinus;
-use crate::calib::report::CalReport;
+use crate::calib::result::report::CalReport;
 use std::fmt::Write as _;
 
 /// Writes the table's header and one row per axis, then the directions in a table of their own

@@ -3,7 +3,7 @@
 //! the runs, the gear ratio and the paper's cross-check.
 
 use super::{axis_table, PlusMinus};
-use crate::calib::report::CalReport;
+use crate::calib::result::report::CalReport;
 use std::fmt::Write as _;
 
 impl CalReport {

@@ -1,8 +1,8 @@
 //! The diagnostics in words: each finding as one sentence (what, where, how large, what it
 //! suggests), and the notes on clipping and on the speed-ripple check.
 
-use crate::calib::axes::AXES;
-use crate::calib::diagnostics::{Diagnostics, Finding, FindingKind};
+use crate::calib::analysis::diagnostics::{Diagnostics, Finding, FindingKind};
+use crate::calib::result::axes::AXES;
 use crate::geometry::Pose;
 use std::fmt::Write as _;
 

@@ -4,9 +4,9 @@
 //! `crate::report`'s primitives as `report.html` with the SVGs beside it.
 
 use super::{findings, loop_text, PlusMinus};
-use crate::calib::axes::AXES;
-use crate::calib::closure::{LoopReport, Verdict};
-use crate::calib::diagnostics::{Diagnostics, RunDiag};
+use crate::calib::analysis::closure::{LoopReport, Verdict};
+use crate::calib::analysis::diagnostics::{Diagnostics, RunDiag};
+use crate::calib::result::axes::AXES;
 use crate::report::{
     palette, spectra_plot, theta2_panel, Document, Marker, PlotSpec, Spectrum, Theta2Bins, Theta2Spec,
 };

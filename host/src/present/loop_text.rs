@@ -2,7 +2,7 @@
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
 use super::{advice, axis_table, findings, PlusMinus};
-use crate::calib::closure::{LoopReport, StepReport, Verdict};
+use crate::calib::analysis::closure::{LoopReport, StepReport, Verdict};
 use std::fmt::Write as _;
 
 impl LoopReport {
@@ -168,8 +168,8 @@ pub fn summary(r: &LoopReport) -> String {
     let _ = writeln!(
         o,
         "  The angles between the axes (intrinsic) rest on the runs alone. The tilts from the package axes (extrinsic) also rest on the fixture, which holds the package to ±{}° (σ {:.3}° per component): a turn of it common to both poses moves all three axes alike and no run can reveal it, so the mount, not the runs, limits them.",
-        crate::calib::derived::MOUNT_TOLERANCE_DEG,
-        crate::calib::derived::mount_sigma_deg()
+        crate::calib::result::derived::MOUNT_TOLERANCE_DEG,
+        crate::calib::result::derived::mount_sigma_deg()
     );
     if let Some(last) = r.steps.last() {
         if !last.effect_params.is_empty() {

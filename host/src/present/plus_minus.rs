@@ -1,7 +1,7 @@
 //! An [`Estimate`] printed as `value ± σ`: the format's width, fill, sign and precision apply to
 //! the value and the precision to σ as well, so `{:+9.3}` prints `   +1.234 ± 0.005`.
 
-use crate::calib::estimate::Estimate;
+use crate::calib::result::estimate::Estimate;
 use std::fmt;
 
 /// `value ± σ` (see the module doc).

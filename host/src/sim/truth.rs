@@ -97,8 +97,8 @@ pub struct RunTruth {
 
 impl Truth {
     /// The sensor alone, as a calibration is compared with it.
-    pub fn sensor(&self) -> crate::calib::truth_check::SensorTruth {
-        crate::calib::truth_check::SensorTruth { k_counts_per_dps: self.k_counts_per_dps, s: self.s }
+    pub fn sensor(&self) -> crate::calib::result::truth_check::SensorTruth {
+        crate::calib::result::truth_check::SensorTruth { k_counts_per_dps: self.k_counts_per_dps, s: self.s }
     }
 
     /// M as a matrix.

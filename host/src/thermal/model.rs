@@ -231,7 +231,7 @@ impl ThermalModel {
         });
         let cov = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(x.len(), var));
         let f = |p: &[f64]| super::rate_from_values(p, raw).to_vec();
-        let (rate, var) = crate::calib::derived::delta_method(f, &x, &cov);
+        let (rate, var) = crate::calib::result::derived::delta_method(f, &x, &cov);
         Ok(([rate[0], rate[1], rate[2]], [0, 1, 2].map(|i| var[(i, i)].max(0.0).sqrt())))
     }
 }
@@ -244,7 +244,7 @@ fn curve(
     summaries: &[SetpointSummary],
     order: Option<usize>,
 ) -> Result<Curve, ThermalError> {
-    let label = || format!("{} {}", crate::calib::axes::AXES[axis], quantity.label());
+    let label = || format!("{} {}", crate::calib::result::axes::AXES[axis], quantity.label());
     let choice = poly::choose_order(points).ok_or(ThermalError::TooFewSetpoints { found: points.len() })?;
     // A given order (a refit without one setpoint keeps the full model's) needs only its
     // coefficients' worth of points; a chosen one keeps a held-out degree of freedom.
@@ -272,7 +272,7 @@ fn curve(
         })
         .collect();
     Ok(Curve {
-        axis: crate::calib::axes::AXES[axis],
+        axis: crate::calib::result::axes::AXES[axis],
         quantity,
         order,
         press: choice.press,

@@ -4,7 +4,7 @@ use super::terms::{
     AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
-use crate::calib::axes::AXES;
+use crate::calib::result::axes::AXES;
 
 /// g-sensitivity: a bias in proportion to the specific force, here gravity, which turns in the
 /// sensor frame with θ2 at the table's own frequency (so it bends directions): three

@@ -2,7 +2,7 @@
 //! effect, each in its own file behind [`Behaviour`]: what it means physically and what makes it
 //! identifiable, its parameters (names, units, bounds), its contribution to the output and its
 //! Jacobian per sample, where its shared parameters enter the exciter's kinematics, and when the
-//! loop tries it. The engine ([`super::extended`]) and the selection ([`super::selection`]) know
+//! loop tries it. The engine ([`crate::calib::engine`]) and the selection ([`crate::calib::analysis::selection`]) know
 //! effects only through this trait.
 //!
 //! Adding an effect is a file here and a line in the `registry!` below (with its `mod` line): the
@@ -35,7 +35,7 @@ pub use delay::MAX_DELAY_S;
 pub use table_harmonic::{GEAR_POLE_PASS_ORDER, HARMONIC_ORDERS};
 pub use terms::DRIFT_KNOT_SPACINGS_S;
 
-use super::layout::Layout;
+use crate::calib::data::layout::Layout;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use terms::{

@@ -58,10 +58,10 @@ impl Behaviour for PoseFixture {
         dot(&t.u, &p.d_fixture[usize::from(k)])
     }
 
-    /// The mount tolerance of a machined angle block ([`crate::calib::derived::MOUNT_TOLERANCE_DEG`]).
+    /// The mount tolerance of a machined angle block ([`crate::calib::result::derived::MOUNT_TOLERANCE_DEG`]).
     fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
         (!cx.has(Effect::PoseFixture)).then_some(ConsiderBound {
-            sigma: crate::calib::derived::MOUNT_TOLERANCE_DEG,
+            sigma: crate::calib::result::derived::MOUNT_TOLERANCE_DEG,
             source: "a machined 90° angle block holds a fixture to about 0.1°, engineering judgement",
         })
     }

@@ -200,7 +200,7 @@ impl Needs {
 
 /// The inputs of the exciter's kinematic chain that shared parameters set, derived from a
 /// model once per pass (each effect's [`super::Behaviour::shift`] writes its own). The chain
-/// (`extended::Evaluator::point`) applies them in the rig's order: the delay to the time, the
+/// (`engine::chain::Evaluator::point`) applies them in the rig's order: the delay to the time, the
 /// index shifts and the gear lag to the angles, the ripple to the table's angle and speed, the
 /// tilt and Earth's rate to ω2, the filter's curvature to the output, the fixture to the frame.
 #[derive(Debug, Clone)]
@@ -486,7 +486,7 @@ pub fn dot(x: &[f64; 3], y: &[f64; 3]) -> f64 {
 /// How large an effect may plausibly be when the runs cannot measure it: one standard
 /// uncertainty of each of its parameters, in the parameter's reported unit
 /// ([`super::Behaviour::reported`]), with where that figure comes from. It enters the
-/// calibration's covariance as a consider parameter (`calib::consider`).
+/// calibration's covariance as a consider parameter (`calib::analysis::consider`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ConsiderBound {
     /// One standard uncertainty, reported unit.

@@ -8,7 +8,7 @@
 //! I = C − Bᵀ·P·B (C the effect's own block).
 //!
 //! Each effect says how large it may plausibly be (one σ, with a source:
-//! [`super::effects::Behaviour::consider`]). In the prior's whitened coordinates
+//! [`crate::calib::effects::Behaviour::consider`]). In the prior's whitened coordinates
 //! (I_w = D·I·D, D the σs), a direction whose information λ reaches [`SEPARATED_SNR2`] would show
 //! an effect of plausible size at ≥ 5σ: the runs separate it, and the loop's tests, which did not
 //! add it, speak for it. Every other direction is not separated: its posterior variance
@@ -19,11 +19,12 @@
 //! The cross-products come from one pass over the data with the model's columns and every
 //! considered effect's: the same sums a candidate's score is read from.
 
-use super::derived::derive;
-use super::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
-use super::effects::Effect;
-use super::extended::{accumulate_pairs, normal_equations, Fitted, Gram, LoopData, Reach, Selection};
-use super::stats::chi2_upper_quantile;
+use crate::calib::analysis::stats::chi2_upper_quantile;
+use crate::calib::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
+use crate::calib::effects::Effect;
+use crate::calib::engine::{accumulate_pairs, normal_equations, Fitted, Gram, LoopData, Reach, Selection};
+use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
+use crate::calib::result::derived::derive;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -37,41 +38,6 @@ pub const SEPARATED_SNR2: f64 = 25.0;
 /// it the runs separate the effect in all that matters.
 const REPORTED_PPM: f64 = 0.05;
 const REPORTED_DEG: f64 = 1e-6;
-
-/// One parameter of a considered effect.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ConsideredParam {
-    /// What.
-    pub name: String,
-    /// Its plausible size, one σ.
-    pub sigma: f64,
-    /// Unit.
-    pub unit: String,
-}
-
-/// One catalogued effect the runs do not separate, and what it costs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ConsiderTerm {
-    /// The effect.
-    pub effect: Effect,
-    /// Its parameters' plausible sizes.
-    pub params: Vec<ConsideredParam>,
-    /// Where those sizes come from.
-    pub source: String,
-    /// σ it adds to each sensitivity, ppm (alone; the terms add in quadrature).
-    pub k_sigma_ppm: [f64; 3],
-    /// σ it adds to each axis direction, degrees.
-    pub direction_sigma_deg: [f64; 3],
-    /// Directions (whitened) the runs do not separate, of the effect's parameters.
-    pub unseparated: usize,
-    /// The least of those directions' information λ (the squared signal-to-noise of an effect
-    /// of plausible size along it; [`SEPARATED_SNR2`] separates it). Near 0: these runs cannot
-    /// see it at all; between: longer runs of the same design would separate it.
-    #[serde(default)]
-    pub least_seen: f64,
-    /// The runs that would separate it.
-    pub removed_by: String,
-}
 
 /// The consider covariance: what it adds to the 12 base parameters' covariance, and its terms.
 #[derive(Debug, Clone, PartialEq)]
@@ -163,7 +129,7 @@ fn candidates(
     let mut out = Vec::new();
     for effect in Effect::catalogue().into_iter().filter(|e| !f.model.effects.contains(e)) {
         let (lin, shared) = effect.params(&data.layout);
-        let tried = super::selection::tried(data, &f.model.effects, effect);
+        let tried = crate::calib::analysis::selection::tried(data, &f.model.effects, effect);
         let mut c = Candidate { effect, cols: Vec::new(), sigma: Vec::new(), params: Vec::new(), source: "", tried };
         let mut add = |col: Col, own: Own, bound: Option<ConsiderBound>| {
             let Some(mut b) = bound else { return };
@@ -310,7 +276,8 @@ pub fn consider(
         let added = &s12 * sigma_c * s12.transpose();
         let (axes, _) = derive(params, &added, nominal);
         let term = ConsiderTerm {
-            effect: c.effect,
+            effect: c.effect.key(),
+            name: c.effect.name(),
             params: c.params.clone(),
             source: c.source.into(),
             k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),

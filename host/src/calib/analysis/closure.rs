@@ -4,26 +4,49 @@
 //! step is reported with the residual against the floor, how far the base parameters moved in
 //! their σ, a held-out prediction and, on simulated data, the error against the truth.
 
-use super::axes::AXES;
-use super::consider::{consider, ConsiderOverrides, ConsiderTerm, Consideration};
-use super::consistency::{consistency, Consistency};
-use super::derived::{derive, AxisEstimate, InterAxisAngle};
-use super::diagnostics::{diagnose, Diagnostics, Finding};
-use super::effects::terms::ConsiderCtx;
-use super::effects::Effect;
-use super::estimate::Estimate;
-use super::extended::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
-use super::paper::{paper_check, PaperCheck};
-use super::report::RunSummary;
-use super::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
-use super::selection::{
+use crate::calib::analysis::consider::{consider, ConsiderOverrides, Consideration};
+use crate::calib::analysis::consistency::{consistency, Consistency};
+use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
+use crate::calib::analysis::paper::paper_check;
+use crate::calib::analysis::selection::{
     both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
 };
-use super::truth_check::{SensorTruth, TruthErrors};
-use super::{check_runs, kinematics, nominal_counts_per_dps, CalError, CalOptions, CalReport};
+use crate::calib::data::kinematics;
+use crate::calib::data::kinematics::KinOptions;
+use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
+use crate::calib::effects::terms::ConsiderCtx;
+use crate::calib::effects::Effect;
+use crate::calib::engine::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
+use crate::calib::result::axes::AXES;
+use crate::calib::result::consider_term::ConsiderTerm;
+use crate::calib::result::derived::{derive, AxisEstimate, InterAxisAngle};
+use crate::calib::result::error::CalError;
+use crate::calib::result::estimate::Estimate;
+use crate::calib::result::paper::PaperCheck;
+use crate::calib::result::report::CalReport;
+use crate::calib::result::report::RunSummary;
+use crate::calib::result::report::{Autocorrelation, AxisResidual, RunDrift, RunResidualReport, DRIFT_TABLE_STEP_S};
+use crate::calib::result::truth_check::{SensorTruth, TruthErrors};
 use crate::capture::Run;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
+
+/// Settings of a calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CalOptions {
+    /// Kinematics reconstruction.
+    pub kinematics: KinOptions,
+    /// Span of the moving average whose remainder measures the noise floor, s. 0.1 s is 1/20 of
+    /// the 2 s table period at 0.5 Hz (a 0.5 Hz misfit leaks < 0.5 % of its amplitude into the
+    /// floor) and 80 samples at 800 Hz (noise correlated over a few samples biases it < 3 %).
+    pub noise_window_s: f64,
+}
+
+impl Default for CalOptions {
+    fn default() -> Self {
+        Self { kinematics: KinOptions::default(), noise_window_s: 0.1 }
+    }
+}
 
 /// Settings of the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -254,11 +277,11 @@ pub struct LoopReport {
 }
 
 impl LoopReport {
-    /// The loop's report once checked: `Err` when its answer is not [`super::sanity::sound`] (or an effect's
+    /// The loop's report once checked: `Err` when its answer is not [`crate::calib::analysis::sanity::sound`] (or an effect's
     /// parameter is not a number); flagged, with the reason, when a floor or statistic of its
     /// diagnostics (the linear model's or the final model's) is not a number.
     pub fn vouched(mut self) -> Result<Self, CalError> {
-        super::sanity::sound(&self.final_report)?;
+        crate::calib::analysis::sanity::sound(&self.final_report)?;
         if let Some(p) = self
             .steps
             .last()
@@ -274,7 +297,9 @@ impl LoopReport {
         // The linear model's diagnostics weighted and steered every step after it.
         let reason = [(self.final_diagnostics.as_ref(), "final model"), (Some(&self.initial), "linear model")]
             .into_iter()
-            .find_map(|(d, model)| Some(format!("{model}, {}", super::sanity::first_not_a_number(d?)?)));
+            .find_map(|(d, model)| {
+                Some(format!("{model}, {}", crate::calib::analysis::sanity::first_not_a_number(d?)?))
+            });
         if let Some(reason) = reason {
             self.verdict = Verdict::UnexplainedStructure;
             self.unvouched = Some(reason);
@@ -643,7 +668,7 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
     if !m.effects.iter().any(|e| e.is_drift()) {
         return Vec::new();
     }
-    let ev = super::extended::Evaluator::new(data, m);
+    let ev = crate::calib::engine::Evaluator::new(data, m);
     let mut out = Vec::new();
     for (r, rk) in data.kin.runs.iter().enumerate() {
         let mut row = RunDrift {
@@ -692,7 +717,7 @@ fn offset_reference_note(m: &Model, data: &LoopData) -> Option<Note> {
     drift.offset_reference()?;
     let r = data.runs.iter().position(|r| r.n_valid > 0)?;
     let i = data.runs[r].valid.first()?;
-    let ev = super::extended::Evaluator::new(data, m);
+    let ev = crate::calib::engine::Evaluator::new(data, m);
     let p = ev.point(r, i);
     let at_start_counts: [f64; 3] = std::array::from_fn(|a| {
         m.lin.iter().zip(&m.beta[a]).filter(|(c, _)| c.is_offset()).map(|(&c, b)| b * ev.lin_value(c, &p, a)).sum()
@@ -794,13 +819,13 @@ fn earth_implausible(f: &Fitted) -> Option<EarthExcess> {
 pub fn calibrate(runs: &[Run], cal: &CalOptions) -> Result<CalReport, CalError> {
     check_runs(runs)?;
     let data = LoopData::new(kinematics::reconstruct(runs, &cal.kinematics)?);
-    super::sanity::enough_samples(&data)?;
+    crate::calib::analysis::sanity::enough_samples(&data)?;
     let opts = LoopOptions { cal: *cal, max_effects: 0, ..LoopOptions::default() };
     let ctx = Context::new(&data, &opts, runs[0].gyro, None);
     let linear = ctx.linear_fit()?;
     let state = ctx.state(linear.clone());
     let report = ctx.cal_report(&state, ctx.paper_check(&linear, &state.diag));
-    super::sanity::sound(&report).map(|()| report)
+    crate::calib::analysis::sanity::sound(&report).map(|()| report)
 }
 
 /// Runs the loop on decoded runs. `truth` (simulated data) adds the error against it.
@@ -834,7 +859,7 @@ fn loop_on(
     truth: Option<SensorTruth>,
 ) -> Result<LoopReport, CalError> {
     let data = LoopData::new(kin);
-    super::sanity::enough_samples(&data)?;
+    crate::calib::analysis::sanity::enough_samples(&data)?;
     let ctx = Context::new(&data, opts, gyro, truth);
     let linear = ctx.linear_fit()?;
     let mut state = ctx.state(ctx.start_from(&linear)?);
@@ -957,7 +982,7 @@ impl Context<'_> {
                     delta_chi2,
                     dof,
                     threshold: 0.0,
-                    significance_sigma: super::stats::chi2_to_sigma(dof, delta_chi2),
+                    significance_sigma: crate::calib::analysis::stats::chi2_to_sigma(dof, delta_chi2),
                     known_physics: true,
                 };
                 let next = self.state(fitted);
@@ -1054,7 +1079,7 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
     (asks, notes)
 }
 
-// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+// The JSON layouts of this module's report types (see [`crate::calib::result::estimate::values`] for why).
 
 #[derive(Serialize, Deserialize)]
 pub struct ParamMoveJson {

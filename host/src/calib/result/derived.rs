@@ -2,9 +2,9 @@
 //! axes and the angles between them, each with a 1-σ from the covariance of M by the delta
 //! method (first-order propagation through a numerical Jacobian).
 
-use super::axes::AXES;
-use super::estimate::Estimate;
-use super::estimate::{estimates, sigmas, values};
+use crate::calib::result::axes::AXES;
+use crate::calib::result::estimate::Estimate;
+use crate::calib::result::estimate::{estimates, sigmas, values};
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -173,7 +173,7 @@ pub fn dvec(v: &[f64]) -> DVector<f64> {
     DVector::from_column_slice(v)
 }
 
-// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
+// The JSON layouts of this module's report types (see [`crate::calib::result::estimate::values`] for why).
 
 #[derive(Serialize, Deserialize)]
 pub struct AxisEstimateJson {

@@ -1,6 +1,6 @@
 //! An estimated quantity with its uncertainty, so that every reported estimate carries its 1-σ
 //! in one value rather than in a second field beside it. The unit stays in the name of the field
-//! that holds it (`tilt_deg: Estimate`); how an estimate is printed is [`super::present`]'s.
+//! that holds it (`tilt_deg: Estimate`); how an estimate is printed is [`crate::calib::present`]'s.
 
 use serde::{Deserialize, Serialize};
 

@@ -10,9 +10,9 @@
 //! separate if the groups agree (Rao 1948; Engle, *Handbook of Econometrics* II, ch. 13). It is
 //! read from the per-run sums the final fit already holds: no pass of its own.
 
-use super::axes::AXES;
-use super::extended::{full_selection, normal_equations, Fitted, Gram, LinCol, LoopData};
-use super::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::calib::engine::{full_selection, normal_equations, Fitted, Gram, LinCol, LoopData};
+use crate::calib::result::axes::AXES;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 

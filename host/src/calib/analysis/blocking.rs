@@ -8,7 +8,7 @@
 //! separated by [`Blocking::end_segment`] so no block straddles two runs.
 //!
 //! Written here: no kept crate implements Jonsson's blocking, least of all streaming over three
-//! lanes with segment ends; its χ² quantile comes from `statrs` (through [`super::stats`]).
+//! lanes with segment ends; its χ² quantile comes from `statrs` (through [`crate::calib::analysis::stats`]).
 
 /// Levels kept: 2^48 samples is beyond any capture.
 const LEVELS: usize = 48;
@@ -78,9 +78,9 @@ impl LongRun {
     }
 }
 
-/// χ² quantile at 99 % (exact, `statrs` through [`super::stats`]).
+/// χ² quantile at 99 % (exact, `statrs` through [`crate::calib::analysis::stats`]).
 fn chi2_99(dof: usize) -> f64 {
-    super::stats::chi2_upper_quantile(dof, ALPHA)
+    crate::calib::analysis::stats::chi2_upper_quantile(dof, ALPHA)
 }
 
 impl<const L: usize> Blocking<L> {

@@ -13,14 +13,14 @@
 //! one-parameter effect with a drop of 18 a nine-parameter g-sensitivity with a drop of 114
 //! (p ≈ 1e-19): with 10⁶ samples ln n charges each parameter 14.
 
-use super::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
-use super::effects::terms::{Evidence, Situation};
-use super::effects::Effect;
-use super::error::CalError;
-use super::extended::{
+use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
+use crate::calib::effects::terms::{Evidence, Situation};
+use crate::calib::effects::Effect;
+use crate::calib::engine::{
     accumulate_pairs, apply_step, fit, full_selection, residual_after, solve_joint, Col, Fitted, Gram, LinCol,
     LoopData, Reach, Selection,
 };
+use crate::calib::result::error::CalError;
 use crate::geometry::Pose;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -55,7 +55,7 @@ pub struct Score {
     /// Threshold the drop had to exceed.
     pub threshold: f64,
     /// The drop's significance: the normal deviate with the same upper tail as Δχ² for `dof`
-    /// parameters ([`super::stats::chi2_to_sigma`]). The order of the candidates.
+    /// parameters ([`crate::calib::analysis::stats::chi2_to_sigma`]). The order of the candidates.
     pub significance_sigma: f64,
     /// Added without a test because the physics is certain to be there (Earth rotation): only
     /// its parameters are unknown.
@@ -184,7 +184,11 @@ pub struct DriftChoice {
 
 /// The model with a candidate added, started at the candidate's linearised solution; the
 /// warm-up's time constant is not in that solution (its grid value stands).
-fn start_model(state: &Fitted, c: &Candidate, sol: &super::extended::JointSolution) -> super::extended::Model {
+fn start_model(
+    state: &Fitted,
+    c: &Candidate,
+    sol: &crate::calib::engine::JointSolution,
+) -> crate::calib::engine::Model {
     let ns = state.model.shared.len();
     let mut model = start_model_at_zero(state, c);
     let frozen: Vec<bool> = (0..model.shared.len()).map(|k| k >= ns && c.held_at.is_some()).collect();
@@ -216,7 +220,7 @@ fn without_replaced(state: &Fitted, c: &Candidate, data: &LoopData, base: &Selec
 }
 
 /// The model with candidate `c` added at zero (its warm-up time constant at its grid value).
-fn start_model_at_zero(state: &Fitted, c: &Candidate) -> super::extended::Model {
+fn start_model_at_zero(state: &Fitted, c: &Candidate) -> crate::calib::engine::Model {
     let (lin, shared) = c.effect.params(&state.model.layout);
     state.model.with(
         c.effect,
@@ -275,7 +279,7 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
 struct Scored {
     score: Score,
     candidate: usize,
-    solution: Option<super::extended::JointSolution>,
+    solution: Option<crate::calib::engine::JointSolution>,
 }
 
 impl Scored {
@@ -336,7 +340,7 @@ fn score_all(
                 }
             }
             let dof = dof.saturating_sub(removed).max(1);
-            let threshold = super::stats::chi2_upper_quantile(dof, alpha / m as f64);
+            let threshold = crate::calib::analysis::stats::chi2_upper_quantile(dof, alpha / m as f64);
             let solution = solve_joint(&total, &sel, weights);
             let delta_chi2 = solution.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
             let score = Score {
@@ -345,7 +349,7 @@ fn score_all(
                 delta_chi2,
                 dof,
                 threshold,
-                significance_sigma: super::stats::chi2_to_sigma(dof, delta_chi2),
+                significance_sigma: crate::calib::analysis::stats::chi2_to_sigma(dof, delta_chi2),
                 known_physics: false,
             };
             Scored { score, candidate: ci, solution }
@@ -505,8 +509,8 @@ pub fn least_needed(fitted: &Fitted, alpha: f64, keep: Effect) -> Option<(Effect
         let Some(ci) = c.cholesky() else { continue };
         let v = DVector::from_vec(val);
         let wald = v.dot(&ci.solve(&v));
-        let threshold = super::stats::chi2_upper_quantile(idx.len(), alpha);
-        let sig = super::stats::chi2_to_sigma(idx.len(), wald);
+        let threshold = crate::calib::analysis::stats::chi2_upper_quantile(idx.len(), alpha);
+        let sig = crate::calib::analysis::stats::chi2_to_sigma(idx.len(), wald);
         if wald < threshold && worst.as_ref().is_none_or(|w| sig < w.3) {
             worst = Some((e, wald, threshold, sig));
         }

@@ -8,8 +8,9 @@
 //! runs, the period, i.e. the actual gear ratio. θ1' is the slope of a local straight-line fit of
 //! encoder count against sample time, θ2' = ratio·θ1'.
 
-use super::error::CalError;
-use super::estimate::Estimate;
+use crate::calib::result::error::CalError;
+use crate::calib::result::estimate::Estimate;
+use crate::calib::result::gear::{GearEstimate, IndexStats};
 use crate::capture::{Run, RunSample, RunTemperature, Samples};
 use crate::geometry::{omega2, Pose};
 use nalgebra::Matrix3;
@@ -222,7 +223,7 @@ impl KinSamples {
 
     /// Sample `i` (panics beyond the end, as a slice does).
     // Always inlined: every pass reads each sample through it, and the batch that reads ahead
-    // (`extended::Cursor`) called it out of line (2 % of a 1-h replay).
+    // (`engine::chain::Cursor`) called it out of line (2 % of a 1-h replay).
     #[inline(always)]
     pub fn get(&self, i: usize) -> KinSample {
         let p = &self.packed[i];
@@ -290,38 +291,6 @@ impl<'a> IntoIterator for &'a KinSamples {
     fn into_iter(self) -> KinIter<'a> {
         self.iter()
     }
-}
-
-/// Where θ2 = 0 lies in a run, from its index pulses.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(into = "IndexStatsJson", from = "IndexStatsJson")]
-pub struct IndexStats {
-    /// Complete pulses found (rising edge followed by a falling edge).
-    pub pulses: usize,
-    /// Pulses rejected as outliers from the line.
-    pub rejected: usize,
-    /// Encoder count of θ2 = 0 nearest the first pulse.
-    pub ref_counts: Estimate,
-    /// 1-σ of the reference as a θ2 angle, degrees (through the pooled period).
-    pub ref_sigma_deg: f64,
-    /// RMS distance of pulse centres from the fitted line, counts.
-    pub centre_rms_counts: f64,
-    /// Median plate width, counts.
-    pub plate_width_counts: f64,
-    /// This run's own estimate of the encoder counts per θ2 revolution (NaN with one pulse).
-    pub period_counts: Estimate,
-}
-
-/// The actual gear ratio θ2'/θ1', from the encoder counts between index pulses of all runs.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(into = "GearEstimateJson", from = "GearEstimateJson")]
-pub struct GearEstimate {
-    /// Nominal ratio from `Hello::gear_ratio`.
-    pub nominal: f64,
-    /// Estimated ratio, used for θ2 and θ2' (`estimated` and `sigma` in the JSON).
-    pub ratio: Estimate,
-    /// (ratio − nominal)/nominal, parts per million.
-    pub deviation_ppm: f64,
 }
 
 /// One run's kinematics and bookkeeping.
@@ -840,71 +809,6 @@ fn run_kinematics(
         index,
         temperatures: run.temperatures.clone(),
     })
-}
-
-// The JSON layouts of this module's report types (see [`super::estimate::values`] for why).
-
-#[derive(Serialize, Deserialize)]
-pub struct IndexStatsJson {
-    pulses: usize,
-    rejected: usize,
-    ref_counts: f64,
-    ref_sigma_counts: f64,
-    ref_sigma_deg: f64,
-    centre_rms_counts: f64,
-    plate_width_counts: f64,
-    period_counts: f64,
-    period_sigma_counts: f64,
-}
-
-impl From<IndexStats> for IndexStatsJson {
-    fn from(i: IndexStats) -> Self {
-        Self {
-            pulses: i.pulses,
-            rejected: i.rejected,
-            ref_counts: i.ref_counts.value,
-            ref_sigma_counts: i.ref_counts.sigma,
-            ref_sigma_deg: i.ref_sigma_deg,
-            centre_rms_counts: i.centre_rms_counts,
-            plate_width_counts: i.plate_width_counts,
-            period_counts: i.period_counts.value,
-            period_sigma_counts: i.period_counts.sigma,
-        }
-    }
-}
-
-impl From<IndexStatsJson> for IndexStats {
-    fn from(i: IndexStatsJson) -> Self {
-        Self {
-            pulses: i.pulses,
-            rejected: i.rejected,
-            ref_counts: Estimate::new(i.ref_counts, i.ref_sigma_counts),
-            ref_sigma_deg: i.ref_sigma_deg,
-            centre_rms_counts: i.centre_rms_counts,
-            plate_width_counts: i.plate_width_counts,
-            period_counts: Estimate::new(i.period_counts, i.period_sigma_counts),
-        }
-    }
-}
-
-#[derive(Serialize, Deserialize)]
-pub struct GearEstimateJson {
-    nominal: f64,
-    estimated: f64,
-    sigma: f64,
-    deviation_ppm: f64,
-}
-
-impl From<GearEstimate> for GearEstimateJson {
-    fn from(g: GearEstimate) -> Self {
-        Self { nominal: g.nominal, estimated: g.ratio.value, sigma: g.ratio.sigma, deviation_ppm: g.deviation_ppm }
-    }
-}
-
-impl From<GearEstimateJson> for GearEstimate {
-    fn from(g: GearEstimateJson) -> Self {
-        Self { nominal: g.nominal, ratio: Estimate::new(g.estimated, g.sigma), deviation_ppm: g.deviation_ppm }
-    }
 }
 
 #[cfg(test)]

@@ -4,17 +4,17 @@
 //! Bonferroni-corrected level, every significant one turned into a sentence that says what, where,
 //! how strong and what it suggests. Also the binned residual and spectrum the report plots.
 
-use super::axes::{is_clipped, AXES};
-use super::binning::Binning;
-use super::blocking::Blocking;
-use super::extended::{harmonics_of, Cursor, Evaluator, LoopData, Model};
-use super::spectrum::{AmplitudeSpectrum, Periodogram};
-use super::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::calib::analysis::binning::Binning;
+use crate::calib::analysis::blocking::Blocking;
+use crate::calib::analysis::spectrum::{AmplitudeSpectrum, Periodogram};
+use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::calib::engine::{harmonics_of, Cursor, Evaluator, LoopData, Model};
+use crate::calib::result::axes::{is_clipped, AXES};
 use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
 
 /// Highest harmonic of the table rate examined sample by sample (the catalogue's).
-pub const MAX_ORDER: usize = super::effects::MAX_HARMONIC_ORDER;
+pub const MAX_ORDER: usize = crate::calib::effects::MAX_HARMONIC_ORDER;
 
 /// θ2 bins of the plotted residual: 1° each.
 pub const THETA2_BINS: usize = 360;

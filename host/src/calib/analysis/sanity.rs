@@ -8,13 +8,14 @@
 //!   positive definite; otherwise there is no answer ([`CalError::Degenerate`], exit 1);
 //! - [`vouch`], on the loop's report: [`sound`], then every noise floor and test statistic of
 //!   the diagnostics a number; otherwise the answer stands but nothing vouches for it, and the
-//!   verdict is [`super::closure::Verdict::UnexplainedStructure`] with the reason in [`super::closure::LoopReport::unvouched`]
+//!   verdict is [`crate::calib::analysis::closure::Verdict::UnexplainedStructure`] with the reason in [`crate::calib::analysis::closure::LoopReport::unvouched`]
 //!   (exit 3).
 
-use super::axes::AXES;
-use super::diagnostics::{AxisRunDiag, Diagnostics};
-use super::extended::LoopData;
-use super::{CalError, CalReport};
+use crate::calib::analysis::diagnostics::{AxisRunDiag, Diagnostics};
+use crate::calib::engine::LoopData;
+use crate::calib::result::axes::AXES;
+use crate::calib::result::error::CalError;
+use crate::calib::result::report::CalReport;
 
 /// Fewest samples per run the fit must use once the gaps are cut out: one sensor-table
 /// revolution at the run's commanded rate, the bar `kinematics` sets on the samples at steady
@@ -41,7 +42,7 @@ pub fn enough_samples(data: &LoopData) -> Result<(), CalError> {
                 run: rk.run,
                 label: rk.label.clone(),
                 usable: rd.n_valid,
-                clear_ms: super::effects::MAX_DELAY_S * 1e3,
+                clear_ms: crate::calib::effects::MAX_DELAY_S * 1e3,
                 kept: rk.samples.len(),
                 needed,
             });
@@ -53,7 +54,7 @@ pub fn enough_samples(data: &LoopData) -> Result<(), CalError> {
 /// Smallest pivot accepted in the Cholesky factorisation of the base parameters' correlation
 /// matrix. Pivot j is 1 − R² of parameter j on those before it, and never below the matrix's
 /// smallest eigenvalue; the fit accepts a normal matrix down to a reciprocal condition of 1e-13
-/// (`extended::MIN_RCOND`), so a covariance it produced honestly passes, and one whose pivot is
+/// (`engine::solve::MIN_RCOND`), so a covariance it produced honestly passes, and one whose pivot is
 /// rounding (1e-16) is singular.
 const MIN_PIVOT: f64 = 1e-13;
 
@@ -177,8 +178,8 @@ fn axis_run_not_a_number(ad: &AxisRunDiag) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::testgen::{two_pose_runs, typical_sensor};
-    use super::super::{calibrate, close_loop, CalOptions, LoopOptions, Verdict};
+    use crate::calib::testgen::{two_pose_runs, typical_sensor};
+    use crate::calib::{calibrate, close_loop, CalOptions, LoopOptions, Verdict};
     use crate::capture::Run;
 
     /// A run as a lossy line leaves it: every 40th sample lost (a gap every 50 ms, so no
@@ -202,7 +203,7 @@ mod tests {
         match close_loop(&runs, &LoopOptions::default(), None) {
             Ok(r) => {
                 let m: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| typical_sensor().0[(i, j)]));
-                let z = super::super::truth_check::max_z_against_m(r.final_report(), &m);
+                let z = crate::calib::result::truth_check::max_z_against_m(r.final_report(), &m);
                 panic!("not refused: {:?} at max |z| {z:.1}\n{}", r.verdict(), r.summary())
             }
             Err(e) => assert_eq!(e.to_string(), expected),

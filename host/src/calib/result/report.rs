@@ -2,10 +2,10 @@
 //! against the measured noise floor, sample accounting, index and gear checks) and the paper
 //! method's cross-check, as data (serialisable); [`crate::present::cal_text`] prints it.
 
-use super::apply::Calibration;
-use super::derived::{AxisEstimate, InterAxisAngle};
-use super::kinematics::{GearEstimate, IndexStats};
+use super::gear::{GearEstimate, IndexStats};
 use super::paper::PaperCheck;
+use crate::calib::result::apply::Calibration;
+use crate::calib::result::derived::{AxisEstimate, InterAxisAngle};
 use crate::geometry::Pose;
 use protocol::GyroConfig;
 use serde::{Deserialize, Serialize};
@@ -139,7 +139,7 @@ pub struct CalReport {
     /// The catalogued effects the runs do not separate, each with its plausible size and what it
     /// adds to σ (already in `cov` and every σ derived from it).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub consider: Vec<super::consider::ConsiderTerm>,
+    pub consider: Vec<super::consider_term::ConsiderTerm>,
 }
 
 /// The modelled offset through one run, sampled every [`DRIFT_TABLE_STEP_S`].

@@ -3,7 +3,7 @@
 use crate::geometry::Pose;
 use protocol::GyroConfig;
 
-/// A calibration failure. Runs are numbered from 1 in the order given to [`super::calibrate`].
+/// A calibration failure. Runs are numbered from 1 in the order given to [`crate::calib::calibrate`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CalError {
     /// Nothing to calibrate.
@@ -32,7 +32,7 @@ pub enum CalError {
         needed: usize,
     },
     /// A run whose gaps leave the fit too few samples: each gap costs the samples within
-    /// `MAX_DELAY_S` of it ([`super::sanity::needed_samples`] says how many a run needs).
+    /// `MAX_DELAY_S` of it ([`crate::calib::analysis::sanity::needed_samples`] says how many a run needs).
     #[error("run {run} ({label}): too few usable samples once the gaps are cut out ({usable} of {kept} at steady speed lie {clear_ms:.0} ms clear of every gap), need at least {needed} (one sensor-table revolution)")]
     TooFewBetweenGaps {
         /// Run number, from 1.
@@ -49,7 +49,7 @@ pub enum CalError {
         needed: usize,
     },
     /// A fit that is not one: a parameter or σ that is not a finite number, or a covariance that
-    /// is not positive definite ([`super::sanity::sound`]).
+    /// is not positive definite ([`crate::calib::analysis::sanity::sound`]).
     #[error("degenerate fit ({model}): {what}; no calibration")]
     Degenerate {
         /// The model fitted.

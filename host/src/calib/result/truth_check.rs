@@ -1,8 +1,8 @@
 //! On simulated data: how far a calibration lies from the truth, in degrees and ppm and in units
 //! of its own reported uncertainty.
 
-use super::derived::{mahalanobis2, AxisEstimate};
-use super::report::CalReport;
+use crate::calib::result::derived::{mahalanobis2, AxisEstimate};
+use crate::calib::result::report::CalReport;
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;

@@ -1,0 +1,42 @@
+//! The engine: the linear model extended by catalogue effects ([`crate::calib::effects`]), fitted
+//! jointly over the three axes.
+//!
+//! Each effect adds per-axis linear columns (drift, rate-dependent scale) and/or parameters shared
+//! by all axes that move the kinematics (delay, index offset, table-speed ripple, the warm-up time
+//! constant); the engine knows them only through [`crate::calib::effects::Behaviour`]. The shared ones make the model non-linear; it is fitted by Gauss-Newton on all
+//! parameters at once, each iteration one pass over the cached kinematics that accumulates, per
+//! run and axis, the Gram matrix of [linear columns | Jacobian columns of the shared parameters]
+//! against the current residual. The covariance of the converged fit is the inverse of the joint
+//! normal matrix, so the uncertainty of a delay or an index offset flows into that of M.
+//!
+//! The same accumulation over the union of the model's columns and every candidate's gives the
+//! linearised fit of any candidate model from one pass (see [`crate::calib::analysis::selection`]).
+//!
+//! Gauss-Newton is written here rather than taken from `levenberg-marquardt` or `argmin`: those
+//! want the residual vector and Jacobian in memory (samples × parameters, millions of rows),
+//! where this accumulates the normal equations run by run and reuses them for every candidate;
+//! the linear algebra is nalgebra's.
+//!
+//! Files: [`loop_data`] (the cached data), [`model`], [`chain`] (eq. 1-2 and every effect's
+//! inputs), [`accumulate`] (one pass → per-run sums), [`solve`] (normal equations, Gauss-Newton,
+//! covariance); [`sincos`] (the recurrences the chain's harmonics use).
+
+pub mod accumulate;
+pub mod chain;
+pub mod loop_data;
+pub mod model;
+pub mod sincos;
+pub mod solve;
+
+#[cfg(test)]
+mod tests;
+
+pub use crate::calib::effects::terms::{Bound, Col, LinCol, Point, Reported, SharedPar};
+pub use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
+pub use accumulate::{accumulate, accumulate_pairs, Gram, Reach};
+pub use chain::{harmonics_of, Cursor, Evaluator};
+pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
+pub use model::Model;
+pub use solve::{
+    apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Fitted, JointSolution, Selection,
+};

@@ -1,0 +1,43 @@
+//! What the consider covariance reports: each catalogued effect the runs do not separate, its
+//! plausible size with its source, and the σ it adds to the sensitivities and directions
+//! ([`crate::calib::analysis::consider`] computes them).
+
+use serde::{Deserialize, Serialize};
+
+/// One parameter of a considered effect.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsideredParam {
+    /// What.
+    pub name: String,
+    /// Its plausible size, one σ.
+    pub sigma: f64,
+    /// Unit.
+    pub unit: String,
+}
+
+/// One catalogued effect the runs do not separate, and what it costs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsiderTerm {
+    /// The effect's key, as `--consider KEY=SIGMA` names it (`g_sensitivity`, …).
+    pub effect: String,
+    /// The effect's name, as the notes print it.
+    #[serde(default)]
+    pub name: String,
+    /// Its parameters' plausible sizes.
+    pub params: Vec<ConsideredParam>,
+    /// Where those sizes come from.
+    pub source: String,
+    /// σ it adds to each sensitivity, ppm (alone; the terms add in quadrature).
+    pub k_sigma_ppm: [f64; 3],
+    /// σ it adds to each axis direction, degrees.
+    pub direction_sigma_deg: [f64; 3],
+    /// Directions (whitened) the runs do not separate, of the effect's parameters.
+    pub unseparated: usize,
+    /// The least of those directions' information λ (the squared signal-to-noise of an effect
+    /// of plausible size along it; [`SEPARATED_SNR2`] separates it). Near 0: these runs cannot
+    /// see it at all; between: longer runs of the same design would separate it.
+    #[serde(default)]
+    pub least_seen: f64,
+    /// The runs that would separate it.
+    pub removed_by: String,
+}
