@@ -408,32 +408,43 @@ impl NoiseReport {
     }
 }
 
-impl std::fmt::Display for NoiseReport {
+/// The figures' table of a [`NoiseReport`], without the Allan curve: [`NoiseReport::figures`].
+pub struct Figures<'a>(&'a NoiseReport);
+
+impl NoiseReport {
+    /// The stretch and the figures per axis, without the curve's table (the calibration's
+    /// summary prints these; `host noise` prints the whole report).
+    pub fn figures(&self) -> Figures<'_> {
+        Figures(self)
+    }
+}
+
+impl std::fmt::Display for Figures<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self.0;
         writeln!(
             f,
             "Static stretch: run {}, {} samples, {:.1} s at {:.2} Hz; rates through the {}",
-            self.run,
-            self.samples,
-            self.duration_s,
-            1.0 / self.tau0_s,
-            self.scaling
+            r.run,
+            r.samples,
+            r.duration_s,
+            1.0 / r.tau0_s,
+            r.scaling
         )?;
         writeln!(f, "axis  ARW [°/√h]  bias instability [°/h]  RRW [°/h/√h]  ADEV min [°/s] at τ [s]")?;
-        let none_seen =
-            self.axes.iter().any(|a| a.bias_instability_deg_per_h == 0.0 || a.rrw_deg_per_h_per_sqrt_h == 0.0);
-        if self.duration_s < SHORT_STRETCH_S {
+        let none_seen = r.axes.iter().any(|a| a.bias_instability_deg_per_h == 0.0 || a.rrw_deg_per_h_per_sqrt_h == 0.0);
+        if r.duration_s < SHORT_STRETCH_S {
             writeln!(
                 f,
                 "(a {:.0} s stretch measures σ(τ) up to τ = {:.0} s only: ARW is firm, bias instability and RRW are indicative)",
-                self.duration_s,
-                self.duration_s * MAX_CLUSTER_FRACTION
+                r.duration_s,
+                r.duration_s * MAX_CLUSTER_FRACTION
             )?;
         }
         if none_seen {
             writeln!(f, "(none seen: the Allan curve shows no such slope within the stretch; a longer one may)")?;
         }
-        for a in &self.axes {
+        for a in &r.axes {
             writeln!(
                 f,
                 "  {}   {:>10}  {:>22}  {:>12}  {:14.3e}  {:8.2}",
@@ -445,6 +456,13 @@ impl std::fmt::Display for NoiseReport {
                 a.tau_at_min_s
             )?;
         }
+        Ok(())
+    }
+}
+
+impl std::fmt::Display for NoiseReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.figures())?;
         writeln!(f, "\n τ [s]        ADEV x [°/s]   ADEV y [°/s]   ADEV z [°/s]")?;
         let n = self.axes.iter().map(|a| a.curve.len()).min().unwrap_or(0);
         for i in 0..n {

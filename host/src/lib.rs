@@ -11,6 +11,7 @@ pub mod link;
 pub mod present;
 pub mod provenance;
 pub mod records;
+pub mod replay;
 pub mod report;
 pub mod session;
 pub mod sim;

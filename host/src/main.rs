@@ -8,7 +8,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use host::calib;
-use host::capture::{self, Capture, Samples as _};
+use host::capture::{self, Capture};
 use host::export;
 use host::files;
 use host::geometry::Pose;
@@ -62,88 +62,7 @@ enum Cmd {
         lockstep_clock: Option<PathBuf>,
     },
     /// Calibrate: live against the rig (--port) or from recorded captures (--replay).
-    #[command(group(clap::ArgGroup::new("source").required(true).args(["port", "replay"])))]
-    Calibrate {
-        /// Serial port of the rig: runs the guided live session.
-        #[arg(long, conflicts_with = "replay", requires = "sensor")]
-        port: Option<String>,
-        /// Capture files to compute from instead (each says which pose it holds).
-        #[arg(long, num_args = 1..)]
-        replay: Vec<PathBuf>,
-        /// Where the captures (live), the JSON result and the report go.
-        #[arg(long, default_value = "calibration")]
-        out_dir: PathBuf,
-        /// Live: seconds of data per run once at speed.
-        #[arg(long, default_value_t = 120.0, value_parser = parse_duration)]
-        duration: f64,
-        /// Live: base-table rates to run in each pose, °/s, negative for clockwise. The default's
-        /// three signed speeds separate every catalogued effect (docs/trust.md): two speeds tell a
-        /// gyro delay from an index offset, and the scale seen at each signed speed holds three
-        /// unknowns, M's, Earth's vertical rate (odd in the direction) and the filter's droop
-        /// (growing with speed).
-        #[arg(long, value_delimiter = ',', default_value = "180,90,-180", allow_negative_numbers = true, value_parser = parse_rate)]
-        rates_dps: Vec<f64>,
-        /// Live: end the session with a static run (motor off) of this many seconds in the last
-        /// pose, for noise figures (Allan deviation, ARW, bias instability, RRW). An hour gives
-        /// bias instability and RRW that are more than indicative.
-        #[arg(long, value_parser = parse_duration, conflicts_with = "replay")]
-        static_s: Option<f64>,
-        /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
-        /// `x.cap`, if present).
-        #[arg(long, requires = "replay")]
-        truth: Option<PathBuf>,
-        /// Serial number of the gyro under calibration. Required live (the operator confirms
-        /// it); on replay it defaults to the session manifest beside the captures.
-        #[arg(long)]
-        sensor: Option<String>,
-        /// Who runs the session.
-        #[arg(long)]
-        operator: Option<String>,
-        /// Which rig runs it.
-        #[arg(long)]
-        rig: Option<String>,
-        /// Records database the result is stored in after its files are written: sqlite:PATH or
-        /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
-        #[arg(long)]
-        db: Option<String>,
-        /// Store the result in no records database (the files are still written): for demos,
-        /// trials and tests.
-        #[arg(long, conflicts_with = "db")]
-        no_db: bool,
-        /// Record this calibration even if one of its captures is already in a record (by
-        /// SHA-256); without it such a capture is refused, naming the record.
-        #[arg(long)]
-        again: bool,
-        /// Specification limits (JSON: sensitivity_tolerance_percent, max_tilt_deg,
-        /// max_non_orthogonality_deg, max_arw_deg_per_sqrt_h, each optional): PASS/FAIL on the
-        /// certificate, the summary and the record; exit 4 when a limit fails.
-        #[arg(long, value_name = "FILE")]
-        spec: Option<PathBuf>,
-        /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
-        #[arg(long)]
-        yes: bool,
-        /// Latitude of the lab, degrees (north positive): Earth's vertical rate is then known
-        /// rather than fitted, which tightens every sensitivity's σ by 10-20 ppm.
-        #[arg(long, allow_negative_numbers = true, value_parser = parse_latitude)]
-        latitude_deg: Option<f64>,
-        /// Plausible size (one σ, in the unit the notes give) of a catalogued effect the runs may
-        /// not separate, replacing the built-in one, e.g. `--consider g_sensitivity=0.02` (°/s
-        /// per g) for a part whose datasheet states it; 0 leaves the effect out. Repeatable.
-        #[arg(long, value_name = "EFFECT=SIGMA")]
-        consider: Vec<String>,
-        /// Baud rate (ignored by USB CDC-ACM).
-        #[arg(long, default_value_t = link::DEFAULT_BAUD)]
-        baud: u32,
-        /// Tests: the link's time is a lockstep virtual rig's simulated time, stepped through
-        /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
-        #[arg(long, hide = true, requires = "port", value_name = "SOCKET")]
-        lockstep_clock: Option<PathBuf>,
-        /// Live: a thermal session at these chamber setpoints, °C, in order: at each the operator
-        /// sets the chamber, the host waits for OUT_TEMP to settle (docs/thermal.md), then records
-        /// the runs into a subfolder; the thermal model is fitted at the end.
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint, conflicts_with = "replay")]
-        chamber_c: Vec<f64>,
-    },
+    Calibrate(CalibrateArgs),
     /// Convert raw counts to rate vectors in the package frame with a calibration.
     Apply {
         /// The calibration.json written by `calibrate`.
@@ -221,39 +140,7 @@ enum Cmd {
         command: RecordsCmd,
     },
     /// Simulate a session on the virtual exciter: a capture and, beside it, the truth.
-    Simulate {
-        /// Capture file to write; the truth goes to the same name with `.truth.json`.
-        #[arg(long)]
-        out: PathBuf,
-        /// Seed: one seed is one simulated sensor.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Seconds per run, spin-up included.
-        #[arg(long, default_value_t = 120.0)]
-        duration: f64,
-        /// Poses to run, in order.
-        #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = parse_pose)]
-        poses: Vec<Pose>,
-        /// Base-table rates to run in each pose, °/s, negative for clockwise.
-        #[arg(long, value_delimiter = ',', default_value = "180", allow_negative_numbers = true)]
-        rates_dps: Vec<f64>,
-        /// Gyro full scale, °/s: 250, 500 or 2000.
-        #[arg(long, default_value_t = 500, value_parser = parse_full_scale)]
-        full_scale: u16,
-        /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
-        /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
-        /// gear_ratio_error, mystery_harmonic, earth_rotation, gear_transmission, g_sensitivity,
-        /// table_tilt, pose_fixture, bias_random_walk.
-        #[arg(long = "effect")]
-        effects: Vec<String>,
-        /// Full configuration as JSON (a `SimConfig`); overrides the options above.
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// A thermal session: the runs at each of these chamber setpoints, °C, in order, each once
-        /// the die has settled; --out is then a folder (one subfolder per setpoint, thermal.json).
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint)]
-        chamber_c: Vec<f64>,
-    },
+    Simulate(SimulateArgs),
     /// The firmware's core and the simulated exciter on a pseudo-terminal, to try the live
     /// session without hardware: prints the device path, then serves `calibrate --port PATH`.
     VirtualRig(host::virtual_rig::Options),
@@ -266,6 +153,127 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// `host calibrate`'s options.
+#[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["port", "replay"])))]
+struct CalibrateArgs {
+    /// Serial port of the rig: runs the guided live session.
+    #[arg(long, conflicts_with = "replay", requires = "sensor")]
+    port: Option<String>,
+    /// Capture files to compute from instead (each says which pose it holds).
+    #[arg(long, num_args = 1..)]
+    replay: Vec<PathBuf>,
+    /// Where the captures (live), the JSON result and the report go.
+    #[arg(long, default_value = "calibration")]
+    out_dir: PathBuf,
+    /// Live: seconds of data per run once at speed.
+    #[arg(long, default_value_t = 120.0, value_parser = parse_duration)]
+    duration: f64,
+    /// Live: base-table rates to run in each pose, °/s, negative for clockwise. The default's
+    /// three signed speeds separate every catalogued effect (docs/trust.md): two speeds tell a
+    /// gyro delay from an index offset, and the scale seen at each signed speed holds three
+    /// unknowns, M's, Earth's vertical rate (odd in the direction) and the filter's droop
+    /// (growing with speed).
+    #[arg(long, value_delimiter = ',', default_value = "180,90,-180", allow_negative_numbers = true, value_parser = parse_rate)]
+    rates_dps: Vec<f64>,
+    /// Live: end the session with a static run (motor off) of this many seconds in the last
+    /// pose, for noise figures (Allan deviation, ARW, bias instability, RRW). An hour gives
+    /// bias instability and RRW that are more than indicative.
+    #[arg(long, value_parser = parse_duration, conflicts_with = "replay")]
+    static_s: Option<f64>,
+    /// Replay: the simulated truth to compare with (default: `x.truth.json` beside a single
+    /// `x.cap`, if present).
+    #[arg(long, requires = "replay")]
+    truth: Option<PathBuf>,
+    /// Serial number of the gyro under calibration. Required live (the operator confirms
+    /// it); on replay it defaults to the session manifest beside the captures.
+    #[arg(long)]
+    sensor: Option<String>,
+    /// Who runs the session.
+    #[arg(long)]
+    operator: Option<String>,
+    /// Which rig runs it.
+    #[arg(long)]
+    rig: Option<String>,
+    /// Records database the result is stored in after its files are written: sqlite:PATH or
+    /// postgres://… (default: $GYROCAL_DB, else sqlite:~/.local/share/gyrocal/records.sqlite).
+    #[arg(long)]
+    db: Option<String>,
+    /// Store the result in no records database (the files are still written): for demos,
+    /// trials and tests.
+    #[arg(long, conflicts_with = "db")]
+    no_db: bool,
+    /// Record this calibration even if one of its captures is already in a record (by
+    /// SHA-256); without it such a capture is refused, naming the record.
+    #[arg(long)]
+    again: bool,
+    /// Specification limits (JSON: sensitivity_tolerance_percent, max_tilt_deg,
+    /// max_non_orthogonality_deg, max_arw_deg_per_sqrt_h, each optional): PASS/FAIL on the
+    /// certificate, the summary and the record; exit 4 when a limit fails.
+    #[arg(long, value_name = "FILE")]
+    spec: Option<PathBuf>,
+    /// Live: do not wait for Enter between poses (for scripted rigs with an automatic mount).
+    #[arg(long)]
+    yes: bool,
+    /// Latitude of the lab, degrees (north positive): Earth's vertical rate is then known
+    /// rather than fitted, which tightens every sensitivity's σ by 10-20 ppm.
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_latitude)]
+    latitude_deg: Option<f64>,
+    /// Plausible size (one σ, in the unit the notes give) of a catalogued effect the runs may
+    /// not separate, replacing the built-in one, e.g. `--consider g_sensitivity=0.02` (°/s
+    /// per g) for a part whose datasheet states it; 0 leaves the effect out. Repeatable.
+    #[arg(long, value_name = "EFFECT=SIGMA")]
+    consider: Vec<String>,
+    /// Baud rate (ignored by USB CDC-ACM).
+    #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+    baud: u32,
+    /// Tests: the link's time is a lockstep virtual rig's simulated time, stepped through
+    /// this Unix socket (`host::virtual_rig::LockstepPort`); --port is that rig's pty.
+    #[arg(long, hide = true, requires = "port", value_name = "SOCKET")]
+    lockstep_clock: Option<PathBuf>,
+    /// Live: a thermal session at these chamber setpoints, °C, in order: at each the operator
+    /// sets the chamber, the host waits for OUT_TEMP to settle (docs/thermal.md), then records
+    /// the runs into a subfolder; the thermal model is fitted at the end.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint, conflicts_with = "replay")]
+    chamber_c: Vec<f64>,
+}
+
+/// `host simulate`'s options.
+#[derive(clap::Args)]
+struct SimulateArgs {
+    /// Capture file to write; the truth goes to the same name with `.truth.json`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed: one seed is one simulated sensor.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seconds per run, spin-up included.
+    #[arg(long, default_value_t = 120.0)]
+    duration: f64,
+    /// Poses to run, in order.
+    #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = parse_pose)]
+    poses: Vec<Pose>,
+    /// Base-table rates to run in each pose, °/s, negative for clockwise.
+    #[arg(long, value_delimiter = ',', default_value = "180", allow_negative_numbers = true)]
+    rates_dps: Vec<f64>,
+    /// Gyro full scale, °/s: 250, 500 or 2000.
+    #[arg(long, default_value_t = 500, value_parser = parse_full_scale)]
+    full_scale: u16,
+    /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
+    /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
+    /// gear_ratio_error, mystery_harmonic, earth_rotation, gear_transmission, g_sensitivity,
+    /// table_tilt, pose_fixture, bias_random_walk.
+    #[arg(long = "effect")]
+    effects: Vec<String>,
+    /// Full configuration as JSON (a `SimConfig`); overrides the options above.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// A thermal session: the runs at each of these chamber setpoints, °C, in order, each once
+    /// the die has settled; --out is then a folder (one subfolder per setpoint, thermal.json).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = parse_setpoint)]
+    chamber_c: Vec<f64>,
 }
 
 /// A drive value whose wire form (`to_wire`, through `DriveConfig::from_si`) lies in `range`,
@@ -410,199 +418,226 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Cmd::Record { port, out, pose, rate_dps, duration, baud, lockstep_clock } => {
             record(open_link(&port, baud, lockstep_clock.as_deref())?, &out, pose, rate_dps, duration)
         }
-        Cmd::Calibrate {
-            port,
-            replay,
-            out_dir,
-            duration,
-            rates_dps,
-            static_s,
-            truth,
-            sensor,
-            operator,
-            rig,
-            db,
-            no_db,
-            again,
-            spec,
-            yes,
-            latitude_deg,
-            consider,
-            baud,
-            lockstep_clock,
-            chamber_c,
-        } => {
-            let mut considered = calib::analysis::consider::ConsiderOverrides::default();
-            for c in &consider {
-                considered.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
-            }
-            // Resolved first: a wrong --db must not cost a session.
-            let db = if no_db { None } else { Some(records::DbSpec::resolve(db.as_deref())?) };
-            // Read first too: a bad spec file must not cost a session.
-            let spec = spec.as_deref().map(host::spec::Spec::read).transpose().map_err(Usage)?;
-            // Held until the process ends: a second calibration into this directory is refused
-            // before it records or computes anything.
-            let _lock = files::DirLock::acquire(&out_dir)?;
-            let identity = Identity { sensor_serial: sensor, operator, rig };
-            let (files, identity, started) = match port {
-                Some(port) => {
-                    let interrupted = interrupt_flag()?;
-                    // Checked now so the operator hears of it before the runs; the record is
-                    // still attempted (and the files kept) at the end.
-                    if let Some(Err(e)) = db.as_ref().map(|db| db.open()) {
-                        note(&format!(
-                            "warning: the records database is not usable now ({e:#}); the session runs anyway"
-                        ));
-                    }
-                    let serial = identity.sensor_serial.clone().unwrap_or_default();
-                    // The port first: a port that cannot be opened must not leave a manifest
-                    // behind, or the retry in the same --out-dir would be refused.
-                    let mut link = open_link(&port, baud, lockstep_clock.as_deref())?;
-                    let mut manifest = start_manifest(&out_dir, identity)?;
-                    link.watch_interrupt(interrupted.clone());
-                    let mut operator: Box<dyn session::Operator> =
-                        if yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
-                    session::prompt(
-                        &mut link,
-                        &format!("Sensor under calibration: {serial}. Check it against the part's label."),
-                        operator.as_mut(),
-                        &interrupted,
-                    )?;
-                    let plan = session::plan_with_static(&Pose::ALL, &rates_dps, duration, static_s);
-                    if !chamber_c.is_empty() {
-                        let m = host::thermal::live::record_thermal_session(
-                            &mut link,
-                            &chamber_c,
-                            &plan,
-                            &out_dir,
-                            operator.as_mut(),
-                            &mut host::thermal::live::ManualChamber,
-                            host::thermal::settle::SettleCriterion::default(),
-                            &interrupted,
-                        )?;
-                        let files: Vec<PathBuf> = m.paths(&out_dir).into_iter().flat_map(|(_, _, f)| f).collect();
-                        manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
-                        manifest.write(&out_dir)?;
-                        let opts =
-                            calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-                        let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
-                        return calibrate_thermal(&out_dir, &out_dir, manifest.identity, record_to, &opts);
-                    }
-                    let files = session::record_session(&mut link, &plan, &out_dir, operator.as_mut(), &interrupted)?;
-                    manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
-                    manifest.write(&out_dir)?;
-                    (files, manifest.identity, Some(manifest.started_utc))
-                }
-                None if replay.len() == 1
-                    && host::thermal::manifest::ThermalManifest::read_in(&replay[0])?.is_some() =>
-                {
-                    let opts =
-                        calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-                    let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
-                    return calibrate_thermal(&replay[0], &out_dir, identity, record_to, &opts);
-                }
-                None => match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
-                    Some(m) => {
-                        for w in m.verify(&replay)? {
-                            note(&format!("warning: {w}"));
-                        }
-                        (replay, identity.or(m.identity), Some(m.started_utc))
-                    }
-                    None => (replay, identity, None),
-                },
-            };
-            let opts = calib::LoopOptions { latitude_deg, consider: considered, ..calib::LoopOptions::default() };
-            let record_to = RecordTo { db: db.as_ref(), again, spec: spec.as_ref() };
-            calibrate(&files, &out_dir, truth.as_deref(), identity, started, record_to, &opts)
-        }
-        Cmd::Noise { capture, cal, json } => {
-            let cap = read_capture(&capture)?;
-            let cal = cal.as_deref().map(load_calibration).transpose()?;
-            let report = host::allan::capture_noise(&cap, cal.as_ref())
-                .map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
-            if json {
-                files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
-            } else {
-                files::stdout(&host::text::wrap(&report.to_string(), host::text::TEXT_WIDTH))?;
-            }
-            Ok(ExitCode::SUCCESS)
-        }
+        Cmd::Calibrate(args) => calibrate_cmd(args),
+        Cmd::Noise { capture, cal, json } => noise_cmd(&capture, cal.as_deref(), json),
         Cmd::Records { db, format, command } => records_cmd(&records::DbSpec::resolve(db.as_deref())?, format, command),
-        Cmd::Export { cal, format, out } => {
-            let text =
-                fs::read_to_string(&cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
-            let e =
-                export::Export::from_json(&text).with_context(|| format!("{} is not a calibration", cal.display()))?;
-            let rendered = e.render(format)?;
-            match out {
-                Some(path) => {
-                    files::write_atomic(&path, rendered)?;
-                    note(&format!("wrote {}", path.display()));
-                }
-                None => files::stdout(&rendered)?,
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Cmd::Simulate { out, seed, duration, poses, rates_dps, full_scale, effects, config, chamber_c } => {
-            let cfg = match config {
-                Some(path) => {
-                    let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
-                    serde_json::from_str(&text)
-                        .with_context(|| format!("{} is not a simulation config", path.display()))
-                        .map_err(Usage)?
-                }
-                None => {
-                    let mut cfg = sim::SimConfig::with_runs(
-                        seed,
-                        session::plan(&poses, &rates_dps, duration)
-                            .iter()
-                            .map(|r| sim::RunSpec { pose: r.pose, rate_dps: r.rate_dps, duration_s: r.duration_s })
-                            .collect(),
-                    );
-                    cfg.gyro.full_scale = match full_scale {
-                        250 => protocol::FullScale::Dps250,
-                        2000 => protocol::FullScale::Dps2000,
-                        _ => protocol::FullScale::Dps500,
-                    };
-                    for e in &effects {
-                        cfg.effects.enable(e).map_err(|e| Usage(e.into()))?;
-                    }
-                    cfg
-                }
-            };
-            if chamber_c.is_empty() {
-                simulate(&cfg, &out)
-            } else {
-                simulate_thermal(&cfg, &chamber_c, &out)
-            }
-        }
+        Cmd::Export { cal, format, out } => export_cmd(&cal, format, out.as_deref()),
+        Cmd::Simulate(args) => simulate_cmd(args),
         Cmd::Apply { cal, counts, capture, temp_c } => apply(&cal, counts, capture.as_deref(), temp_c),
         Cmd::VirtualRig(options) => host::virtual_rig::serve(&options).map(|()| ExitCode::SUCCESS),
         Cmd::ConfigureDrive { port, gear_ratio, load_inertia_kgm2, supply_v, baud } => {
-            let mut link = Link::new(link::open_port(&port, baud)?, port.as_str());
-            session::identify(&mut link)?;
-            session::configure_drive(
-                &mut link,
-                protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v),
-            )?;
-            note(&format!(
-                "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
-            ));
-            Ok(ExitCode::SUCCESS)
+            configure_drive_cmd(&port, gear_ratio, load_inertia_kgm2, supply_v, baud)
         }
-        Cmd::Inspect { files, json } => {
-            for f in &files {
-                let cap = read_capture(f)?;
-                let report = host::inspect::inspect(&f.display().to_string(), &cap);
-                if json {
-                    files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
-                } else {
-                    files::stdout(&report.to_string())?;
-                }
-            }
-            Ok(ExitCode::SUCCESS)
+        Cmd::Inspect { files, json } => inspect_cmd(&files, json),
+    }
+}
+
+/// Where a calibration's captures come from.
+enum Source {
+    /// One session's captures, with the identity and start its manifest gives.
+    Captures { files: Vec<PathBuf>, identity: Identity, started_utc: Option<String> },
+    /// A thermal session's folder (its manifest names every setpoint's captures).
+    Thermal { folder: PathBuf, identity: Identity },
+}
+
+/// `host calibrate`: a live session (`--port`, or a thermal one with `--chamber-c`) or captures
+/// replayed (`--replay`, a thermal session's folder too), then the calibration.
+fn calibrate_cmd(args: CalibrateArgs) -> Result<ExitCode> {
+    let mut consider = calib::analysis::consider::ConsiderOverrides::default();
+    for c in &args.consider {
+        consider.add(c).map_err(|e| Usage(anyhow::anyhow!("--consider {c}: {e}")))?;
+    }
+    // Resolved first: a wrong --db must not cost a session.
+    let db = if args.no_db { None } else { Some(records::DbSpec::resolve(args.db.as_deref())?) };
+    // Read first too: a bad spec file must not cost a session.
+    let spec = args.spec.as_deref().map(host::spec::Spec::read).transpose().map_err(Usage)?;
+    // Held until the process ends: a second calibration into this directory is refused
+    // before it records or computes anything.
+    let _lock = files::DirLock::acquire(&args.out_dir)?;
+    let identity =
+        Identity { sensor_serial: args.sensor.clone(), operator: args.operator.clone(), rig: args.rig.clone() };
+    let source = match &args.port {
+        Some(port) => live_session(port, &args, identity, db.as_ref())?,
+        None => replayed(&args.replay, identity)?,
+    };
+    let opts = calib::LoopOptions { latitude_deg: args.latitude_deg, consider, ..calib::LoopOptions::default() };
+    let record_to = RecordTo { db: db.as_ref(), again: args.again, spec: spec.as_ref() };
+    match source {
+        Source::Thermal { folder, identity } => calibrate_thermal(&folder, &args.out_dir, identity, record_to, &opts),
+        Source::Captures { files, identity, started_utc } => {
+            calibrate(&files, &args.out_dir, args.truth.as_deref(), identity, started_utc, record_to, &opts)
         }
     }
+}
+
+/// The guided live session on `port`: the operator checks the sensor's serial, then the runs
+/// (at each chamber setpoint for a thermal session) are recorded into `--out-dir` with their
+/// manifest.
+fn live_session(port: &str, args: &CalibrateArgs, identity: Identity, db: Option<&records::DbSpec>) -> Result<Source> {
+    let out_dir = &args.out_dir;
+    let interrupted = interrupt_flag()?;
+    // Checked now so the operator hears of it before the runs; the record is still attempted
+    // (and the files kept) at the end.
+    if let Some(Err(e)) = db.map(|db| db.open()) {
+        note(&format!("warning: the records database is not usable now ({e:#}); the session runs anyway"));
+    }
+    let serial = identity.sensor_serial.clone().unwrap_or_default();
+    // The port first: a port that cannot be opened must not leave a manifest behind, or the
+    // retry in the same --out-dir would be refused.
+    let mut link = open_link(port, args.baud, args.lockstep_clock.as_deref())?;
+    let mut manifest = start_manifest(out_dir, identity)?;
+    link.watch_interrupt(interrupted.clone());
+    let mut operator: Box<dyn session::Operator> =
+        if args.yes { Box::new(session::AssumeYes) } else { Box::new(session::Terminal::new()) };
+    session::prompt(
+        &mut link,
+        &format!("Sensor under calibration: {serial}. Check it against the part's label."),
+        operator.as_mut(),
+        &interrupted,
+    )?;
+    let plan = session::plan_with_static(&Pose::ALL, &args.rates_dps, args.duration, args.static_s);
+    let files = if args.chamber_c.is_empty() {
+        session::record_session(&mut link, &plan, out_dir, operator.as_mut(), &interrupted)?
+    } else {
+        let m = host::thermal::live::record_thermal_session(
+            &mut link,
+            &args.chamber_c,
+            &plan,
+            out_dir,
+            operator.as_mut(),
+            &mut host::thermal::live::ManualChamber,
+            host::thermal::settle::SettleCriterion::default(),
+            &interrupted,
+        )?;
+        m.paths(out_dir).into_iter().flat_map(|(_, _, f)| f).collect()
+    };
+    manifest.captures = files.iter().map(|f| provenance::digest_file(f)).collect::<Result<_>>()?;
+    manifest.write(out_dir)?;
+    Ok(if args.chamber_c.is_empty() {
+        Source::Captures { files, identity: manifest.identity, started_utc: Some(manifest.started_utc) }
+    } else {
+        Source::Thermal { folder: out_dir.clone(), identity: manifest.identity }
+    })
+}
+
+/// Captures given with `--replay`: a thermal session's folder, or captures with (or without) the
+/// session manifest beside them, whose identity fills what the options leave out.
+fn replayed(replay: &[PathBuf], identity: Identity) -> Result<Source> {
+    if let [folder] = replay {
+        if host::thermal::manifest::ThermalManifest::read_in(folder)?.is_some() {
+            return Ok(Source::Thermal { folder: folder.clone(), identity });
+        }
+    }
+    Ok(match replay.first().map(|f| SessionManifest::read_beside(f)).transpose()?.flatten() {
+        Some(m) => {
+            for w in m.verify(replay)? {
+                note(&format!("warning: {w}"));
+            }
+            Source::Captures {
+                files: replay.to_vec(),
+                identity: identity.or(m.identity),
+                started_utc: Some(m.started_utc),
+            }
+        }
+        None => Source::Captures { files: replay.to_vec(), identity, started_utc: None },
+    })
+}
+
+/// `host simulate`: a capture of the simulated rig and its truth (a thermal session's folder
+/// with `--chamber-c`), from the options or a whole `--config`.
+fn simulate_cmd(args: SimulateArgs) -> Result<ExitCode> {
+    let SimulateArgs { out, seed, duration, poses, rates_dps, full_scale, effects, config, chamber_c } = args;
+    let cfg = match config {
+        Some(path) => {
+            let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            serde_json::from_str(&text)
+                .with_context(|| format!("{} is not a simulation config", path.display()))
+                .map_err(Usage)?
+        }
+        None => {
+            let mut cfg = sim::SimConfig::with_runs(
+                seed,
+                session::plan(&poses, &rates_dps, duration)
+                    .iter()
+                    .map(|r| sim::RunSpec { pose: r.pose, rate_dps: r.rate_dps, duration_s: r.duration_s })
+                    .collect(),
+            );
+            cfg.gyro.full_scale = match full_scale {
+                250 => protocol::FullScale::Dps250,
+                2000 => protocol::FullScale::Dps2000,
+                _ => protocol::FullScale::Dps500,
+            };
+            for e in &effects {
+                cfg.effects.enable(e).map_err(|e| Usage(e.into()))?;
+            }
+            cfg
+        }
+    };
+    if chamber_c.is_empty() {
+        simulate(&cfg, &out)
+    } else {
+        simulate_thermal(&cfg, &chamber_c, &out)
+    }
+}
+
+/// `host noise`: the noise figures (Allan deviation) of a capture's static stretch.
+fn noise_cmd(capture: &Path, cal: Option<&Path>, json: bool) -> Result<ExitCode> {
+    let cap = read_capture(capture)?;
+    let cal = cal.map(load_calibration).transpose()?;
+    let report =
+        host::allan::capture_noise(&cap, cal.as_ref()).map_err(|e| anyhow::anyhow!("{}: {e}", capture.display()))?;
+    if json {
+        files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
+    } else {
+        files::stdout(&host::text::wrap(&report.to_string(), host::text::TEXT_WIDTH))?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `host export`: a calibration in a firmware's or a tool's format, to a file or standard output.
+fn export_cmd(cal: &Path, format: export::Format, out: Option<&Path>) -> Result<ExitCode> {
+    let text = fs::read_to_string(cal).with_context(|| format!("cannot read calibration {}", cal.display()))?;
+    let e = export::Export::from_json(&text).with_context(|| format!("{} is not a calibration", cal.display()))?;
+    let rendered = e.render(format)?;
+    match out {
+        Some(path) => {
+            files::write_atomic(path, rendered)?;
+            note(&format!("wrote {}", path.display()));
+        }
+        None => files::stdout(&rendered)?,
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `host configure-drive`: the rig's speed loop designed for the gearhead, load and supply given.
+fn configure_drive_cmd(
+    port: &str,
+    gear_ratio: f64,
+    load_inertia_kgm2: f64,
+    supply_v: f64,
+    baud: u32,
+) -> Result<ExitCode> {
+    let mut link = Link::new(link::open_port(port, baud)?, port);
+    session::identify(&mut link)?;
+    session::configure_drive(&mut link, protocol::DriveConfig::from_si(gear_ratio, load_inertia_kgm2, supply_v))?;
+    note(&format!(
+        "the rig on {port} designs its speed loop for a {gear_ratio}:1 gearhead, {load_inertia_kgm2} kg·m² of load, {supply_v} V until it resets"
+    ));
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `host inspect`: what each capture holds, its losses and its runs.
+fn inspect_cmd(files: &[PathBuf], json: bool) -> Result<ExitCode> {
+    for f in files {
+        let cap = read_capture(f)?;
+        let report = host::inspect::inspect(&f.display().to_string(), &cap);
+        if json {
+            files::stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
+        } else {
+            files::stdout(&report.to_string())?;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn records_cmd(spec: &records::DbSpec, format: records::views::Format, cmd: RecordsCmd) -> Result<ExitCode> {
@@ -637,20 +672,6 @@ fn records_cmd(spec: &records::DbSpec, format: records::views::Format, cmd: Reco
 fn read_capture(path: &Path) -> Result<Capture> {
     let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
     capture::decode_reader(file).with_context(|| format!("cannot read capture {}", path.display()))
-}
-
-/// Reads and decodes a capture file run by run: `on_run` gets each run with its samples (packed)
-/// as soon as it is decoded, and returns the run the capture keeps. The file's digest is taken
-/// from the same bytes, as they are read.
-fn read_capture_by_run(
-    path: &Path,
-    on_run: impl FnMut(capture::Run, capture::PackedSamples) -> capture::Run,
-) -> Result<(Capture, provenance::CaptureDigest)> {
-    let file = fs::File::open(path).with_context(|| format!("cannot read capture {}", path.display()))?;
-    let mut reader = provenance::DigestReader::new(file);
-    let cap = capture::decode_reader_by_run(&mut reader, on_run)
-        .with_context(|| format!("cannot read capture {}", path.display()))?;
-    Ok((cap, reader.digest(path)))
 }
 
 /// Ctrl-C, SIGTERM and SIGHUP set a flag that the session loops check, so the motor is stopped
@@ -757,90 +778,17 @@ fn calibrate(
     opts: &calib::LoopOptions,
 ) -> Result<ExitCode> {
     let RecordTo { db, again, spec } = record_to;
-    let mut caps = Vec::new();
-    // Each run once: the same data given twice would count twice and shrink every σ by √2.
-    let mut seen: std::collections::HashMap<u64, (PathBuf, usize)> = std::collections::HashMap::new();
-    // The moving runs' kinematics, made run by run as the captures are decoded.
-    let mut kinematics = calib::data::kinematics::Reconstruction::new(opts.cal.kinematics);
-    for f in files {
-        let mut fingerprints = Vec::new();
-        let (cap, digest) = read_capture_by_run(f, |mut run, samples| {
-            fingerprints.push((!samples.is_empty()).then(|| run.fingerprint_with(&samples)));
-            // Static runs (0 °/s) give the noise figures, from their samples.
-            if run.rate_mdps == 0 {
-                run.samples = samples.to_vec();
-            } else {
-                kinematics.add(&run, &samples);
-            }
-            run
-        })?;
-        let runs_with_samples =
-            cap.runs.iter().zip(fingerprints).enumerate().filter_map(|(i, (r, p))| Some((i, r, p?)));
-        for (i, run, fingerprint) in runs_with_samples {
-            if let Some((first, j)) = seen.insert(fingerprint, (f.clone(), i + 1)) {
-                bail!(
-                    "run {} of {} ({}) is the same data as run {j} of {}: give each capture once",
-                    i + 1,
-                    f.display(),
-                    run.label(),
-                    first.display()
-                );
-            }
-        }
-        let l = &cap.loss;
-        note(&format!(
-            "{}: {} run(s), {} bytes, {} frames lost, {} bytes corrupt",
-            f.display(),
-            cap.runs.len(),
-            l.bytes,
-            l.frames_missing(),
-            l.bytes_skipped()
-        ));
-        if let Some(h) = cap.hello.filter(|h| h.protocol_version != protocol::PROTOCOL_VERSION) {
-            bail!(
-                "{} was recorded with protocol v{}, this host reads v{}",
-                f.display(),
-                h.protocol_version,
-                protocol::PROTOCOL_VERSION
-            );
-        }
-        if cap.runs.is_empty() {
-            bail!(
-                "{} holds no run: no RunStarted frame and no motor status naming a pose ({} valid frames)",
-                f.display(),
-                l.frames_ok
-            );
-        }
-        if cap.loss.hello_assumed {
-            note(&format!("{}: the Hello was lost; the protocol's rig constants are assumed", f.display()));
-        }
-        for (t, fault) in &cap.faults {
-            note(&format!(
-                "{}: the rig reported {:?} outside any run at {:.3} s",
-                f.display(),
-                fault.fault,
-                *t as f64 * 1e-6
-            ));
-        }
-        caps.push((digest, cap));
-    }
-    let prov = Provenance::gather(identity, session_started, &caps);
+    let mut loaded = host::replay::load(files, opts.cal.kinematics, &mut |line| note(line))?;
+    let prov = Provenance::gather(identity, session_started, &loaded.captures);
     if let (Some(db), false) = (db, again) {
         refuse_recorded_captures(db, &prov)?;
     }
-    // Static runs (0 °/s) give noise figures, not calibration data: they stay in their captures.
-    let mut runs = Vec::new();
-    for (_, cap) in &mut caps {
-        let (still, moving): (Vec<_>, Vec<_>) =
-            std::mem::take(&mut cap.runs).into_iter().partition(|r| r.rate_mdps == 0);
-        cap.runs = still;
-        runs.extend(moving);
-    }
+    let runs = loaded.take_moving_runs();
     let truth = load_truth(files, truth_path)?;
     fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
-    let lr = calib::close_loop_reconstructed(&runs, kinematics, opts, truth.as_ref().map(sim::Truth::sensor))
+    let lr = calib::close_loop_reconstructed(&runs, loaded.kinematics, opts, truth.as_ref().map(sim::Truth::sensor))
         .context("calibration failed")?;
-    let noise = host::allan::session_noise(caps.iter().map(|(_, c)| c), &lr.final_report().calibration());
+    let noise = host::allan::session_noise(loaded.captures.iter().map(|(_, c)| c), &lr.final_report().calibration());
     // Files and the record first, the summary last: a closed or full standard output must not
     // cost the result.
     let json = out_dir.join("calibration.json");
@@ -899,9 +847,7 @@ fn calibrate(
     };
     let mut summary = format!("{prov}\n{}", lr.summary());
     if let Some(n) = &noise {
-        let mut text = n.to_string();
-        text.truncate(text.find("\n τ [s]").unwrap_or(text.len()));
-        summary.push_str(&format!("\nNoise figures:\n{text}"));
+        summary.push_str(&format!("\nNoise figures:\n{}", n.figures()));
     }
     if let Some(c) = &checks {
         summary.push('\n');
