@@ -16,22 +16,34 @@
 //! 0 whatever it finds: a measurement, not a test.
 //!
 //! `cargo bench -p host --bench thermal --profile release` (the `bench` profile's fat LTO is
-//! not needed for these figures); `BENCH_SEEDS=N` (default 10), `BENCH_DURATION_S` per run
-//! (default 60), the default run design 180, 90, −180 °/s in both poses; `BENCH_NO_EFFECTS=1`
-//! switches the rig effects off (the temperature dependence alone).
+//! not needed for these figures); `BENCH_SEEDS=N` (default 10) or `BENCH_SEED_LIST=7,1`,
+//! `BENCH_DURATION_S` per run (default 120, the live session's default), the default run design
+//! 180, 90, −180 °/s in both poses; `BENCH_NO_EFFECTS=1` switches the rig effects off (the
+//! temperature dependence alone), `BENCH_EFFECTS=a,b` replaces the set (to find which effect a
+//! figure comes from). `BENCH_CACHE_DIR=dir` keeps each seed's calibrated sessions (the
+//! expensive part: the simulation and the loop, deterministic in seed, duration and effects) and
+//! reads them back on the next run, so the thermal fit can be measured again in seconds;
+//! `BENCH_DETAIL=1` prints, per seed, each session's model, consider terms and effect
+//! parameters, each quantity's error against the truth at every setpoint in its own σ, and the
+//! curves' orders, between-session σ and scale factors.
 
 use host::calib::{self, LoopOptions};
 use host::geometry::Pose;
 use host::sim::{self, RunSpec, SimConfig};
 use host::thermal::programme::programme;
-use host::thermal::{settle::SettleCriterion, truth_check, SetpointCal, ThermalModel};
+use host::thermal::{settle::SettleCriterion, truth_check, Quantity, SetpointCal, ThermalModel};
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 const SETPOINTS_C: [f64; 5] = [-20.0, 0.0, 25.0, 50.0, 70.0];
 const RATES_DPS: [f64; 3] = [180.0, 90.0, -180.0];
 /// The realistic set but the pose-2 fixture (module documentation).
-fn effects() -> Vec<&'static str> {
-    sim::Effects::REALISTIC.into_iter().filter(|e| *e != "pose_fixture").collect()
+/// `BENCH_EFFECTS=a,b` replaces the set (to find which effect a figure comes from).
+fn effects() -> Vec<String> {
+    match std::env::var("BENCH_EFFECTS") {
+        Ok(list) => list.split(',').map(|e| e.trim().to_string()).filter(|e| !e.is_empty()).collect(),
+        Err(_) => sim::Effects::REALISTIC.into_iter().filter(|e| *e != "pose_fixture").map(String::from).collect(),
+    }
 }
 const REFERENCE_RATE_DPS: [f64; 3] = [100.0, -50.0, 150.0];
 /// Index of the separate 25 °C session's noise streams (apart from the programme's 1…5).
@@ -51,15 +63,93 @@ fn base(seed: u64, duration_s: f64, effects_on: bool) -> SimConfig {
     cfg
 }
 
+/// One calibrated session of the programme (or the separate 25 °C one), as the bench keeps it.
+#[derive(Clone, Serialize, Deserialize)]
+struct SessionRun {
+    setpoint_c: f64,
+    /// The loop's final report (the setpoint's calibration is made from it when read, so a
+    /// cached session follows changes to [`SetpointCal::from_report`]).
+    report: calib::CalReport,
+    /// OUT_TEMP readings of its runs.
+    temps: Vec<i8>,
+    truth: sim::Truth,
+    at_floor: bool,
+    /// Effects of the loop's final model (keys).
+    effects: Vec<String>,
+    /// The final model's effect parameters (name, value, σ, unit).
+    effect_params: Vec<(String, f64, f64, String)>,
+}
+
+impl SessionRun {
+    fn cal(&self) -> SetpointCal {
+        SetpointCal::from_report(self.setpoint_c, &self.report, &self.temps).expect("OUT_TEMP readings")
+    }
+}
+
 /// Simulates and calibrates one session with the tool's loop.
-fn calibrate(cfg: &SimConfig, setpoint_c: f64) -> Result<(SetpointCal, sim::Truth, bool), String> {
+fn calibrate(cfg: &SimConfig, setpoint_c: f64) -> Result<SessionRun, String> {
     let out = sim::simulate(cfg).map_err(|e| e.to_string())?;
     let cap = host::capture::decode(&out.bytes);
     let lr =
         calib::close_loop(&cap.runs, &LoopOptions::default(), Some(out.truth.sensor())).map_err(|e| e.to_string())?;
     let temps: Vec<i8> = cap.runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
-    let sp = SetpointCal::from_report(setpoint_c, lr.final_report(), &temps).ok_or("no OUT_TEMP reading")?;
-    Ok((sp, out.truth, lr.verdict() == calib::Verdict::AtNoiseFloor))
+    if temps.is_empty() {
+        return Err("no OUT_TEMP reading".into());
+    }
+    Ok(SessionRun {
+        setpoint_c,
+        report: lr.final_report().clone(),
+        temps,
+        truth: out.truth,
+        at_floor: lr.verdict() == calib::Verdict::AtNoiseFloor,
+        effects: lr.steps.last().map(|s| s.effects.iter().map(|e| e.key()).collect()).unwrap_or_default(),
+        effect_params: lr
+            .steps
+            .last()
+            .map(|s| {
+                s.effect_params
+                    .iter()
+                    .map(|p| (p.name.clone(), p.estimate.value, p.estimate.sigma, p.unit.clone()))
+                    .collect()
+            })
+            .unwrap_or_default(),
+    })
+}
+
+/// The five setpoints' sessions and, last, the separate 25 °C session of one seed; read from
+/// `BENCH_CACHE_DIR` when a previous run of the same seed, duration and effects left them there
+/// (the simulation and the loop are deterministic in these), else computed (and written there).
+fn sessions(seed: u64, duration_s: f64, effects: bool) -> Result<Vec<SessionRun>, String> {
+    let cache = std::env::var("BENCH_CACHE_DIR").ok().map(|d| {
+        std::path::PathBuf::from(d).join(format!(
+            "seed{seed}_{duration_s}s_{}.json",
+            if effects { self::effects().join("+") } else { "plain".into() }
+        ))
+    });
+    if let Some(runs) = cache.as_ref().and_then(|p| std::fs::read(p).ok()).and_then(|b| serde_json::from_slice(&b).ok())
+    {
+        return Ok(runs);
+    }
+    let b = base(seed, duration_s, effects);
+    let steps = programme(&b, &SETPOINTS_C, SettleCriterion::default()).map_err(|e| e.to_string())?;
+    let mut runs = Vec::new();
+    for (s, sp) in steps.iter().zip(SETPOINTS_C) {
+        runs.push(calibrate(&s.config, sp)?);
+    }
+    let mut single_cfg =
+        programme(&b, &[25.0], SettleCriterion::default()).map_err(|e| e.to_string())?.remove(0).config;
+    if let Some(c) = single_cfg.chamber.as_mut() {
+        c.index = SINGLE_SESSION_INDEX;
+    }
+    runs.push(calibrate(&single_cfg, 25.0)?);
+    if let Some(p) = cache {
+        let written = std::fs::create_dir_all(p.parent().expect("a folder"))
+            .and_then(|_| std::fs::write(&p, serde_json::to_vec(&runs).expect("serialisable")));
+        if let Err(e) = written {
+            eprintln!("cache {}: {e}", p.display());
+        }
+    }
+    Ok(runs)
 }
 
 struct SeedFigures {
@@ -72,27 +162,19 @@ struct SeedFigures {
 }
 
 fn run_seed(seed: u64, duration_s: f64, effects: bool) -> Result<SeedFigures, String> {
-    let b = base(seed, duration_s, effects);
-    let steps = programme(&b, &SETPOINTS_C, SettleCriterion::default()).map_err(|e| e.to_string())?;
-    let mut setpoints = Vec::new();
-    let mut truths = Vec::new();
-    let mut floor = 0;
-    for (s, sp) in steps.iter().zip(SETPOINTS_C) {
-        let (cal, truth, at_floor) = calibrate(&s.config, sp)?;
-        setpoints.push(cal);
-        truths.push(truth);
-        floor += usize::from(at_floor);
+    let mut runs = sessions(seed, duration_s, effects)?;
+    let single_run = runs.pop().ok_or("no single session")?;
+    let setpoints: Vec<SetpointCal> = runs.iter().map(SessionRun::cal).collect();
+    let truths: Vec<sim::Truth> = runs.iter().map(|r| r.truth.clone()).collect();
+    let floor = runs.iter().filter(|r| r.at_floor).count();
+    if std::env::var("BENCH_DETAIL").is_ok() {
+        detail(seed, &runs, &single_run);
     }
     let model = ThermalModel::fit(&setpoints).map_err(|e| e.to_string())?;
     let th = truths[0].thermal.as_ref().ok_or("no thermal truth")?;
     let (checks, _) = truth_check::coefficients(&model, th, truths[0].out_temp_at_0c);
-    let mut single_cfg =
-        programme(&b, &[25.0], SettleCriterion::default()).map_err(|e| e.to_string())?.remove(0).config;
-    if let Some(c) = single_cfg.chamber.as_mut() {
-        c.index = SINGLE_SESSION_INDEX;
-    }
-    let (single, single_truth, _) = calibrate(&single_cfg, 25.0)?;
-    let single_z = truth_check::single_setpoint_z(&model, &single).map_err(|e| e.to_string())?;
+    let (single, single_truth) = (&single_run.cal(), &single_run.truth);
+    let single_z = truth_check::single_setpoint_z(&model, single).map_err(|e| e.to_string())?;
     let mut held_z = Vec::new();
     let mut held_err_dps = Vec::new();
     let mut single_cal_err_dps = Vec::new();
@@ -101,9 +183,12 @@ fn run_seed(seed: u64, duration_s: f64, effects: bool) -> Result<SeedFigures, St
         let z = truth_check::held_out_rate_z(&setpoints, &model, held, truth, REFERENCE_RATE_DPS)
             .map_err(|e| e.to_string())?;
         held_z.extend(z);
-        let (err, err_single) = held_out_errors(&setpoints, &model, held, truth, &single_truth)?;
+        let (err, err_single) = held_out_errors(&setpoints, &model, held, truth, single_truth)?;
         held_err_dps.extend(err);
         single_cal_err_dps.extend(err_single);
+    }
+    if std::env::var("BENCH_DETAIL").is_ok() {
+        detail_model(&model, th, truths[0].out_temp_at_0c, &single_z);
     }
     Ok(SeedFigures {
         coef_z: checks.iter().map(|c| c.z).collect(),
@@ -113,6 +198,70 @@ fn run_seed(seed: u64, duration_s: f64, effects: bool) -> Result<SeedFigures, St
         single_z: single_z.iter().map(|(_, z)| *z).collect(),
         floor,
     })
+}
+
+/// Per setpoint: the loop's verdict, its model's effects and its consider terms; per quantity,
+/// each setpoint's error against the truth at its own die temperature in its own σ, and the
+/// separate 25 °C session's (`BENCH_DETAIL=1`).
+fn detail(seed: u64, runs: &[SessionRun], single: &SessionRun) {
+    let all: Vec<&SessionRun> = runs.iter().chain(std::iter::once(single)).collect();
+    for (i, r) in all.iter().enumerate() {
+        let terms: Vec<String> = r
+            .report
+            .consider
+            .iter()
+            .map(|t| format!("{}(k {:.0?} ppm, dir {:.4?}°)", t.effect.key(), t.k_sigma_ppm, t.direction_sigma_deg))
+            .collect();
+        println!(
+            "  seed {seed} session {i} ({} °C): floor {}, effects {:?}, consider {}",
+            r.setpoint_c,
+            r.at_floor,
+            r.effects,
+            terms.join(", ")
+        );
+    }
+    let names: Vec<&String> = all[0].effect_params.iter().map(|p| &p.0).collect();
+    for name in names {
+        let row: Vec<String> = all
+            .iter()
+            .map(|r| {
+                r.effect_params.iter().find(|p| &p.0 == name).map_or("-".into(), |p| format!("{:.4e}±{:.1e}", p.1, p.2))
+            })
+            .collect();
+        println!("  seed {seed} param {name}: {}", row.join(" "));
+    }
+    for (axis, q) in Quantity::all() {
+        let zs: Vec<String> = all
+            .iter()
+            .map(|r| {
+                let th = r.truth.thermal.as_ref().expect("a thermal truth");
+                let t = truth_check::truth_value(th, axis, q, th.die_mean_c);
+                let e = r.cal().value(axis, q);
+                format!("{:>6.2} ({:.2e})", e.z(t), e.sigma)
+            })
+            .collect();
+        println!("  seed {seed} {} {:<20} z (σ) per session: {}", ['x', 'y', 'z'][axis], q.label(), zs.join(" "));
+    }
+}
+
+/// Each coefficient's z against the truth and each quantity's z against the 25 °C session.
+fn detail_model(model: &ThermalModel, th: &host::sim::thermal::ThermalTruth, c_true: f64, single_z: &[(String, f64)]) {
+    let (checks, _) = truth_check::coefficients(model, th, c_true);
+    let curves: Vec<String> = model
+        .curves
+        .iter()
+        .map(|c| format!("{} order {} between {:.1e} σ×{:.2}", c.label(), c.order, c.between_sigma, c.scale_factor))
+        .collect();
+    println!("  curves: {}", curves.join("; "));
+    for c in checks.iter().filter(|c| c.z.abs() > 2.0) {
+        println!(
+            "  coefficient {} c{}: {:.4e} ± {:.2e} vs {:.4e}, z {:.2}",
+            c.curve, c.degree, c.fitted, c.sigma, c.truth, c.z
+        );
+    }
+    for (curve, z) in single_z.iter().filter(|(_, z)| z.abs() > 2.0) {
+        println!("  25 °C session vs model {curve}: z {z:.2}");
+    }
 }
 
 /// The held-out model's rate error at setpoint `held`, °/s, and the error of the true 25 °C
@@ -145,14 +294,17 @@ fn max_abs(v: &[f64]) -> f64 {
 }
 
 fn main() {
-    let seeds = env_or("BENCH_SEEDS", 10.0) as u64;
-    let duration_s = env_or("BENCH_DURATION_S", 60.0);
+    let seeds: Vec<u64> = match std::env::var("BENCH_SEED_LIST") {
+        Ok(list) => list.split(',').filter_map(|v| v.trim().parse().ok()).collect(),
+        Err(_) => (1..=env_or("BENCH_SEEDS", 10.0) as u64).collect(),
+    };
+    let duration_s = env_or("BENCH_DURATION_S", 120.0);
     let effects = std::env::var("BENCH_NO_EFFECTS").is_err();
-    let named: Vec<&str> = if effects { self::effects() } else { Vec::new() };
-    println!("thermal bench: {seeds} seeds, setpoints {SETPOINTS_C:?} °C, runs {RATES_DPS:?} °/s × 2 poses × {duration_s} s, effects {named:?}");
+    let named: Vec<String> = if effects { self::effects() } else { Vec::new() };
+    println!("thermal bench: seeds {seeds:?}, setpoints {SETPOINTS_C:?} °C, runs {RATES_DPS:?} °/s × 2 poses × {duration_s} s, effects {named:?}");
     println!("seed  floor  coef max|z| rms z  held-out rate: max|z| rms z, max err °/s (25 °C cal alone)  25 °C: max|z| rms z   wall s");
     let mut all: Vec<SeedFigures> = Vec::new();
-    for seed in 1..=seeds {
+    for &seed in &seeds {
         let t0 = Instant::now();
         match run_seed(seed, duration_s, effects) {
             Ok(f) => {

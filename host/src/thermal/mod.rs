@@ -109,6 +109,11 @@ pub struct SetpointCal {
     pub full_scale: FullScale,
     /// Per axis: offset, sensitivity, direction components (in [`Quantity::PER_AXIS`] order).
     pub values: [[Estimate; 4]; 3],
+    /// The part of each value's σ that is the same at every setpoint (same order): the
+    /// calibration's consider terms, the catalogued effects its runs do not separate, which are
+    /// the same rig at every setpoint ([`common_sigma`]).
+    #[serde(default)]
+    pub common_sigma: [[f64; 4]; 3],
 }
 
 impl SetpointCal {
@@ -127,7 +132,14 @@ impl SetpointCal {
                 _ => a.s[q.component(i)],
             })
         });
-        Some(Self { setpoint_c, out_temp_mean_lsb: mean, full_scale: report.gyro.full_scale, values })
+        let common_sigma = common_sigma(report, &values);
+        Some(Self { setpoint_c, out_temp_mean_lsb: mean, full_scale: report.gyro.full_scale, values, common_sigma })
+    }
+
+    /// The σ of one quantity of one axis common to every setpoint.
+    pub fn common(&self, axis: usize, quantity: Quantity) -> f64 {
+        let q = Quantity::PER_AXIS.iter().position(|&p| p == quantity).expect("every quantity is per axis");
+        self.common_sigma[axis][q]
     }
 
     /// One quantity of one axis.
@@ -135,6 +147,22 @@ impl SetpointCal {
         let q = Quantity::PER_AXIS.iter().position(|&p| p == quantity).expect("every quantity is per axis");
         self.values[axis][q]
     }
+}
+
+/// The σ of each value that the report's consider terms give it (the terms add in quadrature,
+/// `calib::consider`), which the setpoints share: the considered effect is the rig's, the same at
+/// every setpoint, so the bias it leaves is common to them. The report states each term's σ of
+/// the sensitivities (ppm of k) only; its direction σ is the axis's whole (both components
+/// together) and the offsets' is not stated, so those stay counted as independent (their
+/// curves' constant terms then carry less than the common part, their slopes more).
+fn common_sigma(report: &CalReport, values: &[[Estimate; 4]; 3]) -> [[f64; 4]; 3] {
+    let mut out = [[0.0; 4]; 3];
+    for (axis, row) in out.iter_mut().enumerate() {
+        let ppm = report.consider.iter().map(|t| t.k_sigma_ppm[axis].powi(2)).sum::<f64>().sqrt();
+        let k = values[axis][1];
+        row[1] = (k.value.abs() * ppm * 1e-6).min(k.sigma);
+    }
+    out
 }
 
 /// Checks the setpoints (sorted): enough, distinct, one full scale; returns the full scale.

@@ -57,6 +57,16 @@ pub struct Curve {
     /// Factor the covariance was scaled by: √(χ²/dof) when above 1 (the Particle Data Group's
     /// scale factor for inconsistent inputs), else 1.
     pub scale_factor: f64,
+    /// σ added to every setpoint's value, independently, for what moves between sessions
+    /// beyond their own σ (a gyro's bias instability), estimated over the curves of its kind
+    /// (Paule-Mandel, `model::between_session_sigma`); 0 when they scatter no more than their σ.
+    #[serde(default)]
+    pub between_sigma: f64,
+    /// The coefficients' response to the part of the setpoints' σ common to all of them, per
+    /// unit of it (`poly::PolyFit::common_response`): their covariance with another
+    /// calibration of the same rig.
+    #[serde(default)]
+    pub common_response: Vec<f64>,
     /// Each setpoint beside the curve.
     pub points: Vec<CurvePoint>,
 }
@@ -69,6 +79,13 @@ impl Curve {
         let a = poly::powers(x, self.order);
         let cov = DMatrix::from_fn(self.order + 1, self.order + 1, |r, c| self.cov[r][c]);
         Estimate::from_variance(poly::eval(&coef, x), (a.transpose() * cov * &a)[(0, 0)])
+    }
+
+    /// The curve's covariance at `temp_c` with a value whose σ shares `common_sigma` with the
+    /// setpoints' common part (another session on the same rig).
+    pub fn common_covariance(&self, reference_c: f64, temp_c: f64, common_sigma: f64) -> f64 {
+        let a = poly::powers(temp_c - reference_c, self.order);
+        self.common_response.iter().zip(a.iter()).map(|(g, x)| g * x).sum::<f64>() * common_sigma
     }
 
     /// The curve's slope at `temp_c`, per °C.
@@ -138,18 +155,25 @@ impl ThermalModel {
                 die_c: out_temp_at_0c - s.out_temp_mean_lsb,
             })
             .collect();
+        let measured: Vec<Vec<Measured>> = Quantity::all()
+            .map(|(axis, q)| {
+                sp.iter()
+                    .zip(&summaries)
+                    .map(|(s, sum)| Measured {
+                        x: sum.die_c - REFERENCE_C,
+                        value: s.value(axis, q),
+                        common: s.common(axis, q),
+                    })
+                    .collect()
+            })
+            .collect();
+        let (orders, between) = orders_and_between(&measured, orders)?;
         let mut curves = Vec::with_capacity(12);
         for (c, (axis, quantity)) in Quantity::all().enumerate() {
-            let points: Vec<Point> = sp
-                .iter()
-                .zip(&summaries)
-                .map(|(s, sum)| {
-                    let e = s.value(axis, quantity);
-                    Point { x: sum.die_c - REFERENCE_C, sigma_x: TEMP_SIGMA_C, y: e.value, sigma_y: e.sigma }
-                })
-                .collect();
-            let order = orders.and_then(|o| o.get(c).copied());
-            curves.push(curve(axis, quantity, &points, &summaries, order)?);
+            let b = between[kind(quantity)];
+            let points = points_of(&measured[c], b);
+            let values: Vec<Estimate> = measured[c].iter().map(|m| m.value).collect();
+            curves.push(curve(axis, quantity, &points, &values, &summaries, orders[c], b)?);
         }
         let lo = summaries.iter().map(|s| s.die_c).fold(f64::INFINITY, f64::min);
         let hi = summaries.iter().map(|s| s.die_c).fold(f64::NEG_INFINITY, f64::max);
@@ -236,19 +260,18 @@ impl ThermalModel {
     }
 }
 
-/// One curve: the order chosen (or given), the fit, each setpoint beside it.
+/// One curve at its order: the fit, each setpoint (its own `measured` value) beside it.
 fn curve(
     axis: usize,
     quantity: Quantity,
     points: &[Point],
+    measured: &[Estimate],
     summaries: &[SetpointSummary],
-    order: Option<usize>,
+    order: usize,
+    between_sigma: f64,
 ) -> Result<Curve, ThermalError> {
     let label = || format!("{} {}", crate::calib::result::axes::AXES[axis], quantity.label());
     let choice = poly::choose_order(points).ok_or(ThermalError::TooFewSetpoints { found: points.len() })?;
-    // A given order (a refit without one setpoint keeps the full model's) needs only its
-    // coefficients' worth of points; a chosen one keeps a held-out degree of freedom.
-    let order = order.map_or(choice.order, |o| o.min(points.len() - 1));
     let fit = poly::fit(points, order).map_err(|e| ThermalError::Fit { curve: label(), reason: e.to_string() })?;
     let held = poly::held_out(points, order).ok_or(ThermalError::TooFewSetpoints { found: points.len() })?;
     let dof = points.len() - (order + 1);
@@ -261,14 +284,9 @@ fn curve(
         .zip(held)
         .enumerate()
         .map(|(j, ((p, s), held_out))| {
+            let own = measured[j];
             let model = Estimate::from_variance(poly::eval(&fit.coef, p.x), poly::value_variance(&scaled, p.x));
-            CurvePoint {
-                die_c: s.die_c,
-                measured: Estimate { value: p.y, sigma: p.sigma_y },
-                model,
-                z: (p.y - model.value) / fit.sigma_eff[j],
-                held_out,
-            }
+            CurvePoint { die_c: s.die_c, measured: own, model, z: (p.y - model.value) / fit.sigma_eff[j], held_out }
         })
         .collect();
     Ok(Curve {
@@ -281,6 +299,118 @@ fn curve(
         chi2: fit.chi2,
         dof,
         scale_factor,
+        between_sigma,
+        common_response: fit.common_response.iter().copied().collect(),
         points: points_out,
     })
+}
+
+/// One setpoint's value of one quantity as the fit takes it.
+struct Measured {
+    /// Die temperature from the reference, °C.
+    x: f64,
+    /// Its calibration's value and σ.
+    value: Estimate,
+    /// The part of that σ common to every setpoint.
+    common: f64,
+}
+
+/// Quantities that share one between-session σ: offsets (counts), sensitivities (counts per
+/// °/s), direction components (unit vector); the same physics moves each kind on every axis.
+fn kind(q: Quantity) -> usize {
+    match q {
+        Quantity::OffsetCounts => 0,
+        Quantity::SensitivityCountsPerDps => 1,
+        Quantity::DirectionNext | Quantity::DirectionOther => 2,
+    }
+}
+
+/// The points of one curve: independent σ (its calibration's, less the common part, plus the
+/// between-session σ `between`), the common part kept apart.
+fn points_of(measured: &[Measured], between: f64) -> Vec<Point> {
+    measured
+        .iter()
+        .map(|m| Point {
+            x: m.x,
+            sigma_x: TEMP_SIGMA_C,
+            y: m.value.value,
+            sigma_y: ((m.value.sigma.powi(2) - m.common.powi(2)).max(0.0) + between * between).sqrt(),
+            sigma_common: m.common,
+        })
+        .collect()
+}
+
+/// Rounds of choosing the orders and estimating the between-session σ for them: each round's
+/// σ changes the held-out misses the orders are chosen by; they settle in two or three.
+const BETWEEN_ROUNDS: usize = 4;
+
+/// The curves' orders (given, or chosen by weighted PRESS) and the between-session σ of each
+/// kind of quantity, estimated for those orders and chosen with them.
+fn orders_and_between(
+    measured: &[Vec<Measured>],
+    given: Option<&[usize]>,
+) -> Result<(Vec<usize>, [f64; 3]), ThermalError> {
+    let kinds: Vec<usize> = Quantity::all().map(|(_, q)| kind(q)).collect();
+    let mut between = [0.0; 3];
+    let mut orders = vec![0; measured.len()];
+    for _ in 0..BETWEEN_ROUNDS {
+        for (c, m) in measured.iter().enumerate() {
+            // A given order (a refit without one setpoint keeps the full model's) needs only its
+            // coefficients' worth of points; a chosen one keeps a held-out degree of freedom.
+            orders[c] = match given.and_then(|o| o.get(c).copied()) {
+                Some(o) => o.min(m.len() - 1),
+                None => {
+                    let points = points_of(m, between[kinds[c]]);
+                    poly::choose_order(&points).ok_or(ThermalError::TooFewSetpoints { found: m.len() })?.order
+                }
+            };
+        }
+        let next = [0, 1, 2].map(|k| {
+            let curves: Vec<(&[Measured], usize)> =
+                (0..measured.len()).filter(|&c| kinds[c] == k).map(|c| (measured[c].as_slice(), orders[c])).collect();
+            between_session_sigma(&curves)
+        });
+        if next == between {
+            break;
+        }
+        between = next;
+    }
+    Ok((orders, between))
+}
+
+/// Bisection steps of [`between_session_sigma`]: the bracket shrinks by 2⁻⁶⁰, to the double's
+/// resolution.
+const BISECTION_STEPS: usize = 60;
+
+/// The σ to add, independently, to every point of some curves (each at its order) so that their
+/// χ² sum to their degrees of freedom: the Paule-Mandel estimator of the between-study variance
+/// (Paule & Mandel 1982, J. Res. NBS 87, 377; its generalised Q statistic set to its expectation,
+/// DerSimonian & Kacker 2007, Contemp. Clin. Trials 28, 105), here between the sessions of the
+/// setpoints. 0 when the points scatter no more than their σ. Pooled over the axes: one
+/// curve's two or three degrees of freedom say little of it alone.
+fn between_session_sigma(curves: &[(&[Measured], usize)]) -> f64 {
+    let dof: usize = curves.iter().map(|(m, o)| m.len().saturating_sub(o + 1)).sum();
+    let q = |b: f64| -> Option<f64> {
+        curves.iter().map(|(m, o)| poly::fit(&points_of(m, b), *o).ok().map(|f| f.chi2)).sum()
+    };
+    if dof == 0 || q(0.0).is_none_or(|c| c <= dof as f64) {
+        return 0.0;
+    }
+    let mut hi = curves.iter().flat_map(|(m, _)| m.iter().map(|p| p.value.sigma)).fold(0.0, f64::max);
+    if hi <= 0.0 || hi.is_nan() {
+        return 0.0;
+    }
+    let mut lo = 0.0;
+    while q(hi).is_some_and(|c| c > dof as f64) && hi.is_finite() {
+        lo = hi;
+        hi *= 2.0;
+    }
+    for _ in 0..BISECTION_STEPS {
+        let mid = 0.5 * (lo + hi);
+        match q(mid) {
+            Some(c) if c > dof as f64 => lo = mid,
+            _ => hi = mid,
+        }
+    }
+    hi
 }

@@ -4,6 +4,13 @@
 //! temperature's σ enters by the effective-variance method (Orear, Am. J. Phys. 50 (1982) 912):
 //! `σ_eff² = σ_y² + (p'(x)·σ_x)²`, iterated on the fitted slope.
 //!
+//! A part of each point's σ may be common to every point (`sigma_common`: the same rig's
+//! systematic at every setpoint, fully correlated). The fit is then generalised least squares
+//! with `V = diag(σ_eff²) + c·cᵀ` (c the points' common σ): when c is the same at every point it
+//! lies in the polynomial's column space, so the coefficients are those of the weighted fit on
+//! the independent σ alone and the common variance lands on the constant term only (Rao 1967,
+//! *Proc. Fifth Berkeley Symp.* 1, 355: least squares under `V = σ²I + XΓXᵀ`).
+//!
 //! The order is the one with the smallest weighted PRESS (leave-one-out prediction error,
 //! Allen 1974): each point predicted by the polynomial fitted to the others, the squared miss
 //! in units of that point's own σ, summed. A term the data do not support makes the held-out
@@ -21,8 +28,11 @@ pub struct Point {
     pub sigma_x: f64,
     /// Value.
     pub y: f64,
-    /// σ of the value.
+    /// σ of the value independent of the other points'.
     pub sigma_y: f64,
+    /// σ of the value common to every point (fully correlated between them).
+    #[serde(default)]
+    pub sigma_common: f64,
 }
 
 /// A fitted polynomial `Σ c_d x^d` with the coefficients' covariance.
@@ -32,10 +42,13 @@ pub struct PolyFit {
     pub coef: Vec<f64>,
     /// Their covariance.
     pub cov: DMatrix<f64>,
-    /// χ² of the points against the fit (effective σ).
+    /// χ² of the points against the fit (`rᵀV⁻¹r`, effective σ and the common part).
     pub chi2: f64,
-    /// Effective σ of each point.
+    /// Effective independent σ of each point.
     pub sigma_eff: Vec<f64>,
+    /// The coefficients' response to the points' common part, per unit of it (`G·c`, G the
+    /// estimator `(AᵀV⁻¹A)⁻¹AᵀV⁻¹`): their covariance with anything else sharing that part.
+    pub common_response: DVector<f64>,
 }
 
 /// Why no polynomial could be fitted.
@@ -80,39 +93,63 @@ pub fn value_variance(fit: &PolyFit, x: f64) -> f64 {
 /// Effective-variance iterations: the slope moves little between the second and third.
 const EV_ITERATIONS: usize = 3;
 
-/// Weighted least-squares fit of order `order`.
+/// Generalised least-squares fit of order `order`.
 pub fn fit(points: &[Point], order: usize) -> Result<PolyFit, PolyError> {
     if points.len() < order + 1 {
         return Err(PolyError::TooFewPoints { points: points.len(), order });
     }
-    if points.iter().any(|p| !(p.sigma_y > 0.0 && p.sigma_y.is_finite() && p.sigma_x >= 0.0)) {
+    let valid = |p: &Point| {
+        p.sigma_y > 0.0
+            && p.sigma_y.is_finite()
+            && p.sigma_x >= 0.0
+            && p.sigma_common >= 0.0
+            && p.sigma_common.is_finite()
+    };
+    if !points.iter().all(valid) {
         return Err(PolyError::Degenerate { order });
     }
     let mut sigma_eff: Vec<f64> = points.iter().map(|p| p.sigma_y).collect();
     let mut result = None;
     for _ in 0..EV_ITERATIONS {
-        let (coef, cov) = solve(points, &sigma_eff, order).ok_or(PolyError::Degenerate { order })?;
-        sigma_eff = points.iter().map(|p| p.sigma_y.hypot(slope(&coef, p.x) * p.sigma_x)).collect();
-        result = Some((coef, cov));
+        let solved = solve(points, &sigma_eff, order).ok_or(PolyError::Degenerate { order })?;
+        sigma_eff = points.iter().map(|p| p.sigma_y.hypot(slope(&solved.coef, p.x) * p.sigma_x)).collect();
+        result = Some(solved);
     }
-    let (coef, cov) = result.expect("at least one iteration");
-    let chi2 = points.iter().zip(&sigma_eff).map(|(p, s)| ((p.y - eval(&coef, p.x)) / s).powi(2)).sum();
-    Ok(PolyFit { coef, cov, chi2, sigma_eff })
+    let s = result.expect("at least one iteration");
+    let r = DVector::from_iterator(points.len(), points.iter().map(|p| p.y - eval(&s.coef, p.x)));
+    let chi2 = (r.transpose() * v_inverse(points, &sigma_eff) * &r)[(0, 0)];
+    Ok(PolyFit { coef: s.coef, cov: s.cov, chi2, sigma_eff, common_response: s.common_response })
 }
 
-/// The normal equations' solution and covariance for fixed σ.
-fn solve(points: &[Point], sigma: &[f64], order: usize) -> Option<(Vec<f64>, DMatrix<f64>)> {
-    let n = order + 1;
-    let mut ata = DMatrix::zeros(n, n);
-    let mut atb = DVector::zeros(n);
-    for (p, s) in points.iter().zip(sigma) {
-        let a = powers(p.x, order) / *s;
-        ata += &a * a.transpose();
-        atb += &a * (p.y / s);
-    }
-    let cov = ata.try_inverse()?;
-    let coef = &cov * atb;
-    coef.iter().all(|c| c.is_finite()).then(|| (coef.iter().copied().collect(), cov))
+/// V⁻¹ for `V = diag(σ²) + c·cᵀ`, by Sherman-Morrison.
+fn v_inverse(points: &[Point], sigma: &[f64]) -> DMatrix<f64> {
+    let d_inv = DVector::from_iterator(sigma.len(), sigma.iter().map(|s| 1.0 / (s * s)));
+    let dc = DVector::from_iterator(points.len(), points.iter().zip(d_inv.iter()).map(|(p, d)| p.sigma_common * d));
+    let denom = 1.0 + points.iter().zip(dc.iter()).map(|(p, x)| p.sigma_common * x).sum::<f64>();
+    DMatrix::from_diagonal(&d_inv) - &dc * dc.transpose() / denom
+}
+
+struct Solved {
+    coef: Vec<f64>,
+    cov: DMatrix<f64>,
+    common_response: DVector<f64>,
+}
+
+/// The generalised normal equations' solution, its covariance and the response to the common
+/// part, for fixed σ.
+fn solve(points: &[Point], sigma: &[f64], order: usize) -> Option<Solved> {
+    let a = DMatrix::from_fn(points.len(), order + 1, |i, d| points[i].x.powi(d as i32));
+    let v_inv = v_inverse(points, sigma);
+    let cov = (a.transpose() * &v_inv * &a).try_inverse()?;
+    let g = &cov * a.transpose() * &v_inv;
+    let y = DVector::from_iterator(points.len(), points.iter().map(|p| p.y));
+    let c = DVector::from_iterator(points.len(), points.iter().map(|p| p.sigma_common));
+    let coef = &g * y;
+    coef.iter().all(|c| c.is_finite()).then(|| Solved {
+        coef: coef.iter().copied().collect(),
+        cov,
+        common_response: g * c,
+    })
 }
 
 /// One held-out prediction.
@@ -124,9 +161,11 @@ pub struct HeldOut {
     pub predicted: f64,
     /// σ of that prediction (the others' fit).
     pub sigma_predicted: f64,
-    /// The point's own effective σ (its value's, widened by its temperature's through the slope).
+    /// The point's own independent effective σ (its value's, widened by its temperature's
+    /// through the slope).
     pub sigma_point: f64,
-    /// (measured − predicted) / √(σ_point² + σ_predicted²).
+    /// (measured − predicted) in units of the miss's σ: σ_point² + σ_predicted² and the point's
+    /// common variance, less twice the prediction's covariance with that common part.
     pub z: f64,
 }
 
@@ -140,7 +179,9 @@ pub fn held_out(points: &[Point], order: usize) -> Option<Vec<HeldOut>> {
             let predicted = eval(&f.coef, p.x);
             let sigma_predicted = value_variance(&f, p.x).max(0.0).sqrt();
             let sigma_point = p.sigma_y.hypot(slope(&f.coef, p.x) * p.sigma_x);
-            let z = (p.y - predicted) / sigma_point.hypot(sigma_predicted);
+            let shared = powers(p.x, order).dot(&f.common_response) * p.sigma_common;
+            let var = sigma_point.powi(2) + sigma_predicted.powi(2) + p.sigma_common.powi(2) - 2.0 * shared;
+            let z = (p.y - predicted) / var.max(sigma_point.powi(2)).sqrt();
             Some(HeldOut { index: j, predicted, sigma_predicted, sigma_point, z })
         })
         .collect()
@@ -188,7 +229,7 @@ mod tests {
         [-45.0, -25.0, 0.0, 25.0, 45.0]
             .iter()
             .zip(noise)
-            .map(|(&x, n)| Point { x, sigma_x: 0.0, y: f(x) + n * 0.01, sigma_y: 0.01 })
+            .map(|(&x, n)| Point { x, sigma_x: 0.0, y: f(x) + n * 0.01, sigma_y: 0.01, sigma_common: 0.0 })
             .collect()
     }
 
@@ -217,6 +258,29 @@ mod tests {
         assert_eq!(choose_order(&points(|x| x, &noise)[..3]).unwrap().press.len(), 2);
         assert_eq!(choose_order(&points(|x| x, &noise)[..3]).unwrap().order, 1);
         assert!(choose_order(&points(|x| x, &noise)[..2]).is_none());
+    }
+
+    /// A common part the same at every point lands on the constant term only (Rao 1967): the
+    /// coefficients are those of the fit without it, the constant's variance grows by its
+    /// square, the slope's does not, and a held-out miss (in which it cancels) is unchanged.
+    #[test]
+    fn a_common_part_lands_on_the_constant_term_only() {
+        let noise = [0.7, -1.1, 0.4, 0.9, -0.6];
+        let p = points(|x| 2.0 + 0.03 * x, &noise);
+        let mut q = p.clone();
+        for pt in &mut q {
+            pt.sigma_common = 0.05;
+        }
+        let (f, g) = (fit(&p, 1).unwrap(), fit(&q, 1).unwrap());
+        assert!((f.coef[0] - g.coef[0]).abs() < 1e-12 && (f.coef[1] - g.coef[1]).abs() < 1e-14);
+        assert!((g.cov[(0, 0)] - f.cov[(0, 0)] - 0.05 * 0.05).abs() < 1e-12, "{} {}", g.cov, f.cov);
+        assert!((g.cov[(1, 1)] - f.cov[(1, 1)]).abs() < 1e-16 && (g.cov[(0, 1)] - f.cov[(0, 1)]).abs() < 1e-15);
+        assert!((g.common_response[0] - 0.05).abs() < 1e-12 && g.common_response[1].abs() < 1e-14);
+        assert!((f.chi2 - g.chi2).abs() < 1e-9);
+        let (hf, hg) = (held_out(&p, 1).unwrap(), held_out(&q, 1).unwrap());
+        for (a, b) in hf.iter().zip(&hg) {
+            assert!((a.z - b.z).abs() < 1e-9 && a.z.abs() > 0.1, "{a:?} {b:?}");
+        }
     }
 
     #[test]

@@ -35,13 +35,18 @@ pub fn text(model: &ThermalModel) -> String {
         let press: Vec<String> = c.press.iter().map(|p| format!("{p:.1}")).collect();
         let _ = writeln!(
             out,
-            "  {:<24} order {} (PRESS {}), χ²/dof {:.2}/{}{}: {}",
+            "  {:<24} order {} (PRESS {}), χ²/dof {:.2}/{}{}{}: {}",
             c.label(),
             c.order,
             press.join(" | "),
             c.chi2,
             c.dof,
             if c.scale_factor > 1.0 { format!(", σ × {:.2}", c.scale_factor) } else { String::new() },
+            if c.between_sigma > 0.0 {
+                format!(", between sessions ± {:.1e}", c.between_sigma)
+            } else {
+                String::new()
+            },
             coef.join(", ")
         );
         for p in &c.points {

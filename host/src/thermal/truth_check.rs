@@ -117,7 +117,11 @@ pub fn held_out_rate_z(
 }
 
 /// Each quantity of the model at a single-setpoint session's die temperature against that
-/// session's own calibration, in units of their combined σ.
+/// session's own calibration, in units of the σ of their difference: the model's (with the
+/// temperature's through the slope) and the session's, plus the between-session σ of the
+/// quantity's kind (the session is another session), less twice their covariance through the
+/// part of σ common to every calibration on the rig (`SetpointCal::common_sigma`): a common
+/// systematic moves both alike and is not counted in their difference.
 pub fn single_setpoint_z(model: &ThermalModel, single: &SetpointCal) -> Result<Vec<(String, f64)>, ThermalError> {
     let temp_c = model.temp_c_from_raw_mean(single.out_temp_mean_lsb);
     Quantity::all()
@@ -126,8 +130,10 @@ pub fn single_setpoint_z(model: &ThermalModel, single: &SetpointCal) -> Result<V
             let at = curve.at(model.reference_c, temp_c);
             let slope_sigma = curve.slope_at(model.reference_c, temp_c) * model.temp_sigma_c;
             let mine = single.value(axis, q);
-            let sigma = at.sigma.hypot(mine.sigma).hypot(slope_sigma);
-            Ok((curve.label(), (at.value - mine.value) / sigma))
+            let shared = curve.common_covariance(model.reference_c, temp_c, single.common(axis, q));
+            let var = at.sigma.powi(2) + slope_sigma.powi(2) + mine.sigma.powi(2) + curve.between_sigma.powi(2)
+                - 2.0 * shared;
+            Ok((curve.label(), (at.value - mine.value) / var.max(0.0).sqrt()))
         })
         .collect()
 }
