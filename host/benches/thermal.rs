@@ -210,7 +210,7 @@ fn detail(seed: u64, runs: &[SessionRun], single: &SessionRun) {
             .report
             .consider
             .iter()
-            .map(|t| format!("{}(k {:.0?} ppm, dir {:.4?}°)", t.effect.key(), t.k_sigma_ppm, t.direction_sigma_deg))
+            .map(|t| format!("{}(k {:.0?} ppm, dir {:.4?}°)", t.effect, t.k_sigma_ppm, t.direction_sigma_deg))
             .collect();
         println!(
             "  seed {seed} session {i} ({} °C): floor {}, effects {:?}, consider {}",

@@ -150,7 +150,7 @@ impl SetpointCal {
 }
 
 /// The σ of each value that the report's consider terms give it (the terms add in quadrature,
-/// `calib::consider`), which the setpoints share: the considered effect is the rig's, the same at
+/// `calib::analysis::consider`), which the setpoints share: the considered effect is the rig's, the same at
 /// every setpoint, so the bias it leaves is common to them. The report states each term's σ of
 /// the sensitivities (ppm of k) only; its direction σ is the axis's whole (both components
 /// together) and the offsets' is not stated, so those stay counted as independent (their
