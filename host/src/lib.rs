@@ -3,6 +3,7 @@ pub mod allan;
 pub mod calib;
 pub mod capture;
 pub mod certificate;
+pub mod cli;
 pub mod export;
 pub mod files;
 pub mod geometry;

@@ -1,6 +1,6 @@
 //! The whole live path: the firmware's virtual rig on a pty, recorded and calibrated by the host
 //! code `host calibrate --port <pty> --yes` runs (`host::link`, `host::session`,
-//! `host::capture::decode`, `host::calib::close_loop`; see host/src/main.rs), and the result held
+//! `host::capture::decode`, `host::calib::close_loop`; see host/src/cli.rs), and the result held
 //! against the imperfect gyro the virtual rig simulates.
 //!
 //! A default session (both poses at 180, 90 and −180 °/s, 120 s each) on a healthy rig must end at the

@@ -1,5 +1,5 @@
 //! `host configure-drive --port <pty>` against the firmware's virtual rig, step by step as
-//! host/src/main.rs runs it: the rig acknowledges a drive it can control, and the host says why
+//! host/src/cli.rs runs it: the rig acknowledges a drive it can control, and the host says why
 //! it refused one it cannot (a runaway it could not detect).
 
 use e2e::LockstepRig;

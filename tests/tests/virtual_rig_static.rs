@@ -1,5 +1,5 @@
 //! `host calibrate --port <pty> --static-s N` against the firmware's virtual rig, step by step as
-//! host/src/main.rs runs it: the session ends with a static run (a `Start` at 0 °/s), recorded
+//! host/src/cli.rs runs it: the session ends with a static run (a `Start` at 0 °/s), recorded
 //! to its own capture, framed by `RunStarted`/`RunStopped` with the motor off throughout, and
 //! its samples give the noise figures `host calibrate` adds to the result.
 
