@@ -85,7 +85,7 @@ fn best(v: &[f64]) -> f64 {
 }
 
 fn main() {
-    let runs = replay::seeds_from_env("BENCH_RUNS", 3) as usize;
+    let runs: usize = std::env::var("BENCH_RUNS").ok().and_then(|v| v.trim().parse().ok()).unwrap_or(3).max(1);
     let only: Vec<String> = std::env::var("BENCH_ONLY")
         .map(|v| v.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect())
         .unwrap_or_default();
