@@ -269,6 +269,20 @@ fn a_random_walk_a_curve_took_first_goes_to_the_free_drift() {
     assert!(r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    assert_drift_kept_by_bic(&r);
+}
+
+/// The drift step compared its alternatives by BIC: the model kept is the fitted one with the
+/// lowest, and each alternative left unfitted trailed it by at least the margin.
+fn assert_drift_kept_by_bic(r: &LoopReport) {
+    let step = r.steps.iter().find(|s| !s.drift_choice.is_empty()).expect("a step compared drift models");
+    let kept = step.score.as_ref().expect("the step added a model").effect;
+    let fitted: Vec<_> = step.drift_choice.iter().filter(|d| d.fitted).collect();
+    let best = fitted.iter().min_by(|a, b| a.bic.total_cmp(&b.bic)).expect("one fitted");
+    assert_eq!(best.effect, kept, "{:?}", step.drift_choice);
+    for d in step.drift_choice.iter().filter(|d| !d.fitted) {
+        assert!(d.bic >= best.bic + crate::calib::analysis::selection::DRIFT_BIC_MARGIN, "{d:?} left unfitted within the margin of {best:?}");
+    }
 }
 
 /// A random walk three times the simulator's default (0.006 °/s/√s) leaves run offsets between

@@ -98,9 +98,12 @@ pub fn summary(r: &LoopReport) -> String {
             let _ = writeln!(o, "  next best (linearised): {}", others.join("; "));
         }
         if !s.drift_choice.is_empty() {
-            let c: Vec<String> =
-                s.drift_choice.iter().map(|d| format!("{} BIC {:.1}", d.effect.name(), d.bic)).collect();
-            let _ = writeln!(o, "  drift models fitted and compared (lowest BIC kept): {}", c.join("; "));
+            let c: Vec<String> = s
+                .drift_choice
+                .iter()
+                .map(|d| format!("{} BIC {:.1}{}", d.effect.name(), d.bic, if d.fitted { "" } else { " (linearised)" }))
+                .collect();
+            let _ = writeln!(o, "  drift models compared (lowest BIC kept): {}", c.join("; "));
         }
         for e in &s.replaced {
             let why = if e.is_drift() {

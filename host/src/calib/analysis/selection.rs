@@ -171,7 +171,7 @@ pub struct StepOutcome {
     pub drift_choice: Vec<DriftChoice>,
 }
 
-/// A drift model fitted as an alternative.
+/// A drift model compared as an alternative.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DriftChoice {
     /// The model.
@@ -180,6 +180,15 @@ pub struct DriftChoice {
     pub chi2: f64,
     /// χ² + k·ln n.
     pub bic: f64,
+    /// Whether χ² is after fitting; otherwise it is the scoring pass's linearised one, and the
+    /// model trailed the best fitted one by too much to be fitted ([`DRIFT_BIC_MARGIN`]).
+    #[serde(default = "fitted_by_default")]
+    pub fitted: bool,
+}
+
+/// Loop reports written before drift alternatives could be compared unfitted fitted every one.
+fn fitted_by_default() -> bool {
+    true
 }
 
 /// The model with a candidate added, started at the candidate's linearised solution; the
@@ -398,17 +407,27 @@ impl CandidateFit<'_> {
     }
 }
 
-/// The drift models are alternatives: fit the best-scoring variant of each that passed, and
-/// keep the one with the lowest BIC after fitting (the warm-up's time constant is only on its
-/// grid before). Returns every variant fitted with its χ² and BIC, and the chosen one (its index
-/// in `scores`, and its fit); those that could not be fitted go into `skipped`.
+/// BIC by which a drift alternative linear in its parameters may trail the best fitted one and
+/// still be fitted. Its linearised χ² (the scoring pass's joint solution) is its fitted χ² but
+/// for the coupling with the model's own non-linear parameters (a delay, a phase: ≪ 1 in χ²);
+/// 10 is the "very strong" evidence of Kass & Raftery (1995, §3.2) on the BIC scale, so an
+/// alternative further behind cannot win by being fitted.
+pub(crate) const DRIFT_BIC_MARGIN: f64 = 10.0;
+
+/// The drift models are alternatives: the best-scoring variant of each that passed is compared
+/// by BIC, and the lowest kept. A variant linear in its parameters is compared on its linearised
+/// χ² and fitted only when within [`DRIFT_BIC_MARGIN`] of the best fitted so far; the warm-up,
+/// whose time constant is only on its grid before, is always fitted. Returns every variant with
+/// its χ² and BIC (fitted or linearised), and the chosen one (its index in `scores`, and its
+/// fit); those that could not be fitted go into `skipped`.
 fn best_drift(
     scores: &[Scored],
     fitter: &CandidateFit,
     n_total: u64,
     skipped: &mut Vec<Skipped>,
 ) -> (Vec<DriftChoice>, Option<(usize, Fitted)>) {
-    let mut choices: Vec<(usize, Fitted, f64)> = Vec::new();
+    let ln_n = (n_total as f64).ln();
+    let mut variants: Vec<(usize, f64, bool)> = Vec::new();
     let mut seen: Vec<Effect> = Vec::new();
     for (i, scored) in scores.iter().enumerate().filter(|(_, s)| s.passed() && s.score.effect.is_drift()) {
         let sc = &scored.score;
@@ -420,25 +439,37 @@ fn best_drift(
             continue;
         }
         seen.push(sc.effect);
-        match fitter.fit(scored) {
+        let (lin, shared) = sc.effect.params(&fitter.data.layout);
+        let k = 3 * lin.len() + shared.len();
+        let chi2 = scored.solution.as_ref().map_or(f64::INFINITY, |s| s.chi2);
+        variants.push((i, chi2 + k as f64 * ln_n, shared.is_empty() && sc.drift_tau_s.is_none()));
+    }
+    variants.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut table = Vec::with_capacity(variants.len());
+    let mut best: Option<(usize, Fitted, f64)> = None;
+    for (i, linearised_bic, linear) in variants {
+        let effect = scores[i].score.effect;
+        if linear && best.as_ref().is_some_and(|b| linearised_bic >= b.2 + DRIFT_BIC_MARGIN) {
+            let chi2 = scores[i].solution.as_ref().map_or(f64::INFINITY, |s| s.chi2);
+            table.push(DriftChoice { effect, chi2, bic: linearised_bic, fitted: false });
+            continue;
+        }
+        match fitter.fit(&scores[i]) {
             Ok(f) => {
-                let (lin, shared) = sc.effect.params(&fitter.data.layout);
-                let k = 3 * lin.len() + shared.len();
-                let bic = f.solution.chi2 + k as f64 * (n_total as f64).ln();
-                choices.push((i, f, bic));
+                let bic = linearised_bic - scores[i].solution.as_ref().map_or(0.0, |s| s.chi2) + f.solution.chi2;
+                table.push(DriftChoice { effect, chi2: f.solution.chi2, bic, fitted: true });
+                if best.as_ref().is_none_or(|b| bic < b.2) {
+                    best = Some((i, f, bic));
+                }
             }
             Err(why) => {
-                if !skipped.iter().any(|s: &Skipped| s.effect == sc.effect) {
-                    skipped.push(Skipped { effect: sc.effect, why });
+                if !skipped.iter().any(|s: &Skipped| s.effect == effect) {
+                    skipped.push(Skipped { effect, why });
                 }
             }
         }
     }
-    let table = choices
-        .iter()
-        .map(|c| DriftChoice { effect: scores[c.0].score.effect, chi2: c.1.solution.chi2, bic: c.2 })
-        .collect();
-    (table, choices.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).map(|c| (c.0, c.1)))
+    (table, best.map(|b| (b.0, b.1)))
 }
 
 /// Whether adding the free drift takes `e` out of the model: every drift curve, and the table

@@ -17,9 +17,13 @@ const MIN_RCOND: f64 = 1e-13;
 /// Gauss-Newton iterations at most; a converging fit needs 2–4 (the effects are small angles).
 const MAX_ITERATIONS: usize = 12;
 
-/// A Gauss-Newton step smaller than this many σ in every parameter ends the iteration: the
-/// remaining error is then 1 % of the statistical one.
-const CONVERGED_SIGMAS: f64 = 0.01;
+/// A Gauss-Newton step smaller than this many σ in every parameter ends the iteration, once
+/// applied. What remains after it is the step times the iteration's contraction rate, itself
+/// small for these small-angle effects: a fit started from a candidate's linearised solution
+/// then ends after one pass where a bound of 0.01 σ took two, and the answers on
+/// `realistic-2speed-s101` moved by 1e-11 σ (engineering judgement, measured; the golden tests
+/// hold every answer to 0.01 σ).
+const CONVERGED_SIGMAS: f64 = 0.1;
 
 /// Which accumulated columns a joint solve uses: per-axis linear ones and shared ones, as
 /// indices into the accumulation's columns.
