@@ -281,7 +281,10 @@ fn assert_drift_kept_by_bic(r: &LoopReport) {
     let best = fitted.iter().min_by(|a, b| a.bic.total_cmp(&b.bic)).expect("one fitted");
     assert_eq!(best.effect, kept, "{:?}", step.drift_choice);
     for d in step.drift_choice.iter().filter(|d| !d.fitted) {
-        assert!(d.bic >= best.bic + crate::calib::analysis::selection::DRIFT_BIC_MARGIN, "{d:?} left unfitted within the margin of {best:?}");
+        assert!(
+            d.bic >= best.bic + crate::calib::analysis::selection::DRIFT_BIC_MARGIN,
+            "{d:?} left unfitted within the margin of {best:?}"
+        );
     }
 }
 
@@ -354,6 +357,53 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
             }
         }
     }
+}
+
+/// The consider covariance reads the candidates' pass in place of its own: the sums read for
+/// some of the gathered groups (a group's columns in another order, a subset of a group) are
+/// those a pass of their own takes (to 1e-12 of each entry's scale, as above), and sums of
+/// another model, or of columns never gathered together, are not read.
+#[test]
+fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
+    let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let mut model = Model::base_for(&data.poses).with(Effect::Delay, Default::default(), vec![0.004]);
+    for (a, row) in [[57.0, 0.9, -0.4, 12.0], [-0.5, 56.5, 1.1, -20.0], [0.3, -0.8, 58.0, 5.0]].iter().enumerate() {
+        model.beta[a] = row.to_vec();
+    }
+    let cols_of = |e: Effect| -> Vec<Col> {
+        let (lin, shared) = e.params(&data.layout);
+        lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect()
+    };
+    let (g, h, t) = (cols_of(Effect::GSensitivity), cols_of(Effect::RateScale), cols_of(Effect::TableTilt));
+    let gathered = crate::calib::engine::CrossSums::gather(&data, &model, &[&g, &h, &t]).expect("runs");
+    let g_rev: Vec<Col> = g.iter().rev().copied().collect();
+    let wanted: [&[Col]; 3] = [&t, &g_rev, &h[..1]];
+    let read = gathered.read(&model, &wanted).expect("every group lies within a gathered one");
+    let own = crate::calib::engine::CrossSums::gather(&data, &model, &wanted).expect("runs");
+    let own = own.total();
+    let l = own.l;
+    assert_eq!((read.l, read.n), (l, own.n));
+    let diag = |m: &Vec<f64>, i: usize| m[i * l + i];
+    for a in 0..3 {
+        assert!((read.ete[a] - own.ete[a]).abs() <= 1e-12 * own.ete[a]);
+        for i in 0..l {
+            let scale = (diag(&own.xtx[a], i) * own.ete[a]).sqrt();
+            assert!((read.xte[a][i] - own.xte[a][i]).abs() <= 1e-12 * scale, "axis {a}, xᵀe {i}");
+            for j in 0..l {
+                let scale = (diag(&own.xtx[a], i) * diag(&own.xtx[a], j)).sqrt();
+                let (got, want) = (read.xtx[a][i * l + j], own.xtx[a][i * l + j]);
+                assert!((got - want).abs() <= 1e-12 * scale, "axis {a}, ({i}, {j}): {got} vs {want}");
+            }
+        }
+    }
+    // Columns of two gathered groups were never summed against each other.
+    let across: Vec<Col> = g.iter().chain(&h).copied().collect();
+    assert!(gathered.read(&model, &[&across]).is_none());
+    // Nor are these sums of a model at other values.
+    let mut moved = model.clone();
+    moved.beta[0][0] += 1e-9;
+    assert!(gathered.read(&moved, &[&g]).is_none());
 }
 
 /// The analytic Jacobian of every shared parameter matches a central difference of the model's

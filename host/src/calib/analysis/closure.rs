@@ -4,7 +4,7 @@
 //! step is reported with the residual against the floor, how far the base parameters moved in
 //! their σ, a held-out prediction and, on simulated data, the error against the truth.
 
-use crate::calib::analysis::consider::{consider, ConsiderOverrides, Consideration};
+use crate::calib::analysis::consider::{columns, consider, ConsiderOverrides, Consideration};
 use crate::calib::analysis::consistency::{consistency, Consistency};
 use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
 use crate::calib::analysis::paper::paper_check;
@@ -16,7 +16,9 @@ use crate::calib::data::kinematics::KinOptions;
 use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
 use crate::calib::effects::terms::ConsiderCtx;
 use crate::calib::effects::Effect;
-use crate::calib::engine::{fit, full_selection, solve_joint, Fitted, Gram, LinCol, LoopData, Model, SharedPar};
+use crate::calib::engine::{
+    fit, full_selection, solve_joint, CrossSums, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
+};
 use crate::calib::result::axes::AXES;
 use crate::calib::result::consider_term::ConsiderTerm;
 use crate::calib::result::derived::{derive, AxisEstimate, InterAxisAngle};
@@ -483,26 +485,31 @@ impl<'a> Context<'a> {
     }
 
     /// The consider covariance of a model: what every catalogued effect it lacks and the runs
-    /// do not separate may do to M and the offsets.
-    fn consider(&self, s: &State) -> Consideration {
-        let cx = ConsiderCtx {
-            current: &s.fitted.model.effects,
-            cutoff_hz: self.cutoff_hz,
-            full_scale_dps: self.full_scale_dps,
-            delay_s: s.fitted.model.theta_of(SharedPar { effect: Effect::Delay, k: 0 }),
-        };
+    /// do not separate may do to M and the offsets. Its cross-products are read from `sums`
+    /// when those are of this model (the last candidates' pass, [`Context::next_state`]).
+    fn consider(&self, s: &State, sums: Option<&CrossSums>) -> Consideration {
         let base = base_indices(&s.fitted);
         consider(
             self.data,
             &s.fitted,
             s.diag.weights(),
-            &cx,
+            &self.consider_ctx(&s.fitted),
             &base,
             &s.estimate.params,
             self.nominal,
             &self.opts.consider,
             self.opts.alpha,
+            sums,
         )
+    }
+
+    fn consider_ctx<'f>(&self, f: &'f Fitted) -> ConsiderCtx<'f> {
+        ConsiderCtx {
+            current: &f.model.effects,
+            cutoff_hz: self.cutoff_hz,
+            full_scale_dps: self.full_scale_dps,
+            delay_s: f.model.theta_of(SharedPar { effect: Effect::Delay, k: 0 }),
+        }
     }
 
     fn held_out(&self, s: &State) -> Vec<HeldOutRun> {
@@ -866,8 +873,11 @@ fn loop_on(
     let paper = ctx.paper_check(&linear, &state.diag);
     drop(linear);
     let initial = state.diag.clone();
-    let mut trail =
-        Trail { steps: vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())], skipped: Vec::new() };
+    let mut trail = Trail {
+        steps: vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())],
+        skipped: Vec::new(),
+        last_sums: None,
+    };
     while state.fitted.model.effects.len() < opts.max_effects {
         match ctx.next_state(&state, &mut trail)? {
             Some(next) => state = next,
@@ -884,6 +894,9 @@ fn loop_on(
 struct Trail {
     steps: Vec<StepReport>,
     skipped: Vec<Skipped>,
+    /// The last candidates' pass in which no candidate passed: of the final model when nothing
+    /// is added after the loop (Earth), so the consider covariance reads it.
+    last_sums: Option<CrossSums>,
 }
 
 impl Trail {
@@ -916,11 +929,20 @@ impl Context<'_> {
     /// One step of the loop: the best candidate that passes its test, fitted, then whatever it
     /// made redundant dropped. `None` when no candidate passes.
     fn next_state(&self, state: &State, trail: &mut Trail) -> Result<Option<State>, CalError> {
-        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha)?;
+        // Where this model may be the final one (nothing is added after the loop), the
+        // candidates' pass also sums the consider covariance's columns: if no candidate passes,
+        // that covariance reads them rather than making a pass of its own.
+        let extra = if self.adds_earth(&state.fitted.model) {
+            Vec::new()
+        } else {
+            columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider)
+        };
+        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha, &extra)?;
         for sk in outcome.skipped {
             trail.skip(sk);
         }
         let Some((bi, mut fitted)) = outcome.accepted else {
+            trail.last_sums = outcome.sums;
             return Ok(None);
         };
         let score = outcome.scores[bi].clone();
@@ -948,6 +970,12 @@ impl Context<'_> {
         Ok(Some(next))
     }
 
+    /// Whether [`Context::with_earth`] adds Earth to `model` once the loop ends: it lacks it and
+    /// the runs separate its vertical part from the sensitivities.
+    fn adds_earth(&self, model: &Model) -> bool {
+        !model.effects.iter().any(|e| e.is_earth()) && separates_delay_and_index(self.data)
+    }
+
     /// Earth rotation is in every lab: once the loop has explained what it can, a model without
     /// it gets it (fitted freely: only the lab's orientation is unknown), when the runs separate
     /// its vertical part from the sensitivities (two speeds or directions): its σ then replaces
@@ -961,7 +989,7 @@ impl Context<'_> {
     /// With g-sensitivity in the model its vertical part cannot be told from that term, which
     /// holds it (`Effect::EarthRotationHorizontal`): only the horizontal part is added.
     fn with_earth(&self, state: &State, trail: &mut Trail) -> Option<State> {
-        if state.fitted.model.effects.iter().any(|e| e.is_earth()) || !separates_delay_and_index(self.data) {
+        if !self.adds_earth(&state.fitted.model) {
             return None;
         }
         let weights = state.diag.weights();
@@ -1016,7 +1044,7 @@ impl Context<'_> {
         initial: Diagnostics,
     ) -> LoopReport {
         let (asks, mut notes) = closing_advice(self.data, &state.fitted, self.opts.latitude_deg);
-        let considered = self.consider(&state);
+        let considered = self.consider(&state, trail.last_sums.as_ref());
         state.estimate = base_estimate_with(&state.fitted, self.nominal, Some(&considered.cov));
         // The final model's error against a simulated truth, in the σ it is reported with.
         if let (Some(last), Some(t)) = (trail.steps.last_mut(), self.truth) {

@@ -22,7 +22,7 @@
 use crate::calib::analysis::stats::chi2_upper_quantile;
 use crate::calib::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
 use crate::calib::effects::Effect;
-use crate::calib::engine::{accumulate_pairs, normal_equations, Fitted, Gram, LoopData, Reach, Selection};
+use crate::calib::engine::{accumulate_pairs, normal_equations, CrossSums, Fitted, Gram, LoopData, Reach, Selection};
 use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
 use crate::calib::result::derived::derive;
 use nalgebra::{DMatrix, DVector};
@@ -205,9 +205,18 @@ fn with_candidates(f: &Fitted, cands: &[Candidate]) -> (Vec<Col>, Selection, Pla
     (cols, sel, places)
 }
 
+/// The columns [`consider`] sums against `f`'s, one group per effect: what the loop's last
+/// candidates' pass gathers beside its own when the model it scores will be the final one.
+pub fn columns(data: &LoopData, f: &Fitted, cx: &ConsiderCtx, overrides: &ConsiderOverrides) -> Vec<Vec<Col>> {
+    // The sensitivities scale only the σs, not which columns are considered.
+    candidates(data, f, cx, [1.0; 3], overrides).into_iter().map(|c| c.cols).collect()
+}
+
 /// The consider covariance of `f` (fitted with `weights`) for every catalogued effect it lacks.
 /// `base` are the 12 base parameters' indices in `f`'s covariance; `k` the sensitivities.
-/// `alpha` is the loop's family-wise level, which the test of an effect it tried uses.
+/// `alpha` is the loop's family-wise level, which the test of an effect it tried uses. The
+/// cross-products are read from `sums` when those are of `f`'s model and hold every effect's
+/// columns ([`CrossSums::read`]), else summed in a pass of their own.
 #[allow(clippy::too_many_arguments)]
 pub fn consider(
     data: &LoopData,
@@ -219,6 +228,7 @@ pub fn consider(
     nominal: f64,
     overrides: &ConsiderOverrides,
     alpha: f64,
+    sums: Option<&CrossSums>,
 ) -> Consideration {
     let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
     let cands = candidates(data, f, cx, k, overrides);
@@ -227,8 +237,12 @@ pub fn consider(
     }
     let (nl, ns) = (f.model.lin.len(), f.model.shared.len());
     let (cols, sel, places) = with_candidates(f, &cands);
-    let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
-    let Some(total) = Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach)) else {
+    let groups: Vec<&[Col]> = cands.iter().map(|c| c.cols.as_slice()).collect();
+    let read = sums.and_then(|s| s.read(&f.model, &groups));
+    let Some(total) = read.or_else(|| {
+        let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
+        Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach))
+    }) else {
         return Consideration::none();
     };
     let (n_mat, b_vec) = normal_equations(&total, &sel, weights);

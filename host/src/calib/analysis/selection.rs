@@ -17,8 +17,8 @@ use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
 use crate::calib::effects::terms::{Evidence, Situation};
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
-    accumulate_pairs, apply_step, fit, full_selection, residual_after, solve_joint, Col, Fitted, Gram, LinCol,
-    LoopData, Reach, Selection,
+    apply_step, fit, full_selection, residual_after, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData,
+    Selection,
 };
 use crate::calib::result::error::CalError;
 use crate::geometry::Pose;
@@ -167,8 +167,10 @@ pub struct StepOutcome {
     pub skipped: Vec<Skipped>,
     /// The accepted candidate's index in `scores` and the refitted model, if one passed.
     pub accepted: Option<(usize, Fitted)>,
-    /// When a drift model was added: each alternative fitted, and its BIC.
+    /// When a drift model was added: each alternative compared, and its BIC.
     pub drift_choice: Vec<DriftChoice>,
+    /// The candidates' pass (of the model the step started from), when one was made.
+    pub sums: Option<CrossSums>,
 }
 
 /// A drift model compared as an alternative.
@@ -238,15 +240,29 @@ fn start_model_at_zero(state: &Fitted, c: &Candidate) -> crate::calib::engine::M
     )
 }
 
-/// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level.
-pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> Result<StepOutcome, CalError> {
+/// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level. `extra`
+/// are groups of columns summed against the model in the candidates' pass (the consider
+/// covariance's, read from the outcome's `sums` when no candidate passes).
+pub fn step(
+    data: &LoopData,
+    state: &Fitted,
+    diag: &Diagnostics,
+    alpha: f64,
+    extra: &[Vec<Col>],
+) -> Result<StepOutcome, CalError> {
     let weights = diag.weights();
     let cands = candidates(data, &state.model.effects, &evidence(diag));
-    let nothing = || StepOutcome { scores: Vec::new(), skipped: Vec::new(), accepted: None, drift_choice: Vec::new() };
+    let nothing = || StepOutcome {
+        scores: Vec::new(),
+        skipped: Vec::new(),
+        accepted: None,
+        drift_choice: Vec::new(),
+        sums: None,
+    };
     if cands.is_empty() {
         return Ok(nothing());
     }
-    let Some((mut scores, n_total)) = score_all(data, state, &cands, alpha, weights)? else {
+    let Some((mut scores, n_total, sums)) = score_all(data, state, &cands, extra, alpha, weights)? else {
         // The current model was fitted, so this only happens at the edge of f64: nothing more
         // can be added on top of it.
         return Ok(nothing());
@@ -281,7 +297,13 @@ pub fn step(data: &LoopData, state: &Fitted, diag: &Diagnostics, alpha: f64) -> 
             }
         }
     }
-    Ok(StepOutcome { scores: scores.into_iter().map(|s| s.score).collect(), skipped, accepted, drift_choice })
+    Ok(StepOutcome {
+        scores: scores.into_iter().map(|s| s.score).collect(),
+        skipped,
+        accepted,
+        drift_choice,
+        sums: Some(sums),
+    })
 }
 
 /// A candidate's score, its index in the candidate list, and its linearised joint solution.
@@ -299,29 +321,24 @@ impl Scored {
 }
 
 /// Every candidate scored from one pass of cross-products (the model's columns against all,
-/// each candidate's block against itself), and the samples summed. `None` when the current
-/// model's own normal equations are singular.
+/// each candidate's block against itself; `extra` groups summed alongside), the samples summed,
+/// and the sums. `None` when the current model's own normal equations are singular.
 fn score_all(
     data: &LoopData,
     state: &Fitted,
     cands: &[Candidate],
+    extra: &[Vec<Col>],
     alpha: f64,
     weights: [f64; 3],
-) -> Result<Option<(Vec<Scored>, u64)>, CalError> {
-    let mut cols = state.model.cols();
+) -> Result<Option<(Vec<Scored>, u64, CrossSums)>, CalError> {
     let nl = state.model.lin.len();
     let ns = state.model.shared.len();
-    let mut positions = Vec::with_capacity(cands.len());
-    for c in cands {
-        let start = cols.len();
-        cols.extend(c.cols.iter().copied());
-        positions.push(start..cols.len());
-    }
-    let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
-    let per_run = accumulate_pairs(data, &state.model, &cols, &reach);
-    let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
+    let groups: Vec<&[Col]> = cands.iter().map(|c| c.cols.as_slice()).chain(extra.iter().map(Vec::as_slice)).collect();
+    let sums = CrossSums::gather(data, &state.model, &groups).ok_or(CalError::NoRuns)?;
+    let total = sums.total();
+    let positions: Vec<_> = (0..cands.len()).map(|g| sums.block(g)).collect();
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
-    let Some(base) = solve_joint(&total, &base_sel, weights) else {
+    let Some(base) = solve_joint(total, &base_sel, weights) else {
         return Ok(None);
     };
     let n_total: u64 = total.n.iter().sum();
@@ -350,7 +367,7 @@ fn score_all(
             }
             let dof = dof.saturating_sub(removed).max(1);
             let threshold = crate::calib::analysis::stats::chi2_upper_quantile(dof, alpha / m as f64);
-            let solution = solve_joint(&total, &sel, weights);
+            let solution = solve_joint(total, &sel, weights);
             let delta_chi2 = solution.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
             let score = Score {
                 effect: c.effect,
@@ -364,7 +381,7 @@ fn score_all(
             Scored { score, candidate: ci, solution }
         })
         .collect();
-    Ok(Some((scores, n_total)))
+    Ok(Some((scores, n_total, sums)))
 }
 
 /// Fits a scored candidate to the end.

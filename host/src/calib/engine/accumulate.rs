@@ -79,6 +79,23 @@ impl Gram {
         }
     }
 
+    /// The sums of the columns `idx` of these, in that order.
+    pub fn restricted(&self, idx: &[usize]) -> Gram {
+        let (l, m) = (self.l, idx.len());
+        let mut g = Gram::new(m);
+        for a in 0..3 {
+            for (i, &r) in idx.iter().enumerate() {
+                g.xte[a][i] = self.xte[a][r];
+                for (j, &c) in idx.iter().enumerate() {
+                    g.xtx[a][i * m + j] = self.xtx[a][r * l + c];
+                }
+            }
+        }
+        g.ete = self.ete;
+        g.n = self.n;
+        g
+    }
+
     /// Sum of several.
     pub fn sum<'g>(grams: impl IntoIterator<Item = &'g Gram>) -> Option<Gram> {
         let mut it = grams.into_iter();

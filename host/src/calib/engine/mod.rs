@@ -19,10 +19,12 @@
 //!
 //! Files: [`loop_data`] (the cached data), [`model`], [`chain`] (eq. 1-2 and every effect's
 //! inputs), [`accumulate`] (one pass → per-run sums), [`solve`] (normal equations, Gauss-Newton,
-//! covariance); [`sincos`] (the recurrences the chain's harmonics use).
+//! covariance), [`cross`] (a model's columns against candidates', read by the score and the
+//! consider covariance alike); [`sincos`] (the recurrences the chain's harmonics use).
 
 pub mod accumulate;
 pub mod chain;
+pub mod cross;
 pub mod loop_data;
 pub mod model;
 pub mod sincos;
@@ -35,6 +37,7 @@ pub use crate::calib::effects::terms::{Bound, Col, LinCol, Point, Reported, Shar
 pub use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
 pub use accumulate::{accumulate, accumulate_pairs, Gram, Reach};
 pub use chain::{harmonics_of, Cursor, Evaluator};
+pub use cross::CrossSums;
 pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
 pub use model::Model;
 pub use solve::{
