@@ -619,12 +619,16 @@ fn earth_rotation_without_a_latitude_is_never_confidently_wrong() {
 /// filter's droop, that costs nothing where the lab does not turn: seed 7 with no effect (the
 /// README's round trip) ends within 3σ and within 15 ppm of the truth, Earth in the model.
 /// (With 180 and 90 °/s in one direction the droop rides on Earth's vertical part: 21 → 46 ppm,
-/// within σ.)
+/// within σ.) Its fit starts at its linearised solution from the last candidates' pass, so it
+/// takes one pass.
 #[test]
 fn earth_added_without_a_test_costs_nothing_on_the_default_design() {
     let (runs, truth) = capture_with(7, &[180.0, 90.0, -180.0], BAR_DURATION_S, &[], FullScale::Dps500);
     let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
     assert!(r.effects().contains(&Effect::EarthRotation), "{}", r.summary());
+    let earth_step = r.steps.last().expect("steps");
+    assert_eq!(earth_step.score.as_ref().map(|s| s.effect), Some(Effect::EarthRotation));
+    assert_eq!(earth_step.passes, 1, "{}", r.summary());
     let t = truth_of(r.steps.last().expect("steps"));
     assert!(t.max_sensitivity_ppm() <= 15.0, "{}", r.summary());
     assert_within_3_sigma(&t, "no Earth simulated, Earth fitted");
@@ -834,4 +838,45 @@ fn undeclared_temperature_dependent_sensitivity_is_found_named_and_corrected() {
     }
     assert_within_3_sigma(&truth_of(last), "scale_temperature");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
+/// An effect taken out of a fitted model starts the smaller model's fit at that model's optimum
+/// as the full fit's sums see it: within Gauss-Newton's 0.1-σ stopping step of where the fit from
+/// the model merely without it ends (hundreds of σ away here), so the fit from it stops after one
+/// pass, at the same answer to 0.01 σ (the golden tests' tolerance).
+#[test]
+fn an_effect_taken_out_starts_its_refit_at_the_smaller_models_optimum() {
+    let (runs, _) = capture_with(3, &[180.0, 90.0], 30.0, &["g_sensitivity", "delay_ms=5"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let w = [1.0; 3];
+    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), w).expect("the linear model fits");
+    let model = linear.model.with(Effect::Delay, Default::default(), vec![0.0]).with(
+        Effect::GSensitivity,
+        std::array::from_fn(|_| vec![0.0; 3]),
+        vec![],
+    );
+    let full = crate::calib::engine::fit(&data, model, w).expect("fits");
+    let refit = crate::calib::engine::fit(&data, full.model.without(Effect::GSensitivity), w).expect("fits");
+    let off = |m: &Model| {
+        let nl = m.lin.len();
+        (0..3 * nl + m.shared.len())
+            .map(|i| {
+                let (v, r) = if i < 3 * nl {
+                    (m.beta[i / nl][i % nl], refit.model.beta[i / nl][i % nl])
+                } else {
+                    (m.theta[i - 3 * nl], refit.model.theta[i - 3 * nl])
+                };
+                (v - r).abs() / refit.solution.cov[(i, i)].sqrt()
+            })
+            .fold(0.0, f64::max)
+    };
+    let naive = off(&full.model.without(Effect::GSensitivity));
+    let start = crate::calib::analysis::selection::start_without(&full, Effect::GSensitivity, w);
+    let started = off(&start);
+    assert!(naive > 10.0, "taking g-sensitivity out moves the model by only {naive:.3} σ");
+    assert!(started < 0.1, "the start is {started:.3} σ from the refit (without it: {naive:.3} σ)");
+    let from_start = crate::calib::engine::fit(&data, start, w).expect("fits");
+    assert_eq!((refit.passes > 1, from_start.passes), (true, 1));
+    let ended = off(&from_start.model);
+    assert!(ended < 0.01, "the one-pass fit ends {ended:.4} σ from the refit");
 }

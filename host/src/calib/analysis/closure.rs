@@ -9,7 +9,8 @@ use crate::calib::analysis::consistency::{consistency, Consistency};
 use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
 use crate::calib::analysis::paper::paper_check;
 use crate::calib::analysis::selection::{
-    both_directions, held_out, least_needed, separates_delay_and_index, step, DriftChoice, Dropped, Score, Skipped,
+    both_directions, held_out, least_needed, separates_delay_and_index, start_without, step, DriftChoice, Dropped,
+    Score, Skipped,
 };
 use crate::calib::data::kinematics;
 use crate::calib::data::kinematics::KinOptions;
@@ -17,7 +18,8 @@ use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
 use crate::calib::effects::terms::ConsiderCtx;
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
-    fit, full_selection, solve_joint, CrossSums, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
+    apply_step, fit, full_selection, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model, Selection,
+    SharedPar,
 };
 use crate::calib::result::axes::AXES;
 use crate::calib::result::consider_term::ConsiderTerm;
@@ -890,6 +892,22 @@ fn loop_on(
     Ok(ctx.conclude(state, trail, paper, initial))
 }
 
+/// The form of Earth's rotation [`Context::with_earth`] adds to `model`: with g-sensitivity in
+/// the model, Earth's vertical part cannot be told from it, which holds it, so only the
+/// horizontal part.
+fn earth_form(model: &Model) -> Effect {
+    if model.effects.contains(&Effect::GSensitivity) {
+        Effect::EarthRotationHorizontal
+    } else {
+        Effect::EarthRotation
+    }
+}
+
+/// The columns of an Earth form (its shared parameters').
+fn earth_columns(earth: Effect, layout: &crate::calib::data::layout::Layout) -> Vec<Col> {
+    earth.params(layout).1.into_iter().map(Col::Shared).collect()
+}
+
 /// What the loop has done so far: a report per step, and the candidates it could not fit.
 struct Trail {
     steps: Vec<StepReport>,
@@ -931,9 +949,10 @@ impl Context<'_> {
     fn next_state(&self, state: &State, trail: &mut Trail) -> Result<Option<State>, CalError> {
         // Where this model may be the final one (nothing is added after the loop), the
         // candidates' pass also sums the consider covariance's columns: if no candidate passes,
-        // that covariance reads them rather than making a pass of its own.
+        // that covariance reads them rather than making a pass of its own. Where Earth is added
+        // after the loop, it sums Earth's, from which Earth's fit starts.
         let extra = if self.adds_earth(&state.fitted.model) {
-            Vec::new()
+            vec![earth_columns(earth_form(&state.fitted.model), &self.data.layout)]
         } else {
             columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider)
         };
@@ -950,7 +969,7 @@ impl Context<'_> {
         let replaced: Vec<Effect> =
             state.fitted.model.effects.iter().copied().filter(|e| !fitted.model.effects.contains(e)).collect();
         while let Some((effect, wald_chi2, threshold)) = least_needed(&fitted, self.opts.alpha, score.effect) {
-            match fit(self.data, fitted.model.without(effect), state.diag.weights()) {
+            match fit(self.data, start_without(&fitted, effect, state.diag.weights()), state.diag.weights()) {
                 Ok(f) => {
                     dropped.push(Dropped { effect, after: score.effect, wald_chi2, threshold });
                     fitted = f;
@@ -993,13 +1012,23 @@ impl Context<'_> {
             return None;
         }
         let weights = state.diag.weights();
-        let earth = if state.fitted.model.effects.contains(&Effect::GSensitivity) {
-            Effect::EarthRotationHorizontal
-        } else {
-            Effect::EarthRotation
-        };
+        let earth = earth_form(&state.fitted.model);
         let dof = earth.params(&self.data.layout).1.len();
-        let start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
+        let mut start = state.fitted.model.with(earth, Default::default(), vec![0.0; dof]);
+        // Started at its linearised solution when the last candidates' pass summed its columns
+        // (`next_state`): the fit is then done in one pass rather than two.
+        let cols = earth_columns(earth, &self.data.layout);
+        let nl = state.fitted.model.lin.len();
+        let sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + start.shared.len()).collect() };
+        if let Some(sol) = trail
+            .last_sums
+            .as_ref()
+            .and_then(|s| s.read(&state.fitted.model, &[&cols]))
+            .and_then(|g| solve_joint(&g, &sel, weights))
+        {
+            let held = vec![false; start.shared.len()];
+            apply_step(&mut start, nl, &sol.delta, &held);
+        }
         // The model without it at the same weights: re-solved from the sums its fit holds, no
         // pass over the data (the Δχ² is reported, not tested).
         let mut without = state.fitted.clone();

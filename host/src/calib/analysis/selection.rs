@@ -17,8 +17,8 @@ use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
 use crate::calib::effects::terms::{Evidence, Situation};
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
-    apply_step, fit, full_selection, residual_after, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData,
-    Selection,
+    apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Col, CrossSums, Fitted, Gram,
+    LinCol, LoopData, Selection,
 };
 use crate::calib::result::error::CalError;
 use crate::geometry::Pose;
@@ -502,6 +502,43 @@ pub fn replaced_by_free_drift(e: Effect, data: &LoopData) -> bool {
 pub fn free_drift_keeps_constant_rates(data: &LoopData) -> bool {
     let rates: Vec<f64> = data.kin.runs.iter().map(|r| r.commanded_rate_dps).collect();
     data.layout.shares_levels_across_rates(&rates)
+}
+
+/// `fitted`'s model without `effect`, moved to the smaller model's linearised optimum from the
+/// sums `fitted`'s last pass holds (no pass of its own): taking an effect out moves the
+/// parameters correlated with it by up to several σ, which the fit would otherwise spend a pass
+/// on. With N, b the full normal equations at the point x₀ of those sums, K the kept parameters
+/// and R the effect's, the move is N_KK·d_K = b_K + N_KR·x_R (x_R going to 0). The model already
+/// holds the full fit's last (sub-0.1 σ) step beyond x₀, so that step is taken back out.
+pub fn start_without(fitted: &Fitted, effect: Effect, weights: [f64; 3]) -> crate::calib::engine::Model {
+    let mut start = fitted.model.without(effect);
+    let model = &fitted.model;
+    let (nl, ns) = (model.lin.len(), model.shared.len());
+    let last = &fitted.solution.delta;
+    let Some(total) = Gram::sum(&fitted.per_run) else { return start };
+    if last.len() != 3 * nl + ns {
+        // Some shared parameter was held in the last pass: its step is not in `last`.
+        return start;
+    }
+    let (lin, shared) = effect.params(&model.layout);
+    let kept_lin: Vec<usize> = (0..nl).filter(|&j| !lin.contains(&model.lin[j])).collect();
+    let kept_shared: Vec<usize> = (0..ns).filter(|&k| !shared.contains(&model.shared[k])).collect();
+    let keep: Vec<usize> = (0..3)
+        .flat_map(|a| kept_lin.iter().map(move |&j| a * nl + j))
+        .chain(kept_shared.iter().map(|&k| 3 * nl + k))
+        .collect();
+    let value = |i: usize| if i < 3 * nl { model.beta[i / nl][i % nl] } else { model.theta[i - 3 * nl] };
+    let gone: Vec<usize> = (0..3 * nl + ns).filter(|i| !keep.contains(i)).collect();
+    let (n_mat, b) = normal_equations(&total, &full_selection(model), weights);
+    let n_kk = DMatrix::from_fn(keep.len(), keep.len(), |i, j| n_mat[(keep[i], keep[j])]);
+    let x_r = DVector::from_fn(gone.len(), |i, _| value(gone[i]) - last[gone[i]]);
+    let n_kr = DMatrix::from_fn(keep.len(), gone.len(), |i, j| n_mat[(keep[i], gone[j])]);
+    let rhs = DVector::from_fn(keep.len(), |i, _| b[keep[i]]) + n_kr * x_r;
+    let Some(chol) = n_kk.cholesky() else { return start };
+    let step = chol.solve(&rhs) - DVector::from_fn(keep.len(), |i, _| last[keep[i]]);
+    let held = vec![false; start.shared.len()];
+    apply_step(&mut start, kept_lin.len(), &step, &held);
+    start
 }
 
 /// An effect taken out of the model because a later one made it redundant.
