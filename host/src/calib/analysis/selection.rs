@@ -15,7 +15,7 @@
 
 use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
 use crate::calib::effects::terms::{Evidence, Situation};
-use crate::calib::effects::Effect;
+use crate::calib::effects::{Effect, DRIFT_TAU_RANGE_S};
 use crate::calib::engine::{
     apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Col, CrossSums, Fitted, Gram,
     LinCol, LoopData, Selection,
@@ -427,14 +427,16 @@ impl CandidateFit<'_> {
 /// BIC by which a drift alternative linear in its parameters may trail the best fitted one and
 /// still be fitted. Its linearised χ² (the scoring pass's joint solution) is its fitted χ² but
 /// for the coupling with the model's own non-linear parameters (a delay, a phase: ≪ 1 in χ²);
+/// the warm-up's, its profile's least value over its time constant ([`profile_minimum`]), is at
+/// or below its fitted χ² where that profile is convex;
 /// 10 is the "very strong" evidence of Kass & Raftery (1995, §3.2) on the BIC scale, so an
 /// alternative further behind cannot win by being fitted.
 pub(crate) const DRIFT_BIC_MARGIN: f64 = 10.0;
 
 /// The drift models are alternatives: the best-scoring variant of each that passed is compared
-/// by BIC, and the lowest kept. A variant linear in its parameters is compared on its linearised
-/// χ² and fitted only when within [`DRIFT_BIC_MARGIN`] of the best fitted so far; the warm-up,
-/// whose time constant is only on its grid before, is always fitted. Returns every variant with
+/// by BIC, and the lowest kept. Each is compared on its linearised χ² (the warm-up's at its time
+/// constant's best, [`profile_minimum`]) and fitted only when within [`DRIFT_BIC_MARGIN`] of the
+/// best fitted so far. Returns every variant with
 /// its χ² and BIC (fitted or linearised), and the chosen one (its index in `scores`, and its
 /// fit); those that could not be fitted go into `skipped`.
 fn best_drift(
@@ -444,7 +446,7 @@ fn best_drift(
     skipped: &mut Vec<Skipped>,
 ) -> (Vec<DriftChoice>, Option<(usize, Fitted)>) {
     let ln_n = (n_total as f64).ln();
-    let mut variants: Vec<(usize, f64, bool)> = Vec::new();
+    let mut variants: Vec<(usize, f64, f64, bool)> = Vec::new();
     let mut seen: Vec<Effect> = Vec::new();
     for (i, scored) in scores.iter().enumerate().filter(|(_, s)| s.passed() && s.score.effect.is_drift()) {
         let sc = &scored.score;
@@ -458,22 +460,27 @@ fn best_drift(
         seen.push(sc.effect);
         let (lin, shared) = sc.effect.params(&fitter.data.layout);
         let k = 3 * lin.len() + shared.len();
-        let chi2 = scored.solution.as_ref().map_or(f64::INFINITY, |s| s.chi2);
-        variants.push((i, chi2 + k as f64 * ln_n, shared.is_empty() && sc.drift_tau_s.is_none()));
+        let grid_chi2 = scored.solution.as_ref().map_or(f64::INFINITY, |s| s.chi2);
+        // A variant held at a grid value of its shape parameter (the warm-up's time constant) is
+        // compared at its profile's least value over that parameter.
+        let (chi2, comparable) = match sc.drift_tau_s {
+            None => (grid_chi2, shared.is_empty()),
+            Some(_) => profile_minimum(scores, sc.effect).map_or((grid_chi2, false), |c| (c, true)),
+        };
+        variants.push((i, chi2, chi2 + k as f64 * ln_n, comparable));
     }
-    variants.sort_by(|a, b| a.1.total_cmp(&b.1));
+    variants.sort_by(|a, b| a.2.total_cmp(&b.2));
     let mut table = Vec::with_capacity(variants.len());
     let mut best: Option<(usize, Fitted, f64)> = None;
-    for (i, linearised_bic, linear) in variants {
+    for (i, chi2, linearised_bic, comparable) in variants {
         let effect = scores[i].score.effect;
-        if linear && best.as_ref().is_some_and(|b| linearised_bic >= b.2 + DRIFT_BIC_MARGIN) {
-            let chi2 = scores[i].solution.as_ref().map_or(f64::INFINITY, |s| s.chi2);
+        if comparable && best.as_ref().is_some_and(|b| linearised_bic >= b.2 + DRIFT_BIC_MARGIN) {
             table.push(DriftChoice { effect, chi2, bic: linearised_bic, fitted: false });
             continue;
         }
         match fitter.fit(&scores[i]) {
             Ok(f) => {
-                let bic = linearised_bic - scores[i].solution.as_ref().map_or(0.0, |s| s.chi2) + f.solution.chi2;
+                let bic = linearised_bic - chi2 + f.solution.chi2;
                 table.push(DriftChoice { effect, chi2: f.solution.chi2, bic, fitted: true });
                 if best.as_ref().is_none_or(|b| bic < b.2) {
                     best = Some((i, f, bic));
@@ -487,6 +494,40 @@ fn best_drift(
         }
     }
     (table, best.map(|b| (b.0, b.1)))
+}
+
+/// The least χ² of `effect` over its shape parameter (the warm-up's time constant τ), from its
+/// variants scored at the grid values (`Score::drift_tau_s`, a factor 2 apart), taking the
+/// profile to be convex in ln τ (engineering judgement: one exponential's fit worsens steadily
+/// as its time constant leaves the best): inside the grid, the parabola through the best grid
+/// value and its two neighbours, at its vertex; at the grid's edge, the edge's value less its
+/// last step's fall for every further doubling up to τ's bound ([`DRIFT_TAU_RANGE_S`]), which a
+/// convex profile cannot exceed. `None` with fewer than two grid values.
+fn profile_minimum(scores: &[Scored], effect: Effect) -> Option<f64> {
+    let mut grid: Vec<(f64, f64)> = scores
+        .iter()
+        .filter(|s| s.score.effect == effect)
+        .filter_map(|s| Some((s.score.drift_tau_s?, s.solution.as_ref()?.chi2)))
+        .collect();
+    grid.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let best = (0..grid.len()).min_by(|&a, &b| grid[a].1.total_cmp(&grid[b].1))?;
+    let (tau, y1) = grid[best];
+    let beyond = |neighbour: usize, bound_s: f64| {
+        let doublings = (bound_s / tau).ln().abs() / std::f64::consts::LN_2;
+        y1 - doublings * (grid[neighbour].1 - y1)
+    };
+    match best {
+        _ if grid.len() < 2 => None,
+        0 => Some(beyond(1, DRIFT_TAU_RANGE_S.0)),
+        b if b + 1 == grid.len() => Some(beyond(b - 1, DRIFT_TAU_RANGE_S.1)),
+        b => {
+            let (y0, y2) = (grid[b - 1].1, grid[b + 1].1);
+            // Equal steps in ln τ: the vertex lies below the middle value by
+            // (y2 − y0)² / (8·curvature); a curvature of 0 means all three are equal.
+            let curvature = y0 - 2.0 * y1 + y2;
+            Some(if curvature > 0.0 { y1 - (y2 - y0).powi(2) / (8.0 * curvature) } else { y1 })
+        }
+    }
 }
 
 /// Whether adding the free drift takes `e` out of the model: every drift curve, and the table
@@ -696,4 +737,52 @@ pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The warm-up's variants scored on its grid with χ² = `profile(τ)`.
+    fn scored_on_grid(profile: impl Fn(f64) -> f64) -> Vec<Scored> {
+        [15.0, 30.0, 60.0, 120.0, 240.0, 480.0, 960.0]
+            .into_iter()
+            .enumerate()
+            .map(|(i, tau_s)| Scored {
+                score: Score {
+                    effect: Effect::DriftWarmUp,
+                    drift_tau_s: Some(tau_s),
+                    delta_chi2: 0.0,
+                    dof: 4,
+                    threshold: 0.0,
+                    significance_sigma: 0.0,
+                    known_physics: false,
+                },
+                candidate: i,
+                solution: Some(crate::calib::engine::JointSolution {
+                    delta: DVector::zeros(1),
+                    cov: DMatrix::identity(1, 1),
+                    chi2: profile(tau_s),
+                    rss: [0.0; 3],
+                    n: [1; 3],
+                }),
+            })
+            .collect()
+    }
+
+    /// Inside the grid a profile parabolic in ln τ is found at its least value exactly; at the
+    /// grid's edge a convex profile's least value beyond it is never above the estimate.
+    #[test]
+    fn a_time_constants_profile_is_read_at_its_least_value() {
+        let parabola = |tau_min_s: f64| move |tau_s: f64| 5.0 + 1000.0 * (tau_s / tau_min_s).ln().powi(2);
+        let inside = profile_minimum(&scored_on_grid(parabola(100.0)), Effect::DriftWarmUp).expect("a minimum");
+        assert!((inside - 5.0).abs() < 1e-9, "{inside}");
+        // Least at 3000 s, beyond the grid's last value (960 s: 1303 above the least there).
+        let beyond = profile_minimum(&scored_on_grid(parabola(3000.0)), Effect::DriftWarmUp).expect("a minimum");
+        assert!(beyond <= 5.0, "{beyond}");
+        // And at the short end, least at 4 s.
+        let short = profile_minimum(&scored_on_grid(parabola(4.0)), Effect::DriftWarmUp).expect("a minimum");
+        assert!(short <= 5.0, "{short}");
+        assert_eq!(profile_minimum(&scored_on_grid(parabola(100.0)), Effect::DriftPolynomial), None);
+    }
 }

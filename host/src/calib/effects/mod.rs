@@ -32,6 +32,7 @@ mod table_harmonic;
 mod table_tilt;
 
 pub use delay::MAX_DELAY_S;
+pub use drift_warm_up::DRIFT_TAU_RANGE_S;
 pub use table_harmonic::{GEAR_POLE_PASS_ORDER, HARMONIC_ORDERS};
 pub use terms::DRIFT_KNOT_SPACINGS_S;
 
