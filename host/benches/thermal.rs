@@ -82,7 +82,9 @@ struct SessionRun {
 
 impl SessionRun {
     fn cal(&self) -> SetpointCal {
-        SetpointCal::from_report(self.setpoint_c, &self.report, &self.temps).expect("OUT_TEMP readings")
+        SetpointCal::from_report(self.setpoint_c, &self.report, &self.temps)
+            .expect("OUT_TEMP readings")
+            .with_noise_floor(self.at_floor)
     }
 }
 
@@ -337,6 +339,7 @@ fn main() {
         max_abs(&coef),
         over(&coef, 3.0)
     );
+    print_normality("coefficients", &coef);
     println!(
         "  held-out rate: {} components, rms z {:.2}, {} beyond 1σ ({:.0} %), max error {:.4} °/s (25 °C calibration alone: {:.3} °/s)",
         held.len(),
@@ -353,5 +356,17 @@ fn main() {
         max_abs(&single),
         over(&single, 3.0)
     );
+    print_normality("25 °C session vs model", &single);
     println!("  setpoints at the noise floor: {}/{}", all.iter().map(|s| s.floor).sum::<usize>(), 5 * all.len());
+}
+
+/// Whether z-values look standard normal: counts beyond 1, 2, 3σ against chance and the
+/// Kolmogorov-Smirnov statistic (`truth_check::normality`).
+fn print_normality(what: &str, z: &[f64]) {
+    let Some(g) = truth_check::normality(z) else { return };
+    let [b1, b2, b3] = g.beyond;
+    println!(
+        "  {what}, z against N(0,1): beyond 1σ {} (chance {:.1}), 2σ {} ({:.1}), 3σ {} ({:.2}; P(≥ {} by chance) {:.2}); KS D {:.3}, p {:.2}",
+        b1.0, b1.1, b2.0, b2.1, b3.0, b3.1, b3.0, g.p_beyond_3, g.ks_d, g.ks_p
+    );
 }
