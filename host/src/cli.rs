@@ -803,16 +803,7 @@ fn calibrate(
     if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
         obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
     }
-    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::engine::loop_data).
-    let out_temp_raw: Vec<i8> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
-    let warm_up = crate::thermal::warm_up::WarmUp::of(&lr, &out_temp_raw);
-    let out_temp_mean = warm_up.as_ref().map(|w| w.reference_out_temp_lsb);
-    if let (Some(d), Some(obj)) = (export::DriftModel::of(&lr, out_temp_mean), value.as_object_mut()) {
-        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
-    }
-    if let (Some(w), Some(obj)) = (&warm_up, value.as_object_mut()) {
-        obj.insert(crate::thermal::warm_up::CALIBRATION_KEY.into(), serde_json::to_value(w)?);
-    }
+    let warm_up = temperature_sections(&lr, &runs, &mut value)?;
     let json_text = serde_json::to_string_pretty(&value)?;
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
@@ -874,6 +865,27 @@ fn calibrate(
         (calib::Verdict::AtNoiseFloor, true) => ExitCode::from(4),
         (calib::Verdict::AtNoiseFloor, false) => ExitCode::SUCCESS,
     })
+}
+
+/// The sections of `calibration.json` that rest on the die temperature: the drift model a
+/// firmware can apply (`export::DriftModel`) and the session's own warm-up coefficients
+/// (`thermal::warm_up`), which are returned for the summary and the report.
+fn temperature_sections(
+    lr: &calib::LoopReport,
+    runs: &[capture::Run],
+    value: &mut serde_json::Value,
+) -> Result<Option<crate::thermal::warm_up::WarmUp>> {
+    let out_temp_raw: Vec<i8> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
+    let warm_up = crate::thermal::warm_up::WarmUp::of(lr, &out_temp_raw);
+    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::engine::loop_data).
+    let out_temp_mean = warm_up.as_ref().map(|w| w.reference_out_temp_lsb);
+    if let (Some(d), Some(obj)) = (export::DriftModel::of(lr, out_temp_mean), value.as_object_mut()) {
+        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
+    }
+    if let (Some(w), Some(obj)) = (&warm_up, value.as_object_mut()) {
+        obj.insert(crate::thermal::warm_up::CALIBRATION_KEY.into(), serde_json::to_value(w)?);
+    }
+    Ok(warm_up)
 }
 
 /// `host calibrate --replay <thermal folder>`: each setpoint calibrated into its own subfolder of
