@@ -3,7 +3,8 @@
 //! `host calibrate --replay`, shows the loop's offset and sensitivity coefficients with the span
 //! they hold over in the summary, `calibration.json` and `report.html`, each within 3σ (the
 //! tool's own σ) of the simulator's truth; a session without a warm-up says in one line that its
-//! span was too small and what span would be needed.
+//! span was too small and what span would be needed. And a thermal session whose one setpoint
+//! did not reach the noise floor leaves it out of the model.
 
 mod common;
 use common::host;
@@ -129,4 +130,45 @@ fn a_warm_up_gives_the_sessions_own_coefficients_and_no_warm_up_says_its_span_is
     assert!(unwrapped(&summary).contains(&line), "{line}\n{summary}");
     let page = std::fs::read_to_string(dir.path().join("still").join("report.html")).unwrap();
     assert!(page.contains("not estimated, the die-temperature span was too small"));
+}
+
+/// A thermal session in which one setpoint's calibration does not reach the noise floor (its
+/// capture swapped for the same session with a harmonic no effect explains, so its loop exits
+/// 3): `calibrate --replay` leaves that setpoint out of the model, says so, narrows the range to
+/// the other setpoints' and exits 3, the worst setpoint's status.
+#[test]
+fn a_setpoint_not_at_the_noise_floor_is_left_out_of_a_thermal_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, flawed, out) = (dir.path().join("plain"), dir.path().join("flawed"), dir.path().join("cal"));
+    let common = ["--chamber-c", "-20,0,25,50,70", "--duration", "8", "--seed", "2"];
+    let o = host(&[&["simulate", "--out", plain.to_str().unwrap()][..], &common].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let o =
+        host(&[&["simulate", "--out", flawed.to_str().unwrap(), "--effect", "mystery_harmonic"][..], &common].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    // The same sensor, chamber and noise at −20 °C, with the harmonic.
+    for f in ["session.cap", "session.truth.json"] {
+        std::fs::copy(flawed.join("sp1_m20c").join(f), plain.join("sp1_m20c").join(f)).unwrap();
+    }
+    let o = host(&[
+        "calibrate",
+        "--replay",
+        plain.to_str().unwrap(),
+        "--out-dir",
+        out.to_str().unwrap(),
+        "--no-db",
+        "--sensor",
+        "G-27",
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert_eq!(o.status.code(), Some(3), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(unwrapped(&text).contains("Left out of the fit: setpoint -20 °C"), "{text}");
+    assert!(text.contains("Thermal model: 4 setpoints"), "{text}");
+    let cal: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
+    assert_eq!(cal["thermal"]["excluded"][0]["setpoint_c"], -20.0);
+    let lo = cal["thermal"]["range_c"][0].as_f64().unwrap();
+    assert!(lo > -5.0, "the range starts at the 0 °C setpoint's die: {lo}");
+    let page = std::fs::read_to_string(out.join("thermal.html")).unwrap();
+    assert!(page.contains("Left out of the fit: setpoint -20 °C"));
 }
