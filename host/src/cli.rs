@@ -803,12 +803,7 @@ fn calibrate(
     if let (Some(g), Some(obj)) = (g_sensitivity(&lr), value.as_object_mut()) {
         obj.insert(export::G_SENSITIVITY_KEY.into(), serde_json::to_value(g)?);
     }
-    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::engine::loop_data).
-    let temps: Vec<f64> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| f64::from(t.raw))).collect();
-    let out_temp_mean = (!temps.is_empty()).then(|| temps.iter().sum::<f64>() / temps.len() as f64);
-    if let (Some(d), Some(obj)) = (export::DriftModel::of(&lr, out_temp_mean), value.as_object_mut()) {
-        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
-    }
+    let warm_up = temperature_sections(&lr, &runs, &mut value)?;
     let json_text = serde_json::to_string_pretty(&value)?;
     files::write_atomic(&json, &json_text)?;
     let loop_json = out_dir.join("loop.json");
@@ -829,7 +824,8 @@ fn calibrate(
     let history = records::history_before_recording(db, &rec);
     let extra = checks.as_deref().map(crate::spec::html_section).unwrap_or_default()
         + &crate::certificate::html_section(lr.final_report(), &history)
-        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default();
+        + &noise.as_ref().map(|n| n.html_section()).unwrap_or_default()
+        + &warm_up.as_ref().map(|w| w.html_section()).unwrap_or_default();
     let html = write_report(out_dir, &lr, &prov, &extra)
         .with_context(|| format!("cannot write the report in {}", out_dir.display()))?;
     note(&format!("wrote {}, {} and {}", json.display(), loop_json.display(), html.display()));
@@ -857,6 +853,10 @@ fn calibrate(
         summary.push('\n');
         summary.push_str(&crate::spec::text(c));
     }
+    if let Some(w) = &warm_up {
+        summary.push('\n');
+        summary.push_str(&w.text());
+    }
     files::stdout(&crate::text::wrap(&summary, crate::text::TEXT_WIDTH))?;
     recorded?;
     Ok(match (lr.verdict(), checks.as_deref().is_some_and(|c| !crate::spec::passed(c))) {
@@ -865,6 +865,27 @@ fn calibrate(
         (calib::Verdict::AtNoiseFloor, true) => ExitCode::from(4),
         (calib::Verdict::AtNoiseFloor, false) => ExitCode::SUCCESS,
     })
+}
+
+/// The sections of `calibration.json` that rest on the die temperature: the drift model a
+/// firmware can apply (`export::DriftModel`) and the session's own warm-up coefficients
+/// (`thermal::warm_up`), which are returned for the summary and the report.
+fn temperature_sections(
+    lr: &calib::LoopReport,
+    runs: &[capture::Run],
+    value: &mut serde_json::Value,
+) -> Result<Option<crate::thermal::warm_up::WarmUp>> {
+    let out_temp_raw: Vec<i8> = runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
+    let warm_up = crate::thermal::warm_up::WarmUp::of(lr, &out_temp_raw);
+    // The runs' mean OUT_TEMP: where the temperature drift's column is zero (calib::engine::loop_data).
+    let out_temp_mean = warm_up.as_ref().map(|w| w.reference_out_temp_lsb);
+    if let (Some(d), Some(obj)) = (export::DriftModel::of(lr, out_temp_mean), value.as_object_mut()) {
+        obj.insert(export::DRIFT_MODEL_KEY.into(), serde_json::to_value(d)?);
+    }
+    if let (Some(w), Some(obj)) = (&warm_up, value.as_object_mut()) {
+        obj.insert(crate::thermal::warm_up::CALIBRATION_KEY.into(), serde_json::to_value(w)?);
+    }
+    Ok(warm_up)
 }
 
 /// `host calibrate --replay <thermal folder>`: each setpoint calibrated into its own subfolder of
@@ -889,10 +910,13 @@ fn calibrate_thermal(
         let rec = RecordTo { db: record_to.db, again: record_to.again, spec: record_to.spec };
         let code = calibrate(&files, &sub_out, None, identity.clone(), None, rec, opts)
             .with_context(|| format!("setpoint {setpoint_c} °C"))?;
-        if code != ExitCode::SUCCESS {
+        // The worst status is the session's: 3 (not to be trusted) before 4 (a limit fails).
+        let rank = |c: ExitCode| [ExitCode::SUCCESS, ExitCode::from(4), ExitCode::from(3)].iter().position(|&r| r == c);
+        if rank(code) > rank(status) {
             status = code;
         }
-        setpoints.push(thermal::setpoint_from_files(setpoint_c, &sub_out, &files)?);
+        let (cal, value) = thermal::setpoint_from_files(setpoint_c, &sub_out, &files)?;
+        setpoints.push((cal.with_noise_floor(code != ExitCode::from(3)), value));
     }
     // Every setpoint's captures: the thermal model's record names them all.
     let captures: Vec<String> = setpoints
@@ -900,7 +924,7 @@ fn calibrate_thermal(
         .filter_map(|(_, v)| Provenance::from_calibration_json(&v.to_string()))
         .flat_map(|p| p.captures.into_iter().map(|c| c.sha256))
         .collect();
-    let model = thermal::write_model(out_dir, setpoints)?;
+    let (model, beside) = thermal::write_model(out_dir, setpoints)?;
     note(&format!(
         "wrote {} with the thermal model and {}",
         out_dir.join("calibration.json").display(),
@@ -914,7 +938,7 @@ fn calibrate_thermal(
         Some(db) => record_thermal(db, out_dir, &captures, status == ExitCode::SUCCESS)
             .map(|id| note(&format!("thermal model recorded as {id} in {db}"))),
     };
-    files::stdout(&present::text(&model))?;
+    files::stdout(&(present::text(&model) + &crate::thermal::warm_up::beside_model_text(&beside)))?;
     recorded?;
     Ok(status)
 }

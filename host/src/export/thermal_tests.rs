@@ -49,6 +49,7 @@ fn thermal_model(k25: f64, offset25_counts: [f64; 3]) -> ThermalModel {
                 full_scale: if k25 > 30.0 { FullScale::Dps500 } else { FullScale::Dps2000 },
                 values,
                 common_sigma: [[0.0; 4]; 3],
+                at_noise_floor: true,
             }
         })
         .collect();

@@ -6,6 +6,8 @@
 //! - [`model`]: the thermal model from the setpoints' calibrations, queried only in its range.
 //! - [`manifest`]: a thermal session's folders, each capture with its setpoint.
 //! - [`present`]: the per-setpoint values beside the model, as text.
+//! - [`warm_up`]: one session's own warm-up coefficients (the loop's temperature effects), shown
+//!   with the span they hold over, and beside a thermal model's slopes.
 //!
 //! Direction is fitted as the two components of each unit axis `s_i` off its own package axis
 //! (the third follows from |s_i| = 1): small, nearly linear in the axis's turn, and with σ from
@@ -21,6 +23,7 @@ pub mod programme;
 pub mod session;
 pub mod settle;
 pub mod truth_check;
+pub mod warm_up;
 
 #[cfg(test)]
 mod tests;
@@ -114,6 +117,16 @@ pub struct SetpointCal {
     /// the same rig at every setpoint ([`common_sigma`]).
     #[serde(default)]
     pub common_sigma: [[f64; 4]; 3],
+    /// Whether the setpoint's own calibration reached the noise floor (its loop's verdict, exit
+    /// 0 or 4); one that did not (exit 3) is left out of the fit ([`ThermalModel::fit`]).
+    #[serde(default = "at_noise_floor_by_default")]
+    pub at_noise_floor: bool,
+}
+
+/// A setpoint read without its verdict (a file written before the field existed) counts as at
+/// the noise floor, as the fit took every setpoint then.
+fn at_noise_floor_by_default() -> bool {
+    true
 }
 
 impl SetpointCal {
@@ -133,13 +146,26 @@ impl SetpointCal {
             })
         });
         let common_sigma = common_sigma(report, &values);
-        Some(Self { setpoint_c, out_temp_mean_lsb: mean, full_scale: report.gyro.full_scale, values, common_sigma })
+        Some(Self {
+            setpoint_c,
+            out_temp_mean_lsb: mean,
+            full_scale: report.gyro.full_scale,
+            values,
+            common_sigma,
+            at_noise_floor: true,
+        })
     }
 
     /// The σ of one quantity of one axis common to every setpoint.
     pub fn common(&self, axis: usize, quantity: Quantity) -> f64 {
         let q = Quantity::PER_AXIS.iter().position(|&p| p == quantity).expect("every quantity is per axis");
         self.common_sigma[axis][q]
+    }
+
+    /// The same setpoint with its loop's verdict: `false` when the calibration left structure
+    /// above the noise floor.
+    pub fn with_noise_floor(self, at_noise_floor: bool) -> Self {
+        Self { at_noise_floor, ..self }
     }
 
     /// One quantity of one axis.
@@ -165,9 +191,12 @@ fn common_sigma(report: &CalReport, values: &[[Estimate; 4]; 3]) -> [[f64; 4]; 3
     out
 }
 
+/// Fewest setpoints a model is fitted from: one held out and two for a line.
+pub const MIN_SETPOINTS: usize = 3;
+
 /// Checks the setpoints (sorted): enough, distinct, one full scale; returns the full scale.
 fn check_setpoints(sp: &[&SetpointCal]) -> Result<FullScale, ThermalError> {
-    if sp.len() < 3 {
+    if sp.len() < MIN_SETPOINTS {
         return Err(ThermalError::TooFewSetpoints { found: sp.len() });
     }
     for w in sp.windows(2) {

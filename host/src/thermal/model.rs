@@ -94,6 +94,17 @@ impl Curve {
         poly::slope(&coef, temp_c - reference_c)
     }
 
+    /// The curve's slope at `temp_c`, per °C, with its σ from the coefficients' covariance.
+    pub fn slope_estimate_at(&self, reference_c: f64, temp_c: f64) -> Estimate {
+        let x = temp_c - reference_c;
+        let g = nalgebra::DVector::from_fn(
+            self.order + 1,
+            |d, _| if d == 0 { 0.0 } else { d as f64 * x.powi(d as i32 - 1) },
+        );
+        let cov = DMatrix::from_fn(self.order + 1, self.order + 1, |r, c| self.cov[r][c]);
+        Estimate::from_variance(self.slope_at(reference_c, temp_c), (g.transpose() * cov * &g)[(0, 0)])
+    }
+
     /// Name for tables, e.g. "x offset [counts]".
     pub fn label(&self) -> String {
         format!("{} {}", self.axis, self.quantity.label())
@@ -132,6 +143,33 @@ pub struct ThermalModel {
     pub setpoints: Vec<SetpointSummary>,
     /// Per axis: offset, sensitivity, and the direction's two components off its own axis.
     pub curves: Vec<Curve>,
+    /// Setpoints left out of the fit because their own calibration did not reach the noise
+    /// floor ([`SetpointCal::at_noise_floor`], rule in [`split_by_noise_floor`]); their die
+    /// temperature on the model's scale. The range is the fitted setpoints'.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub excluded: Vec<SetpointSummary>,
+    /// Setpoints in the fit although their calibration did not reach the noise floor: left
+    /// out, fewer than [`super::MIN_SETPOINTS`] would remain. Such a model is not to be trusted.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub not_at_floor_in_fit: Vec<f64>,
+}
+
+/// The setpoints the model is fitted to, those left out, and those fitted though not at the
+/// noise floor. Rule: a setpoint whose own calibration left structure above the noise floor
+/// (its loop's verdict, exit 3: "must not be trusted") is left out of the fit, while at least
+/// [`super::MIN_SETPOINTS`] at the floor remain; otherwise every setpoint is fitted and the
+/// model says it rests on them. Not a σ inflated by the residual's RMS over the floor (a Birge
+/// ratio, Birge 1932, Phys. Rev. 40, 207): that ratio scales σ for a scatter the σ did not
+/// hold, assuming the values right on average, whereas structure no modelled effect explains
+/// biases the values by an amount the residual's size does not give (seed 6's −20 °C setpoint
+/// of the thermal bench: 49σ off in an offset, docs/thermal.md).
+pub fn split_by_noise_floor<'a>(sp: &[&'a SetpointCal]) -> (Vec<&'a SetpointCal>, Vec<&'a SetpointCal>, Vec<f64>) {
+    let (at, off): (Vec<&SetpointCal>, Vec<&SetpointCal>) = sp.iter().partition(|s| s.at_noise_floor);
+    if at.len() >= super::MIN_SETPOINTS {
+        (at, off, Vec::new())
+    } else {
+        (sp.to_vec(), Vec::new(), off.iter().map(|s| s.setpoint_c).collect())
+    }
 }
 
 impl ThermalModel {
@@ -142,9 +180,10 @@ impl ThermalModel {
 
     /// Fits with the orders of `orders` (curve by curve), or chosen from the data when `None`.
     pub fn fit_with(setpoints: &[SetpointCal], orders: Option<&[usize]>) -> Result<Self, ThermalError> {
-        let mut sp: Vec<&SetpointCal> = setpoints.iter().collect();
-        sp.sort_by(|a, b| a.setpoint_c.total_cmp(&b.setpoint_c));
-        let full_scale = super::check_setpoints(&sp)?;
+        let mut all: Vec<&SetpointCal> = setpoints.iter().collect();
+        all.sort_by(|a, b| a.setpoint_c.total_cmp(&b.setpoint_c));
+        let full_scale = super::check_setpoints(&all)?;
+        let (sp, left_out, not_at_floor_in_fit) = split_by_noise_floor(&all);
         let n = sp.len() as f64;
         let out_temp_at_0c = sp.iter().map(|s| s.setpoint_c + s.out_temp_mean_lsb).sum::<f64>() / n;
         let summaries: Vec<SetpointSummary> = sp
@@ -185,6 +224,15 @@ impl ThermalModel {
             full_scale,
             setpoints: summaries,
             curves,
+            excluded: left_out
+                .iter()
+                .map(|s| SetpointSummary {
+                    setpoint_c: s.setpoint_c,
+                    out_temp_mean_lsb: s.out_temp_mean_lsb,
+                    die_c: out_temp_at_0c - s.out_temp_mean_lsb,
+                })
+                .collect(),
+            not_at_floor_in_fit,
         })
     }
 

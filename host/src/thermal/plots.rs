@@ -2,6 +2,7 @@
 //! ±1σ band with every setpoint's own calibration as a point, and the numbers as text.
 
 use super::model::{Curve, ThermalModel};
+use super::warm_up::BesideModel;
 use crate::report::html::Document;
 use crate::report::plots::{line_plot, PlotSpec, Series};
 
@@ -30,7 +31,7 @@ fn figure(model: &ThermalModel, c: &Curve) -> Result<String, crate::report::plot
 }
 
 /// The page.
-pub fn html(model: &ThermalModel) -> String {
+pub fn html(model: &ThermalModel, beside: &[BesideModel]) -> String {
     let mut doc = Document::new("Gyro calibration over temperature");
     doc.paragraph(format!(
         "{} setpoints; the model holds for die temperatures {:.1}…{:.1} °C (die °C = {:.1} − OUT_TEMP) and is not extrapolated beyond.",
@@ -39,10 +40,34 @@ pub fn html(model: &ThermalModel) -> String {
         model.range_c[1],
         model.out_temp_at_0c
     ));
+    for line in super::present::exclusions(model) {
+        doc.paragraph(line);
+    }
     for c in &model.curves {
         doc.figure_result(
             figure(model, c),
             format!("{}: the model (line, ±1σ band) and each setpoint's own calibration (points)", c.label()),
+        );
+    }
+    if !beside.is_empty() {
+        let rows = beside
+            .iter()
+            .map(|r| {
+                vec![
+                    format!("{}", r.setpoint_c),
+                    format!("{:.1}", r.die_c),
+                    r.axis.to_string(),
+                    r.quantity.clone(),
+                    format!("{:+.6} ± {:.6}", r.warm_up.value, r.warm_up.sigma),
+                    format!("{:+.6} ± {:.6}", r.model_slope.value, r.model_slope.sigma),
+                    format!("{:+.2}", r.z),
+                ]
+            })
+            .collect();
+        doc.table(
+            "A setpoint's own warm-up coefficients (its session's die-temperature span only) beside the model's slope at its die temperature",
+            &["setpoint °C", "die °C", "axis", "quantity", "warm-up", "model slope", "z"],
+            rows,
         );
     }
     doc.preformatted(super::present::text(model));

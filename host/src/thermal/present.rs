@@ -27,6 +27,9 @@ pub fn text(model: &ThermalModel) -> String {
         model.out_temp_at_0c,
         model.reference_c,
     );
+    for line in exclusions(model) {
+        let _ = writeln!(out, "{line}");
+    }
     let _ = writeln!(out, "Order by held-out setpoint (smallest weighted PRESS); z = (setpoint − model)/σ");
     for c in &model.curves {
         let d = decimals(c.points.iter().map(|p| p.measured.sigma).fold(f64::INFINITY, f64::min));
@@ -68,6 +71,31 @@ pub fn text(model: &ThermalModel) -> String {
                 p.held_out.z
             );
         }
+    }
+    out
+}
+
+/// What the fit left out or took in spite of the setpoints' verdicts
+/// ([`super::model::split_by_noise_floor`]), a line each; none when every setpoint reached the
+/// noise floor.
+pub fn exclusions(model: &ThermalModel) -> Vec<String> {
+    let mut out: Vec<String> = model
+        .excluded
+        .iter()
+        .map(|s| {
+            format!(
+                "Left out of the fit: setpoint {} °C (die {:.1} °C): its calibration did not reach the noise floor (exit 3; its folder says what it left), so its values are not trusted; the model's range is the other setpoints'.",
+                s.setpoint_c, s.die_c
+            )
+        })
+        .collect();
+    if !model.not_at_floor_in_fit.is_empty() {
+        let list: Vec<String> = model.not_at_floor_in_fit.iter().map(|c| format!("{c} °C")).collect();
+        out.push(format!(
+            "DO NOT TRUST THIS MODEL: setpoint(s) {} did not reach the noise floor and are in the fit, as leaving them out would leave fewer than {} setpoints.",
+            list.join(", "),
+            super::MIN_SETPOINTS
+        ));
     }
     out
 }

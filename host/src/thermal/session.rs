@@ -3,6 +3,7 @@
 
 use super::manifest::{SetpointEntry, ThermalManifest, MANIFEST_FILE};
 use super::settle::SettleCriterion;
+use super::warm_up::BesideModel;
 use super::{SetpointCal, ThermalModel, CALIBRATION_KEY};
 use crate::calib::CalReport;
 use crate::sim::{self, SimConfig};
@@ -78,10 +79,16 @@ pub fn setpoint_from_files(
 /// Fits the model over the setpoints and writes `out_dir/thermal.html` (each quantity against
 /// temperature) and `out_dir/calibration.json`: the calibration of
 /// the setpoint nearest the model's reference temperature (what `host apply` uses without
-/// `--temp-c`, and the exports), with the model in its `thermal` section. Returns the model.
-pub fn write_model(out_dir: &Path, setpoints: Vec<(SetpointCal, serde_json::Value)>) -> Result<ThermalModel> {
+/// `--temp-c`, and the exports), with the model in its `thermal` section and any setpoint's own
+/// warm-up coefficients beside the model's slopes. Returns the model and that comparison.
+pub fn write_model(
+    out_dir: &Path,
+    setpoints: Vec<(SetpointCal, serde_json::Value)>,
+) -> Result<(ThermalModel, Vec<BesideModel>)> {
     let cals: Vec<SetpointCal> = setpoints.iter().map(|(s, _)| s.clone()).collect();
     let model = ThermalModel::fit(&cals).context("thermal model")?;
+    let own: Vec<(f64, serde_json::Value)> = setpoints.iter().map(|(s, v)| (s.setpoint_c, v.clone())).collect();
+    let beside = super::warm_up::beside_model(&model, &own);
     let nearest = setpoints
         .into_iter()
         .min_by(|a, b| {
@@ -92,9 +99,12 @@ pub fn write_model(out_dir: &Path, setpoints: Vec<(SetpointCal, serde_json::Valu
     let obj = value.as_object_mut().context("a calibration report is a JSON object")?;
     obj.insert(CALIBRATION_KEY.into(), serde_json::to_value(&model)?);
     obj.insert("thermal_base_setpoint_c".into(), nearest.0.setpoint_c.into());
+    if !beside.is_empty() {
+        obj.insert(super::warm_up::BESIDE_MODEL_KEY.into(), serde_json::to_value(&beside)?);
+    }
     crate::files::write_atomic(&out_dir.join("calibration.json"), serde_json::to_string_pretty(&value)?)?;
-    crate::files::write_atomic(&out_dir.join(THERMAL_REPORT), super::plots::html(&model))?;
-    Ok(model)
+    crate::files::write_atomic(&out_dir.join(THERMAL_REPORT), super::plots::html(&model, &beside))?;
+    Ok((model, beside))
 }
 
 /// The thermal model in a `calibration.json`, if it holds one.

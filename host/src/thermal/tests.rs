@@ -136,6 +136,7 @@ fn synthetic(shift: [f64; 5], common: f64) -> Vec<SetpointCal> {
                 full_scale: protocol::FullScale::Dps500,
                 values,
                 common_sigma: [[0.0, common, 0.0, 0.0]; 3],
+                at_noise_floor: true,
             }
         })
         .collect()
@@ -194,4 +195,134 @@ fn a_common_sigma_is_the_constant_terms_and_cancels_against_another_session() {
     // Counted twice, as independent σ, the common part would have hidden a third of the shift.
     let naive = (at_est.value - single.values[0][1].value) / (at * at + 9e-4 * 9e-4 + slope * slope).sqrt();
     assert!(zk < -1.0 && zk.abs() > 1.1 * naive.abs(), "z {zk}, counted twice {naive}");
+}
+
+/// A setpoint whose calibration did not reach the noise floor (exit 3) is left out of the fit
+/// (`model::split_by_noise_floor`): the −20 °C setpoint 40 units off its curves (as seed 6's
+/// was, 49σ in an offset) moves nothing once flagged, the range is the other setpoints', and the
+/// summary says so; taken in as if at the floor, it pulls the offset's slope off the truth. With
+/// three of five flagged, leaving them out would leave two: every setpoint is fitted and the
+/// model says not to trust it.
+#[test]
+fn a_setpoint_not_at_the_noise_floor_is_left_out_of_the_fit() {
+    let shifted = synthetic([40.0, 0.0, 0.0, 0.0, 0.0], 0.0);
+    let flag = |n: usize| -> Vec<SetpointCal> {
+        shifted.iter().cloned().enumerate().map(|(i, s)| s.with_noise_floor(i >= n)).collect()
+    };
+    let m = ThermalModel::fit(&flag(1)).unwrap();
+    assert_eq!(m.excluded.iter().map(|s| s.setpoint_c).collect::<Vec<_>>(), vec![-20.0]);
+    assert_eq!(m.setpoints.len(), 4);
+    assert!(m.not_at_floor_in_fit.is_empty());
+    // The synthetic die is the setpoint itself: the range starts at 0 °C.
+    assert_eq!(m.range_c, [-0.5, 70.5]);
+    assert!(m.check_range(-10.0).is_err());
+    for axis in 0..3 {
+        let slope = m.curve(axis, Quantity::OffsetCounts).coef[1];
+        assert!((slope.value - 1.7).abs() < 1e-6, "axis {axis}: {slope:?}\n{}", present::text(&m));
+    }
+    let text = present::text(&m);
+    assert!(text.contains("Left out of the fit: setpoint -20 °C (die -20.0 °C)"), "{text}");
+    assert!(!text.contains("DO NOT TRUST"), "{text}");
+    // Taken in, the same setpoint drags the slope by more than its σ says.
+    let taken = ThermalModel::fit(&shifted).unwrap();
+    assert!(taken.excluded.is_empty());
+    let slope = taken.curve(0, Quantity::OffsetCounts).coef[1];
+    assert!((slope.value - 1.7).abs() > 0.02, "{slope:?}\n{}", present::text(&taken));
+    // Too many flagged to leave out.
+    let all_in = ThermalModel::fit(&flag(3)).unwrap();
+    assert!(all_in.excluded.is_empty());
+    assert_eq!(all_in.setpoints.len(), 5);
+    assert_eq!(all_in.not_at_floor_in_fit, vec![-20.0, 0.0, 25.0]);
+    assert!(present::text(&all_in).contains("DO NOT TRUST THIS MODEL: setpoint(s) -20 °C, 0 °C, 25 °C"));
+}
+
+/// The bench's goodness check of z-values against N(0,1): exact normal quantiles pass it
+/// (counts beyond 1, 2, 3σ at chance, D = 1/(2n), p ≈ 1); values all at 0 fail it (D = 0.5);
+/// one value beyond 3σ in 318 is what chance gives 58 % of the time, 1 − (1 − p₃)³¹⁸.
+#[test]
+fn z_values_are_checked_against_the_standard_normal() {
+    use statrs::distribution::{ContinuousCDF, Normal};
+    let phi = Normal::standard();
+    let n = 1000;
+    let q: Vec<f64> = (0..n).map(|i| phi.inverse_cdf((i as f64 + 0.5) / n as f64)).collect();
+    let g = truth_check::normality(&q).unwrap();
+    assert_eq!(g.n, n);
+    for (b, (seen, expected)) in g.beyond.iter().enumerate() {
+        assert!((*seen as f64 - expected).abs() <= 1.0, "beyond {}σ: {seen} vs {expected}", b + 1);
+    }
+    assert!((g.ks_d - 0.5 / n as f64).abs() < 1e-9, "{}", g.ks_d);
+    assert!(g.ks_p > 0.999, "{}", g.ks_p);
+    let zeros = truth_check::normality(&[0.0; 100]).unwrap();
+    assert!((zeros.ks_d - 0.5).abs() < 1e-12 && zeros.ks_p < 1e-10, "{zeros:?}");
+    assert_eq!(zeros.beyond.map(|b| b.0), [0, 0, 0]);
+    let mut one: Vec<f64> = (0..317).map(|i| phi.inverse_cdf((i as f64 + 0.5) / 318.0).clamp(-2.9, 2.9)).collect();
+    one.push(3.37);
+    let g = truth_check::normality(&one).unwrap();
+    let p3 = 2.0 * phi.cdf(-3.0);
+    assert_eq!(g.beyond[2].0, 1);
+    assert!((g.p_beyond_3 - (1.0 - (1.0 - p3).powi(318))).abs() < 1e-9, "{}", g.p_beyond_3);
+    assert!((g.p_beyond_3 - 0.577).abs() < 0.002, "{}", g.p_beyond_3);
+    assert!(truth_check::normality(&[]).is_none());
+}
+
+/// One session's warm-up coefficients are read from the loop's final model by the names its
+/// effects report; without a warm-up the one line gives the span needed (3·√12·σ of the level
+/// over the datasheet's size, at least the loop's own threshold); beside a thermal model they
+/// are compared with its slopes at the setpoint's die temperature, in the warm-up's units.
+#[test]
+fn warm_up_coefficients_are_read_from_the_loop_and_set_beside_the_model() {
+    use crate::calib::analysis::closure::EffectParam;
+    use crate::calib::Effect;
+    use warm_up::WarmUp;
+    let out = sim::simulate(&SimConfig::standard(3, 10.0)).unwrap();
+    let cap = decode(&out.bytes);
+    let mut lr = crate::calib::close_loop(&cap.runs, &Default::default(), None).unwrap();
+    let temps: Vec<i8> = cap.runs.iter().flat_map(|r| r.temperatures.iter().map(|t| t.raw)).collect();
+    let still = WarmUp::of(&lr, &temps).unwrap();
+    assert!(!still.estimated() && still.die_span_c == 0.0, "{still:?}");
+    let rep = lr.final_report();
+    let level_dps = (0..3).map(|a| rep.axes[a].offset_counts.sigma / rep.axes[a].k_counts_per_dps.value);
+    let need = (3.0 * 12f64.sqrt() * level_dps.fold(0.0, f64::max) / 0.03).max(0.5);
+    assert!((still.span_needed_c.offset_c - need).abs() < 1e-12, "{still:?}");
+    assert!(still.span_needed_c.sensitivity_c >= 1.0);
+    let t = temps[0];
+    assert!(
+        still.text().starts_with(&format!(
+            "Warm-up temperature coefficients: not estimated, the die-temperature span was too small: 0 °C (OUT_TEMP {t}…{t} LSB) where about {need:.1} °C"
+        )),
+        "{}",
+        still.text()
+    );
+    // The loop's offsets linear in temperature, named as it names them.
+    let last = lr.steps.last_mut().unwrap();
+    last.effects.push(Effect::DriftTemperature);
+    for (a, v) in ["x", "y", "z"].iter().zip([0.0298, -0.02, 0.025]) {
+        let estimate = Estimate::new(v, 0.001);
+        last.effect_params.push(EffectParam {
+            name: format!("offset vs temperature, {a}"),
+            estimate,
+            unit: "°/s per °C".into(),
+        });
+    }
+    let w = WarmUp::of(&lr, &[5, 6, 7, 12]).unwrap();
+    assert_eq!(w.offset_dps_per_c.unwrap()[1], Estimate::new(-0.02, 0.001));
+    assert!(w.sensitivity_ppm_per_c.is_none());
+    assert_eq!((w.die_span_c, w.out_temp_range_lsb, w.reference_out_temp_lsb), (7.0, [5, 12], 7.5));
+    let text = w.text();
+    assert!(
+        text.contains("offset [°/s/°C]: x +0.02980 ± 0.00100, y -0.02000 ± 0.00100, z +0.02500 ± 0.00100"),
+        "{text}"
+    );
+    assert!(text.starts_with("Warm-up temperature coefficients (this session's own, from its warm-up; valid only over its die temperatures, OUT_TEMP 5…12 LSB (a span of 7 °C), not extrapolated):\n"), "{text}");
+    assert!(text.contains("  sensitivity: not in the loop's model (the residual did not call for it)"), "{text}");
+    // Beside a model of 1.7 counts/°C on k = 57 (1 + 10 ppm/°C): 0.029825 °/s/°C at 25 °C.
+    let model = ThermalModel::fit(&synthetic([0.0; 5], 0.0)).unwrap();
+    let cal = serde_json::json!({ warm_up::CALIBRATION_KEY: w });
+    let rows = warm_up::beside_model(&model, &[(25.0, cal.clone()), (99.0, cal)]);
+    assert_eq!(rows.len(), 3, "one per axis, none for a temperature that is not a setpoint");
+    let slope = rows[0].model_slope;
+    assert!((slope.value - 1.7 / 57.0).abs() < 1e-9 && slope.sigma > 0.0, "{slope:?}");
+    assert!(rows[0].z.abs() < 0.1 && rows[1].z < -30.0, "{rows:?}");
+    let table = warm_up::beside_model_text(&rows);
+    assert!(table.contains("25 °C (die 25.0 °C) y offset [°/s/°C]"), "{table}");
 }

@@ -137,3 +137,70 @@ pub fn single_setpoint_z(model: &ThermalModel, single: &SetpointCal) -> Result<V
         })
         .collect()
 }
+
+/// How a set of z-values (each (fitted − truth)/σ) compares with the standard normal they
+/// should follow if every σ is honest: the counts beyond 1, 2 and 3σ against chance, the
+/// chance of at least the count seen beyond 3σ, and the Kolmogorov-Smirnov statistic with its
+/// asymptotic p-value. The z-values of one seed share setpoints and are not independent, so
+/// the p-values are indicative.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Normality {
+    /// z-values.
+    pub n: usize,
+    /// Beyond 1, 2 and 3σ: (seen, expected of a standard normal).
+    pub beyond: [(usize, f64); 3],
+    /// P(at least the count seen beyond 3σ) for n standard normal values (binomial).
+    pub p_beyond_3: f64,
+    /// sup |F_n(z) − Φ(z)|.
+    pub ks_d: f64,
+    /// Its asymptotic p-value, Q_KS((√n + 0.12 + 0.11/√n)·D) (Stephens 1970; Numerical Recipes,
+    /// 3rd ed., §14.3.3).
+    pub ks_p: f64,
+}
+
+/// Terms of the Kolmogorov series Q_KS(λ) = 2 Σ (−1)^(j−1) exp(−2 j² λ²): below 1e-16 by the
+/// 100th for any λ ≥ 0.04, and Q is 1 to double precision below that.
+const KS_TERMS: i32 = 100;
+
+/// The normality of `z` ([`Normality`]); `None` for no value.
+pub fn normality(z: &[f64]) -> Option<Normality> {
+    use statrs::distribution::{Binomial, ContinuousCDF, DiscreteCDF, Normal};
+    if z.is_empty() {
+        return None;
+    }
+    let n = z.len();
+    let phi = Normal::standard();
+    let beyond = [1.0, 2.0, 3.0].map(|b| {
+        let seen = z.iter().filter(|v| v.abs() > b).count();
+        (seen, n as f64 * 2.0 * phi.cdf(-b))
+    });
+    let p3 = 2.0 * phi.cdf(-3.0);
+    let p_beyond_3 = match beyond[2].0 {
+        0 => 1.0,
+        k => Binomial::new(p3, n as u64).map_or(f64::NAN, |b| b.sf(k as u64 - 1)),
+    };
+    let mut sorted = z.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let ks_d = sorted
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            let f = phi.cdf(v);
+            (f - i as f64 / n as f64).abs().max(((i + 1) as f64 / n as f64 - f).abs())
+        })
+        .fold(0.0, f64::max);
+    let sqrt_n = (n as f64).sqrt();
+    let lambda = (sqrt_n + 0.12 + 0.11 / sqrt_n) * ks_d;
+    let ks_p = if lambda < 0.04 {
+        1.0
+    } else {
+        let q: f64 = (1..=KS_TERMS)
+            .map(|j| {
+                let sign = if j % 2 == 1 { 1.0 } else { -1.0 };
+                sign * (-2.0 * f64::from(j * j) * lambda * lambda).exp()
+            })
+            .sum();
+        (2.0 * q).clamp(0.0, 1.0)
+    };
+    Some(Normality { n, beyond, p_beyond_3, ks_d, ks_p })
+}
