@@ -25,6 +25,20 @@ fn config(seed: u64, duration_s: f64) -> SimConfig {
     SimConfig::with_runs(seed, runs)
 }
 
+/// `host calibrate --replay input --out-dir out --no-db --sensor sensor`.
+fn replay(input: &Path, out: &Path, sensor: &str) -> std::process::Output {
+    host(&[
+        "calibrate",
+        "--replay",
+        input.to_str().unwrap(),
+        "--out-dir",
+        out.to_str().unwrap(),
+        "--no-db",
+        "--sensor",
+        sensor,
+    ])
+}
+
 /// Writes `cfg`, simulates it into `dir/name.cap` and calibrates it into `dir/name/`; returns
 /// the summary, `calibration.json` and the truth.
 fn simulate_and_calibrate(dir: &Path, name: &str, cfg: &SimConfig) -> (String, serde_json::Value, Truth) {
@@ -34,16 +48,7 @@ fn simulate_and_calibrate(dir: &Path, name: &str, cfg: &SimConfig) -> (String, s
     let o = host(&["simulate", "--config", cfg_path.to_str().unwrap(), "--out", cap.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let out = dir.join(name);
-    let o = host(&[
-        "calibrate",
-        "--replay",
-        cap.to_str().unwrap(),
-        "--out-dir",
-        out.to_str().unwrap(),
-        "--no-db",
-        "--sensor",
-        "W-27",
-    ]);
+    let o = replay(&cap, &out, "W-27");
     let summary = String::from_utf8_lossy(&o.stdout).into_owned();
     assert_eq!(o.status.code(), Some(0), "{summary}\n{}", String::from_utf8_lossy(&o.stderr));
     let cal = serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap();
@@ -150,16 +155,7 @@ fn a_setpoint_not_at_the_noise_floor_is_left_out_of_a_thermal_session() {
     for f in ["session.cap", "session.truth.json"] {
         std::fs::copy(flawed.join("sp1_m20c").join(f), plain.join("sp1_m20c").join(f)).unwrap();
     }
-    let o = host(&[
-        "calibrate",
-        "--replay",
-        plain.to_str().unwrap(),
-        "--out-dir",
-        out.to_str().unwrap(),
-        "--no-db",
-        "--sensor",
-        "G-27",
-    ]);
+    let o = replay(&plain, &out, "G-27");
     let text = String::from_utf8_lossy(&o.stdout).into_owned();
     assert_eq!(o.status.code(), Some(3), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
     assert!(unwrapped(&text).contains("Left out of the fit: setpoint -20 °C"), "{text}");
