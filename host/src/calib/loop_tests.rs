@@ -880,3 +880,19 @@ fn an_effect_taken_out_starts_its_refit_at_the_smaller_models_optimum() {
     let ended = off(&from_start.model);
     assert!(ended < 0.01, "the one-pass fit ends {ended:.4} σ from the refit");
 }
+
+/// A warm-up three times the simulator's default (30 °C), default design, seed 2: the warm-up's
+/// fit beats the temperature-driven drift by 121 in BIC, though its best grid time constant
+/// scored behind it. Compared on a floor under its profile over the time constant, it is fitted
+/// and kept; compared on a parabola through the grid (which put it 1165 behind), it was left
+/// unfitted and the answer ended 6σ off (trust bench, `offset_drift_x3`).
+#[test]
+fn a_warm_up_behind_on_its_grid_is_still_fitted_when_its_profile_may_win() {
+    let (runs, truth) =
+        capture_with(2, &[180.0, 90.0, -180.0], BAR_DURATION_S, &["offset_drift=30"], FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    assert!(r.effects().contains(&Effect::DriftWarmUp), "{}", r.summary());
+    assert_drift_kept_by_bic(&r);
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "warm-up 3×");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
