@@ -896,3 +896,23 @@ fn a_warm_up_behind_on_its_grid_is_still_fitted_when_its_profile_may_win() {
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "warm-up 3×");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
+
+/// A fit that runs out of passes says so: a 5-ms delay fitted from 0 needs more than one
+/// Gauss-Newton pass, so one pass leaves it unconverged (and the loop then treats it as no fit:
+/// a candidate skipped, a final model not vouched for); given its passes it converges.
+#[test]
+fn a_fit_that_runs_out_of_passes_is_not_converged() {
+    let (runs, _) = capture_with(4, &[180.0, 90.0], 20.0, &["delay_ms=5"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
+    assert!(linear.converged, "a linear model converges in its one pass");
+    let start = linear.model.with(Effect::Delay, Default::default(), vec![0.0]);
+    let once = crate::calib::engine::solve::fit_at_most(&data, start.clone(), [1.0; 3], 1).expect("one pass");
+    assert_eq!((once.passes, once.converged), (1, false));
+    assert_eq!(
+        crate::calib::analysis::selection::not_converged(&once),
+        "its fit had not converged after 1 Gauss-Newton pass"
+    );
+    let full = crate::calib::engine::fit(&data, start, [1.0; 3]).expect("fits");
+    assert!(full.converged && full.passes > 1, "{} passes", full.passes);
+}

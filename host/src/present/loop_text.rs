@@ -243,7 +243,7 @@ pub fn verdict(r: &LoopReport) -> String {
             )
         }
         Verdict::UnexplainedStructure if r.unvouched.is_some() => format!(
-            "DO NOT TRUST THIS CALIBRATION: a figure the verdict rests on is not a number ({}), so no test can vouch for the fit. The numbers below are the best fit of the model, not a characterisation of the sensor.",
+            "DO NOT TRUST THIS CALIBRATION: nothing vouches for the fit ({}): a figure the verdict rests on is not a number, or the fit is not at its minimum. The numbers below are the model's last values, not a characterisation of the sensor.",
             r.unvouched.as_deref().unwrap_or_default()
         ),
         Verdict::UnexplainedStructure => {

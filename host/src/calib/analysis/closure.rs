@@ -9,8 +9,8 @@ use crate::calib::analysis::consistency::{consistency, Consistency};
 use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
 use crate::calib::analysis::paper::paper_check;
 use crate::calib::analysis::selection::{
-    both_directions, held_out, least_needed, separates_delay_and_index, start_without, step, DriftChoice, Dropped,
-    Score, Skipped,
+    both_directions, held_out, least_needed, not_converged, separates_delay_and_index, start_without, step,
+    DriftChoice, Dropped, Score, Skipped,
 };
 use crate::calib::data::kinematics;
 use crate::calib::data::kinematics::KinOptions;
@@ -970,6 +970,13 @@ impl Context<'_> {
             state.fitted.model.effects.iter().copied().filter(|e| !fitted.model.effects.contains(e)).collect();
         while let Some((effect, wald_chi2, threshold)) = least_needed(&fitted, self.opts.alpha, score.effect) {
             match fit(self.data, start_without(&fitted, effect, state.diag.weights()), state.diag.weights()) {
+                Ok(f) if !f.converged => {
+                    trail.skip(Skipped {
+                        effect,
+                        why: format!("could not be dropped when redundant: {}", not_converged(&f)),
+                    });
+                    break;
+                }
                 Ok(f) => {
                     dropped.push(Dropped { effect, after: score.effect, wald_chi2, threshold });
                     fitted = f;
@@ -1034,6 +1041,10 @@ impl Context<'_> {
         let mut without = state.fitted.clone();
         reweight(&mut without, weights);
         match fit(self.data, start, weights) {
+            Ok(fitted) if !fitted.converged => {
+                trail.skipped.push(Skipped { effect: earth, why: not_converged(&fitted) });
+                None
+            }
             Ok(fitted) => {
                 let delta_chi2 = without.solution.chi2 - fitted.solution.chi2;
                 let score = Score {
@@ -1089,7 +1100,9 @@ impl Context<'_> {
             self.opts.alpha,
         );
         let disagree = consistency.as_ref().is_some_and(Consistency::disagrees);
-        let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree {
+        // A final fit that ran out of passes is not at its minimum: nothing vouches for it.
+        let unvouched = (!state.fitted.converged).then(|| format!("final model, {}", not_converged(&state.fitted)));
+        let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree || unvouched.is_some() {
             Verdict::UnexplainedStructure
         } else {
             Verdict::AtNoiseFloor
@@ -1109,7 +1122,7 @@ impl Context<'_> {
             initial,
             final_diagnostics: added.then_some(state.diag),
             final_report,
-            unvouched: None,
+            unvouched,
         }
     }
 }

@@ -419,6 +419,7 @@ impl CandidateFit<'_> {
         let f = fit(data, start, self.weights).map_err(|e| e.to_string())?;
         match f.at_bound() {
             Some(why) => Err(why),
+            None if !f.converged => Err(not_converged(&f)),
             None => Ok(f),
         }
     }
@@ -432,6 +433,12 @@ impl CandidateFit<'_> {
 /// 10 is the "very strong" evidence of Kass & Raftery (1995, §3.2) on the BIC scale, so an
 /// alternative further behind cannot win by being fitted.
 pub(crate) const DRIFT_BIC_MARGIN: f64 = 10.0;
+
+/// Why a fit that ran out of passes is not one.
+pub fn not_converged(f: &Fitted) -> String {
+    let unit = if f.passes == 1 { "pass" } else { "passes" };
+    format!("its fit had not converged after {} Gauss-Newton {unit}", f.passes)
+}
 
 /// The drift models are alternatives: the best-scoring variant of each that passed is compared
 /// by BIC, and the lowest kept. Each is compared on its linearised χ² (the warm-up's on a floor

@@ -157,6 +157,10 @@ pub struct Fitted {
     pub solution: JointSolution,
     /// Gauss-Newton passes made.
     pub passes: usize,
+    /// Whether the last step was below [`CONVERGED_SIGMAS`] in every parameter (or the model is
+    /// linear). When not, the passes ran out ([`MAX_ITERATIONS`]) and `model` is not the
+    /// minimum: nothing may rest on it.
+    pub converged: bool,
 }
 
 impl Fitted {
@@ -231,13 +235,24 @@ pub fn apply_step(m: &mut Model, sel_lin: usize, delta: &DVector<f64>, frozen: &
 
 /// Fits a model by Gauss-Newton from its current values. Shared parameters whose Jacobian is
 /// zero at the start (a warm-up time constant while its amplitude is 0) are held for the first
-/// pass.
+/// pass. After [`MAX_ITERATIONS`] passes without converging the fit ends with
+/// [`Fitted::converged`] false.
 pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, CalError> {
+    fit_at_most(data, start, weights, MAX_ITERATIONS)
+}
+
+/// [`fit`] in at most `max_passes` passes.
+pub(crate) fn fit_at_most(
+    data: &LoopData,
+    start: Model,
+    weights: [f64; 3],
+    max_passes: usize,
+) -> Result<Fitted, CalError> {
     let mut model = start;
     let cols = model.cols();
     let nl = model.lin.len();
     let linear_only = model.shared.is_empty() && model.lin.iter().all(|c| c.is_common());
-    for pass in 1..=MAX_ITERATIONS {
+    for pass in 1..=max_passes.max(1) {
         let per_run = accumulate(data, &model, &cols);
         let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
         let frozen: Vec<bool> = model.shared.iter().map(|&p| model.shapes_only_zero_columns(p)).collect();
@@ -252,13 +267,14 @@ pub fn fit(data: &LoopData, start: Model, weights: [f64; 3]) -> Result<Fitted, C
                 solution.delta[i].abs() <= CONVERGED_SIGMAS * sd
             });
         apply_step(&mut model, nl, &solution.delta, &frozen);
-        if converged || (linear_only && pass == 1) || pass == MAX_ITERATIONS {
+        let converged = converged || (linear_only && pass == 1);
+        if converged || pass >= max_passes {
             // The sums were taken before the (negligible, or exact linear) last step: the
             // solution describes the model as it now is.
-            return Ok(Fitted { model, per_run, solution, passes: pass });
+            return Ok(Fitted { model, per_run, solution, passes: pass, converged });
         }
     }
-    unreachable!("the loop returns at MAX_ITERATIONS")
+    unreachable!("the loop returns at its last pass")
 }
 
 /// The error for a joint system that cannot be solved: an axis whose own base columns (ω_s and
