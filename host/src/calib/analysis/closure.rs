@@ -912,8 +912,9 @@ fn earth_columns(earth: Effect, layout: &crate::calib::data::layout::Layout) -> 
 struct Trail {
     steps: Vec<StepReport>,
     skipped: Vec<Skipped>,
-    /// The last candidates' pass in which no candidate passed: of the final model when nothing
-    /// is added after the loop (Earth), so the consider covariance reads it.
+    /// The last candidates' pass in which no candidate passed. Where nothing is added after the
+    /// loop it is of the final model, and the consider covariance reads it; where Earth is, it
+    /// holds Earth's columns, and Earth's fit starts from the solution they give.
     last_sums: Option<CrossSums>,
 }
 
