@@ -304,6 +304,18 @@ fn finer_knots_replace_coarser_ones_that_leave_a_random_walk() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
+/// A short two-direction capture with speed ripple (seed 8, 6-s runs) and a model with a 4-ms
+/// delay and plausible rows of M and offsets: the accumulation tests' data and model.
+fn short_capture_and_delay_model() -> (LoopData, Model) {
+    let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let mut model = Model::base_for(&data.poses).with(Effect::Delay, Default::default(), vec![0.004]);
+    for (a, row) in [[57.0, 0.9, -0.4, 12.0], [-0.5, 56.5, 1.1, -20.0], [0.3, -0.8, 58.0, 5.0]].iter().enumerate() {
+        model.beta[a] = row.to_vec();
+    }
+    (data, model)
+}
+
 /// A candidates' pass sums only the pairs a test needs (the model's columns with every column,
 /// each candidate's with its own): those are the full pass's sums (to 1e-12 of the pair's scale
 /// √(xᵢᵀxᵢ·xⱼᵀxⱼ), a reordered sum's rounding; a score reads differences of χ² far above it),
@@ -311,12 +323,7 @@ fn finer_knots_replace_coarser_ones_that_leave_a_random_walk() {
 /// Every catalogued candidate of a model with a delay, the free drift's sparse knots among them.
 #[test]
 fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
-    let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
-    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
-    let mut model = Model::base_for(&data.poses).with(Effect::Delay, Default::default(), vec![0.004]);
-    for (a, row) in [[57.0, 0.9, -0.4, 12.0], [-0.5, 56.5, 1.1, -20.0], [0.3, -0.8, 58.0, 5.0]].iter().enumerate() {
-        model.beta[a] = row.to_vec();
-    }
+    let (data, model) = short_capture_and_delay_model();
     let everything = super::effects::terms::Evidence {
         phase: true,
         drift: true,
@@ -365,12 +372,7 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
 /// another model, or of columns never gathered together, are not read.
 #[test]
 fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
-    let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
-    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
-    let mut model = Model::base_for(&data.poses).with(Effect::Delay, Default::default(), vec![0.004]);
-    for (a, row) in [[57.0, 0.9, -0.4, 12.0], [-0.5, 56.5, 1.1, -20.0], [0.3, -0.8, 58.0, 5.0]].iter().enumerate() {
-        model.beta[a] = row.to_vec();
-    }
+    let (data, model) = short_capture_and_delay_model();
     let cols_of = |e: Effect| -> Vec<Col> {
         let (lin, shared) = e.params(&data.layout);
         lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect()

@@ -18,8 +18,7 @@ use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
 use crate::calib::effects::terms::ConsiderCtx;
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
-    apply_step, fit, full_selection, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model, Selection,
-    SharedPar,
+    apply_step, fit, full_selection, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
 };
 use crate::calib::result::axes::AXES;
 use crate::calib::result::consider_term::ConsiderTerm;
@@ -1027,7 +1026,7 @@ impl Context<'_> {
         // (`next_state`): the fit is then done in one pass rather than two.
         let cols = earth_columns(earth, &self.data.layout);
         let nl = state.fitted.model.lin.len();
-        let sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + start.shared.len()).collect() };
+        let sel = full_selection(&start);
         if let Some(sol) = trail
             .last_sums
             .as_ref()
