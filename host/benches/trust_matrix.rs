@@ -32,8 +32,8 @@
 //! value is the latitude; Earth's rate is what it is). A value scales the switch's headline
 //! parameter only: `speed_ripple` its 1× harmonic, `nonlinearity` its quadratic term (the
 //! asymmetry stays), `offset_drift` the temperature rise; `g_sensitivity` and
-//! `gear_transmission` scale as a whole. The full matrix is 12 designs × 28 effect cases × 10
-//! seeds = 3360 calibrations (and as many simulations, the first time). A calibration costs
+//! `gear_transmission` scale as a whole, `axis_delay` all three axes. The full matrix is 12 designs
+//! × 32 effect cases × 10 seeds = 3840 calibrations (and as many simulations, the first time). A calibration costs
 //! from 0.06 s of CPU (`180@20`, no effect) to ≈ 180 s (`180,90,-180@300`, `all`; 45 s at
 //! `180,90@120`): with effects on, about 0.1 s of CPU per second of run and pose. The long
 //! effectful cells dominate, and the full matrix takes of the order of a day on 2 cores: select.
@@ -110,6 +110,8 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "table_tilt" => e.table_tilt.map(|t| t.tilt_deg),
         "pose_fixture" => e.pose_fixture.map(|p| p.z2_deg),
         "bias_random_walk" => e.bias_random_walk.map(|b| b.k_dps_per_sqrt_s),
+        "axis_delay" => e.axis_delay.map(|d| d.delay_ms[1]),
+        "rig_clock" => e.rig_clock.map(|c| c.error_ppm),
         _ => None,
     }
 }

@@ -512,8 +512,8 @@ fn every_registered_effects_jacobian_matches_finite_differences() {
         assert_jacobians_match(&data, &model, &at, |_, value| (1e-3 * value.abs()).max(1e-6));
         checked += 1;
     }
-    // Every effect with a shared parameter: 11 besides the 32 harmonics.
-    assert_eq!(checked, 11 + crate::calib::effects::MAX_HARMONIC_ORDER);
+    // Every effect with a shared parameter: 13 besides the 32 harmonics.
+    assert_eq!(checked, 13 + crate::calib::effects::MAX_HARMONIC_ORDER);
 }
 
 #[test]
@@ -917,4 +917,62 @@ fn a_fit_that_runs_out_of_passes_is_not_converged() {
     );
     let full = crate::calib::engine::fit(&data, start, [1.0; 3]).expect("fits");
     assert!(full.converged && full.passes > 1, "{} passes", full.passes);
+}
+
+/// Axes sampled 0.3 ms (y) and −0.15 ms (z) behind x, not declared: each axis looks turned about
+/// the table axis by θ2'·δ (0.05° on y at 180 °/s, half that at 90 °/s), so no one M fits both
+/// speeds until the delays between the axes are found (the linear model's directions are more
+/// than 10σ off); then both delays and every direction within 3σ of the truth, at the floor.
+#[test]
+fn undeclared_delays_between_the_axes_are_found_named_and_corrected() {
+    let (r, _) = run_loop(9, &BAR_RATES_DPS, SHORT_S, &["axis_delay=0.3"]);
+    assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::AxisDelay), "{}", r.summary());
+    let last = r.steps.last().expect("steps");
+    for (axis, truth_ms) in [("y", 0.3), ("z", -0.15)] {
+        let name = format!("delay of {axis} behind x");
+        let p = last.effect_params.iter().find(|p| p.name == name).unwrap_or_else(|| panic!("{name}\n{}", r.summary()));
+        assert!(p.estimate.z(truth_ms).abs() <= Z_1D, "{name}: {} ± {} ms", p.estimate.value, p.estimate.sigma);
+    }
+    let before = truth_of(&r.steps[0]).direction_z.into_iter().fold(0.0, f64::max);
+    assert!(before > 10.0, "the delays must matter for this test to mean anything: {before:.1}σ");
+    assert_within_3_sigma(&truth_of(last), "axis_delay=0.3");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
+/// The rig's crystal 60 ppm fast: the encoder's rates come out 60 ppm low, so every sensitivity
+/// comes out 60 ppm high, alike, and no run can tell. The consider term carries its 20-ppm bound
+/// in every sensitivity and nothing in the directions; declared at 60 ppm
+/// (`--consider rig_clock=60`), the answer is within 3σ.
+#[test]
+fn a_rig_clock_off_its_frequency_moves_every_sensitivity_alike_and_sigma_carries_it() {
+    let (runs, truth) = capture_with(4, &BAR_RATES_DPS, SHORT_S, &["rig_clock=60"], FullScale::Dps500);
+    let calibrate = |consider: Option<&str>| {
+        let mut opts = LoopOptions::default();
+        if let Some(spec) = consider {
+            opts.consider.add(spec).expect("a valid --consider");
+        }
+        close_loop(&runs, &opts, Some(truth.sensor())).expect("calibrates")
+    };
+    let r = calibrate(None);
+    let term = r
+        .final_report()
+        .consider
+        .iter()
+        .find(|t| t.effect == Effect::RigClock.key())
+        .cloned()
+        .unwrap_or_else(|| panic!("no rig-clock term\n{}", r.summary()));
+    for a in 0..3 {
+        assert!((term.k_sigma_ppm[a] - 20.0).abs() < 0.01, "{term:?}");
+        assert!(term.direction_sigma_deg[a] < 1e-9, "{term:?}");
+    }
+    let t = truth_of(r.steps.last().expect("steps"));
+    for a in 0..3 {
+        // σ of the sensitivity without the clock's 20 ppm: what the runs and the other terms give.
+        let sigma_ppm = t.sensitivity_error_ppm[a] / t.sensitivity_z[a];
+        let rest_ppm = (sigma_ppm * sigma_ppm - 400.0).sqrt();
+        let off = t.sensitivity_error_ppm[a] - 60.0;
+        assert!(off.abs() <= Z_1D * rest_ppm, "axis {a}: {} ppm against +60 ± {rest_ppm}", t.sensitivity_error_ppm[a]);
+    }
+    let declared = calibrate(Some("rig_clock=60"));
+    assert_within_3_sigma(&truth_of(declared.steps.last().expect("steps")), "rig_clock=60 declared");
 }

@@ -39,6 +39,12 @@ pub struct Effects {
     /// A rate random walk of the offset on every axis.
     #[serde(default)]
     pub bias_random_walk: Option<BiasRandomWalk>,
+    /// Each sensing axis sampled at its own instant (a delay per axis beyond the common one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axis_delay: Option<AxisDelay>,
+    /// The rig's time base (the MCU's crystal) off its nominal frequency.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig_clock: Option<RigClock>,
     /// Offset, sensitivity and direction as functions of die temperature (`host simulate
     /// --chamber-c` switches it on; not in [`Effects::NAMES`]: a single session at one
     /// temperature cannot show it).
@@ -328,6 +334,40 @@ impl Default for GearRatioError {
     }
 }
 
+/// Physical source: a gyro whose three sense channels share one multiplexed converter samples
+/// them in turn, a third of an output period apart (0.42 ms at 800 Hz); one with an ADC per
+/// channel still shows the sense resonators' phase mismatch, tens of µs (engineering judgement:
+/// no L3G4200D figure). Default: 0, +0.1, −0.05 ms on x, y, z.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AxisDelay {
+    /// Delay of each axis's output beyond the common delay, ms.
+    pub delay_ms: [f64; 3],
+}
+
+impl Default for AxisDelay {
+    fn default() -> Self {
+        Self { delay_ms: [0.0, 0.1, -0.05] }
+    }
+}
+
+/// Physical source: the firmware's 8 MHz HSE crystal (`firmware/src/main.rs`) is specified to
+/// ±30 ppm at 25 °C plus ±30 ppm over temperature (a typical HC-49 part's datasheet). Every
+/// timestamp the rig sends counts its ticks, so a fast clock stretches the rig's time and
+/// shrinks every rate derived from it. Default +20 ppm.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RigClock {
+    /// Frequency error of the rig's time base, ppm (positive: its µs are short).
+    pub error_ppm: f64,
+}
+
+impl Default for RigClock {
+    fn default() -> Self {
+        Self { error_ppm: 20.0 }
+    }
+}
+
 /// Out-of-catalogue structure for "unexplained residual" tests: a rate of
 /// `amplitude·sin(order·θ2 + phase)` added to one axis, as a sensor-table wobble or a magnetic
 /// disturbance from the gears might produce. No calibration model explains it.
@@ -381,7 +421,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 14] = [
+    pub const NAMES: [(&'static str, &'static str); 16] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -396,6 +436,8 @@ impl Effects {
         ("table_tilt", "sensor-table axis off perpendicular, degrees (default 0.3)"),
         ("pose_fixture", "pose-2 fixture turned about the table axis, degrees (default 0.1)"),
         ("bias_random_walk", "rate random walk of the offset, °/s/√s (default 0.002)"),
+        ("axis_delay", "per-axis delay beyond the common one, y's in ms (default 0.1; x 0, z −y/2)"),
+        ("rig_clock", "rig time base's frequency error, ppm (default 20)"),
     ];
 
     /// True when no effect is on.
@@ -506,6 +548,13 @@ impl Effects {
                 }
                 self.gear_transmission = Some(g);
             }
+            "axis_delay" => {
+                let y_ms = value.unwrap_or(AxisDelay::default().delay_ms[1]);
+                self.axis_delay = Some(AxisDelay { delay_ms: [0.0, y_ms, -0.5 * y_ms] })
+            }
+            "rig_clock" => {
+                self.rig_clock = Some(RigClock { error_ppm: value.unwrap_or(RigClock::default().error_ppm) })
+            }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();
                 return Err(EffectSpecError(format!("unknown effect {name:?}; known: {}", known.join(", "))));
@@ -527,6 +576,16 @@ impl Effects {
     /// Pure output delay, s.
     pub fn pure_delay_s(&self) -> f64 {
         self.filter_delay.map_or(0.0, |f| f.pure_delay_ms * 1e-3)
+    }
+
+    /// Each axis's delay beyond the common one, s.
+    pub fn axis_delay_s(&self) -> [f64; 3] {
+        self.axis_delay.map_or([0.0; 3], |d| d.delay_ms.map(|ms| ms * 1e-3))
+    }
+
+    /// The rig's timer ticks per true µs (1 + its frequency error).
+    pub fn rig_clock_rate(&self) -> f64 {
+        1.0 + self.rig_clock.map_or(0.0, |c| c.error_ppm * 1e-6)
     }
 
     /// Whether the low-pass filter is on.

@@ -28,8 +28,9 @@ mod truth;
 mod tests;
 
 pub use effects::{
-    EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission, IndexOffset,
-    MysteryHarmonic, Nonlinearity, OffsetDrift, PoseFixture, RippleHarmonic, SpeedRipple, TableTilt,
+    AxisDelay, EarthRotation, EffectSpecError, Effects, FilterDelay, GSensitivity, GearRatioError, GearTransmission,
+    IndexOffset, MysteryHarmonic, Nonlinearity, OffsetDrift, PoseFixture, RigClock, RippleHarmonic, SpeedRipple,
+    TableTilt,
 };
 pub use rig::{serve, Port, SimRig};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;

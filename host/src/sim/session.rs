@@ -244,9 +244,9 @@ impl Session {
         firmware::rig::hello(self.gyro)
     }
 
-    /// Timer value at `t_s` (the timer counts whole µs).
+    /// Timer value at `t_s` (the timer counts whole µs of the rig's own clock).
     pub fn timer_us(&self, t_s: f64) -> u32 {
-        (i64::from(self.start_t_us) + (t_s * 1e6).floor() as i64) as u32
+        (i64::from(self.start_t_us) + (t_s * 1e6 * self.effects.rig_clock_rate()).floor() as i64) as u32
     }
 
     fn data_ready_s(&self, k: u64) -> f64 {
@@ -507,6 +507,18 @@ impl Session {
         self.sensed_counts_at(chain, &self.motor.state(t_s))
     }
 
+    /// Sensed counts at `t_s`, each axis at its own instant when the axes are not sampled
+    /// together (`Effects::axis_delay`).
+    fn sensed_counts_per_axis(&self, chain: &SenseChain, t_s: f64) -> [f64; 3] {
+        match self.effects.axis_delay {
+            None => self.sensed_counts(chain, t_s),
+            Some(_) => {
+                let d = self.effects.axis_delay_s();
+                std::array::from_fn(|a| self.sensed_counts(chain, t_s - d[a])[a])
+            }
+        }
+    }
+
     /// Sensed counts for a base-table state.
     fn sensed_counts_at(&self, chain: &SenseChain, st: &BaseState) -> [f64; 3] {
         let theta2 = self.theta2_rad(st.theta1_deg);
@@ -556,12 +568,14 @@ impl Session {
                 let dt = (t_s - t_prev) / f64::from(OVERSAMPLING);
                 let mut y = [0.0; 3];
                 for j in 1..=OVERSAMPLING {
-                    y = f.step(self.sensed_counts(&run.chain, t_prev + f64::from(j) * dt - delay_s));
+                    y = f.step(self.sensed_counts_per_axis(&run.chain, t_prev + f64::from(j) * dt - delay_s));
                 }
                 y
             }
-            None if delay_s == 0.0 => self.sensed_counts_at(&run.chain, &run.base_done),
-            None => self.sensed_counts(&run.chain, t_s - delay_s),
+            None if delay_s == 0.0 && self.effects.axis_delay.is_none() => {
+                self.sensed_counts_at(&run.chain, &run.base_done)
+            }
+            None => self.sensed_counts_per_axis(&run.chain, t_s - delay_s),
         };
         let mut drift = self.thermal.offset_drift_dps(t_s);
         if let Some(w) = self.effects.bias_random_walk {
@@ -583,7 +597,8 @@ impl Session {
             rate_counts[i] = quantise(pre[i] + offset + self.noise_counts[i] * z);
         }
         let jitter_us = self.jitter.sample(&mut self.jitter_rng);
-        let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 + jitter_us).round() as i64) as u32;
+        let t_us = (i64::from(self.start_t_us) + (t_s * 1e6 * self.effects.rig_clock_rate() + jitter_us).round() as i64)
+            as u32;
         debug_assert_eq!(run.done_s, t_s, "the sample's interval is emitted first");
         let encoder = self.encoder.register(run.base_done.theta1_deg);
         run.samples += 1;

@@ -524,3 +524,41 @@ fn speed_ripple_is_in_the_encoder_derived_rate() {
         assert!((amp - h1.amplitude).abs() < 0.1 * h1.amplitude, "{amp}");
     }
 }
+
+#[test]
+fn a_fast_rig_clock_stretches_every_timestamp_and_nothing_else() {
+    let (_, base, cb, _, ce) = with_and_without(36, "rig_clock=1000", 6.0);
+    for (rb, re) in cb.runs.iter().zip(&ce.runs) {
+        // The same samples and edges, each timestamp 1000 ppm further from the timer's zero
+        // (±2 µs: two roundings and the jitter), and over the run 1000 ppm longer to 1 ppm.
+        assert_eq!(rb.samples.len(), re.samples.len());
+        for (sb, se) in rb.samples.iter().zip(&re.samples) {
+            assert_eq!((sb.encoder, sb.rate_counts), (se.encoder, se.rate_counts));
+            assert!((se.t_us as f64 - sb.t_us as f64 * 1.001).abs() <= 2.0, "{} vs {}", se.t_us, sb.t_us);
+        }
+        let span = |r: &crate::capture::Run| (r.samples.last().unwrap().t_us - r.samples[0].t_us) as f64;
+        assert!((span(re) / span(rb) - 1.001).abs() < 1e-6, "{} vs {}", span(re), span(rb));
+        for (eb, ee) in rb.index.iter().zip(&re.index) {
+            assert_eq!(eb.encoder, ee.encoder);
+            assert!((ee.t_us as f64 - eb.t_us as f64 * 1.001).abs() <= 2.0, "{} vs {}", ee.t_us, eb.t_us);
+        }
+    }
+    assert_eq!(base.truth.start_t_us, 0, "the timer starts at 0, so its reading scales with the clock");
+}
+
+#[test]
+fn axes_sampled_apart_each_read_the_rate_of_their_own_instant() {
+    let (cfg, _, cb, _, ce) = with_and_without(37, "axis_delay=0.4", 6.0);
+    assert_eq!(encoders(&cb), encoders(&ce));
+    let d_ms = cfg.effects.axis_delay.unwrap().delay_ms;
+    assert_eq!(d_ms, [0.0, 0.4, -0.2]);
+    // x is untouched; y and z differ by their rate's change over their delay: at most
+    // |dω/dt|·δ = (π rad/s)·(180 °/s)·0.4 ms ≈ 0.23 °/s ≈ 13 counts at 57 counts/(°/s) (the
+    // table turns at 0.5 Hz), plus the two roundings; and by more than the roundings.
+    assert_eq!(axis(&cb, 0), axis(&ce, 0));
+    for a in 1..3 {
+        let diff: Vec<i32> = axis(&cb, a).iter().zip(axis(&ce, a)).map(|(&b, e)| i32::from(e) - i32::from(b)).collect();
+        let most = diff.iter().map(|d| d.abs()).max().unwrap();
+        assert!((4..=15).contains(&most), "axis {a}: largest difference {most} counts");
+    }
+}

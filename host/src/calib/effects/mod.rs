@@ -14,6 +14,7 @@
 
 pub mod terms;
 
+mod axis_delay;
 mod delay;
 mod drift_knots;
 mod drift_polynomial;
@@ -27,6 +28,7 @@ mod index_offset;
 mod phase;
 mod pose_fixture;
 mod rate_scale;
+mod rig_clock;
 mod scale_temperature;
 mod table_harmonic;
 mod table_tilt;
@@ -155,6 +157,8 @@ macro_rules! registry {
 registry! {
     /// [`delay::Delay`].
     Delay => delay::Delay,
+    /// [`axis_delay::AxisDelay`].
+    AxisDelay => axis_delay::AxisDelay,
     /// [`index_offset::IndexOffset`].
     IndexOffset => index_offset::IndexOffset,
     /// [`phase::Phase`].
@@ -181,6 +185,8 @@ registry! {
     RateScale => rate_scale::RateScale,
     /// [`scale_temperature::ScaleTemperature`].
     ScaleTemperature => scale_temperature::ScaleTemperature,
+    /// [`rig_clock::RigClock`].
+    RigClock => rig_clock::RigClock,
     /// [`table_harmonic::TableHarmonic`] at this multiple of θ2.
     TableHarmonic(order: u32 in HARMONIC_ORDERS) => table_harmonic::TableHarmonic(order),
     /// [`earth::Earth`], all three components fitted.
@@ -273,7 +279,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 13 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 15 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();

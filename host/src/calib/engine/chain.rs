@@ -636,6 +636,25 @@ impl<'a> Evaluator<'a> {
     /// added in the column order, as one axis at a time did, but the plan is walked once.
     #[inline]
     pub(super) fn predict3_with(&self, p: &Point, common: &[f64]) -> [f64; 3] {
+        let mut sum = self.predict3_terms(p, common);
+        if self.shifts.rig_clock_ppm != 0.0 {
+            // The rig's clock scales every rate it measures: the gyro sees M·ω·(1 + ε).
+            for (s, m) in sum.iter_mut().zip(&self.m_rows) {
+                *s += 1e-6 * self.shifts.rig_clock_ppm * dot(m, &p.omega);
+            }
+        }
+        for (a, &delay_s) in self.shifts.axis_delay_s.iter().enumerate() {
+            if delay_s != 0.0 {
+                // First order in θ2'·δ (`effects::axis_delay`).
+                sum[a] -= p.rate2_dps.to_radians() * delay_s * self.axis_terms(p, a).d_shift;
+            }
+        }
+        sum
+    }
+
+    /// The model's linear terms at `p` ([`Evaluator::predict3_with`] before the rig's clock).
+    #[inline]
+    fn predict3_terms(&self, p: &Point, common: &[f64]) -> [f64; 3] {
         let mut sum = [0.0; 3];
         if self.lin_plan.all_common {
             for (beta, &v) in self.lin_beta.iter().zip(common) {

@@ -1,0 +1,74 @@
+//! The rig's time base off its nominal frequency.
+
+use super::terms::{
+    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
+    Situation,
+};
+use super::{Behaviour, Effect, Layout};
+
+/// Every timestamp the rig sends counts its timer, clocked by the MCU's crystal. With that
+/// clock fast by ε, the encoder's rates come out (1 − ε) of the truth while the gyro measures
+/// the truth: the gyro's output is M(1 + ε)·ω_measured. One parameter, ε (ppm).
+///
+/// No run separates it: it scales the whole signal alike at every speed, in every direction and
+/// pose, exactly as a common scale of M does. So it is never fitted (no candidate rule); it only
+/// enters the consider covariance, where it moves every sensitivity together and leaves the
+/// directions and the angles between the axes alone.
+pub struct RigClock;
+
+impl Behaviour for RigClock {
+    fn name(&self) -> String {
+        "rig time base (crystal frequency error)".into()
+    }
+
+    fn key(&self) -> String {
+        "rig_clock".into()
+    }
+
+    fn meaning(&self) -> &'static str {
+        "the rig times the encoder with its own crystal: a clock fast by ε ppm makes every sensitivity ε ppm high"
+    }
+
+    fn identified_by(&self) -> &'static str {
+        "none: it scales the signal as M does at every speed and in every direction; measure the rig's crystal instead (its 8 MHz on the MCO1 pin, with a frequency counter) and declare what remains with --consider rig_clock=PPM"
+    }
+
+    fn kind(&self) -> Kind {
+        Kind::Other
+    }
+
+    fn params(&self, _: &Layout) -> (Vec<LinCol>, Vec<SharedPar>) {
+        (vec![], vec![SharedPar { effect: Effect::RigClock, k: 0 }])
+    }
+
+    fn reported(&self, _: Own, _: f64) -> Option<Reported> {
+        Some(Reported::new("rig clock frequency error", 1.0, "ppm"))
+    }
+
+    fn bound(&self, _: u8) -> Option<Bound> {
+        None
+    }
+
+    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
+        s.rig_clock_ppm = value;
+    }
+
+    /// ∂(output)/∂ε: the model's own rate signal on the axis, per ppm.
+    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
+        1e-6 * dot(&t.u, &p.omega)
+    }
+
+    /// 20 ppm: the firmware runs on an 8 MHz HSE crystal (`firmware/src/main.rs`); parts of that
+    /// class are specified to ±30 ppm at 25 °C (a uniform bound: 17 ppm, GUM 4.3.7), with a few
+    /// ppm more for a year's ageing and the lab's temperature (engineering judgement).
+    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
+        Some(ConsiderBound {
+            sigma: 20.0,
+            source: "the rig's 8 MHz crystal, ±30 ppm at 25 °C as a uniform bound plus ageing (typical HC-49 part's datasheet), engineering judgement",
+        })
+    }
+
+    fn candidate(&self, _: &Situation) -> bool {
+        false
+    }
+}
