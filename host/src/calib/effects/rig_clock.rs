@@ -59,12 +59,14 @@ impl Behaviour for RigClock {
     }
 
     /// 20 ppm: the firmware runs on an 8 MHz HSE crystal (`firmware/src/main.rs`); parts of that
-    /// class are specified to ±30 ppm at 25 °C (a uniform bound: 17 ppm, GUM 4.3.7), with a few
-    /// ppm more for a year's ageing and the lab's temperature (engineering judgement).
+    /// class are specified to ±30 ppm at 25 °C (a uniform bound: 17 ppm, GUM 4.3.7), and a board
+    /// whose load capacitors do not match the crystal's load capacitance pulls it by more (ST
+    /// AN2867 §3.3; STM32F4DISCOVERY's user manual does not give the crystal's), with a few ppm
+    /// for a year's ageing (engineering judgement).
     fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
         Some(ConsiderBound {
             sigma: 20.0,
-            source: "the rig's 8 MHz crystal, ±30 ppm at 25 °C as a uniform bound plus ageing (typical HC-49 part's datasheet), engineering judgement",
+            source: "the rig's 8 MHz crystal: ±30 ppm at 25 °C as a uniform bound, load-capacitance pulling and ageing (engineering judgement)",
         })
     }
 
