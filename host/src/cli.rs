@@ -267,7 +267,7 @@ struct SimulateArgs {
     /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
     /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
     /// gear_ratio_error, mystery_harmonic, earth_rotation, gear_transmission, g_sensitivity,
-    /// table_tilt, pose_fixture, bias_random_walk.
+    /// table_tilt, pose_fixture, bias_random_walk, axis_delay, rig_clock.
     #[arg(long = "effect")]
     effects: Vec<String>,
     /// Full configuration as JSON (a `SimConfig`); overrides the options above.
