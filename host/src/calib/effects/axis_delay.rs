@@ -50,8 +50,11 @@ impl Behaviour for AxisDelay {
         Some(Bound { lo: -MAX_AXIS_DELAY_S, hi: MAX_AXIS_DELAY_S, what: "delay between axes", unit: "s" })
     }
 
-    fn shift(&self, k: u8, value: f64, s: &mut Shifts) {
-        s.axis_delay_s[usize::from(k) + 1] = value;
+    fn shift(&self, _: u8, _: f64, _: &mut Shifts) {}
+
+    /// First order in θ2'·δ ([`MAX_AXIS_DELAY_S`]): the prediction adds δ times the column.
+    fn on_output(&self) -> bool {
+        true
     }
 
     /// Delaying axis a by δ moves its θ2 by −θ2'·δ.

@@ -81,8 +81,16 @@ pub trait Behaviour {
     /// The range shared parameter `k` is held in, if any.
     fn bound(&self, k: u8) -> Option<Bound>;
 
-    /// Sets the kinematic chain's input that shared parameter `k` is, at `value`.
+    /// Sets the kinematic chain's input that shared parameter `k` is, at `value` (nothing for an
+    /// effect that acts on the output, [`Behaviour::on_output`]).
     fn shift(&self, k: u8, value: f64, s: &mut Shifts);
+
+    /// Whether it acts on the output rather than on the chain's inputs, linearly in its shared
+    /// parameters: the prediction adds Σ_k θ_k·`value(Own::Shared(k))` on each axis, so its
+    /// Jacobian is its column exactly, and the engine needs no input of its own for it.
+    fn on_output(&self) -> bool {
+        false
+    }
 
     /// The value at `p` on axis `a` of linear column `Own::Lin(k)`, or of shared parameter
     /// `Own::Shared(k)`'s Jacobian, ∂(output)/∂θ_k, given the axis's chain-rule factors `t`

@@ -49,8 +49,11 @@ impl Behaviour for RigClock {
         None
     }
 
-    fn shift(&self, _: u8, value: f64, s: &mut Shifts) {
-        s.rig_clock_ppm = value;
+    fn shift(&self, _: u8, _: f64, _: &mut Shifts) {}
+
+    /// The gyro's output is the model's signal times 1 + ε: the prediction adds ε times the column.
+    fn on_output(&self) -> bool {
+        true
     }
 
     /// ∂(output)/∂ε: the model's own rate signal on the axis, per ppm.

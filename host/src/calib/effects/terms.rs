@@ -202,8 +202,7 @@ impl Needs {
 /// model once per pass (each effect's [`super::Behaviour::shift`] writes its own). The chain
 /// (`engine::chain::Evaluator::point`) applies them in the rig's order: the delay to the time, the
 /// index shifts and the gear lag to the angles, the ripple to the table's angle and speed, the
-/// tilt and Earth's rate to ω2, the filter's curvature to the output, the fixture to the frame;
-/// the prediction scales the rate signal by the rig's clock and shifts each axis by its delay.
+/// tilt and Earth's rate to ω2, the filter's curvature to the output, the fixture to the frame.
 #[derive(Debug, Clone)]
 pub struct Shifts {
     /// Delay of the gyro behind the encoder, s.
@@ -224,10 +223,6 @@ pub struct Shifts {
     pub fixture_rad: [f64; 3],
     /// (n, pose, a, b) of each ripple harmonic.
     pub ripple: Vec<(u32, Pose, f64, f64)>,
-    /// The rig's clock frequency error, ppm: the output is M·ω·(1 + ε).
-    pub rig_clock_ppm: f64,
-    /// Each axis's delay behind x, s (x's is 0): its output moves by −θ2'·δ·∂v/∂θ2.
-    pub axis_delay_s: [f64; 3],
 }
 
 impl Shifts {
@@ -244,8 +239,6 @@ impl Shifts {
             tilt_sin_cos: 0.0f64.sin_cos(),
             fixture_rad: [0.0; 3],
             ripple: Vec::new(),
-            rig_clock_ppm: 0.0,
-            axis_delay_s: [0.0; 3],
         }
     }
 }

@@ -187,6 +187,9 @@ pub struct Evaluator<'a> {
     /// own rate with their coefficients (their slope adds to it along the axis).
     m_rows: [[f64; 3]; 3],
     rate_cols: Vec<(Effect, u16, [f64; 3])>,
+    /// The shared parameters of the effects that act on the output ([`crate::calib::effects::Behaviour::on_output`]),
+    /// with their values.
+    output_pars: Vec<(SharedPar, f64)>,
     /// Per stretch and knot spacing of [`DRIFT_KNOT_SPACINGS_S`]: the first knot's time, s, and
     /// knots per second.
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
@@ -282,6 +285,13 @@ impl<'a> Evaluator<'a> {
             s_hat: model.s_hat.map(|v| [v[0], v[1], v[2]]),
             m_rows: std::array::from_fn(|a| [m[(a, 0)], m[(a, 1)], m[(a, 2)]]),
             rate_cols,
+            output_pars: model
+                .shared
+                .iter()
+                .zip(&model.theta)
+                .filter(|(p, _)| p.effect.behaviour(|b| b.on_output()))
+                .map(|(&p, &v)| (p, v))
+                .collect(),
             knot_grid: (0..data.layout.stretches.len())
                 .map(|st| std::array::from_fn(|k| data.layout.knot_grid(st, DRIFT_KNOT_SPACINGS_S[k])))
                 .collect(),
@@ -637,22 +647,19 @@ impl<'a> Evaluator<'a> {
     #[inline]
     pub(super) fn predict3_with(&self, p: &Point, common: &[f64]) -> [f64; 3] {
         let mut sum = self.predict3_terms(p, common);
-        if self.shifts.rig_clock_ppm != 0.0 {
-            // The rig's clock scales every rate it measures: the gyro sees M·ω·(1 + ε).
-            for (s, m) in sum.iter_mut().zip(&self.m_rows) {
-                *s += 1e-6 * self.shifts.rig_clock_ppm * dot(m, &p.omega);
-            }
-        }
-        for (a, &delay_s) in self.shifts.axis_delay_s.iter().enumerate() {
-            if delay_s != 0.0 {
-                // First order in θ2'·δ (`effects::axis_delay`).
-                sum[a] -= p.rate2_dps.to_radians() * delay_s * self.axis_terms(p, a).d_shift;
+        if !self.output_pars.is_empty() {
+            for (a, s) in sum.iter_mut().enumerate() {
+                let t = self.axis_terms(p, a);
+                for &(sp, theta) in &self.output_pars {
+                    *s += theta * self.effect_value(sp.effect, Own::Shared(sp.k), p, a, &t);
+                }
             }
         }
         sum
     }
 
-    /// The model's linear terms at `p` ([`Evaluator::predict3_with`] before the rig's clock).
+    /// The model's linear terms at `p` ([`Evaluator::predict3_with`] before the effects that act
+    /// on the output).
     #[inline]
     fn predict3_terms(&self, p: &Point, common: &[f64]) -> [f64; 3] {
         let mut sum = [0.0; 3];
