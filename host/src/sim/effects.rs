@@ -354,7 +354,9 @@ impl Default for AxisDelay {
 /// Physical source: the firmware's 8 MHz HSE crystal (`firmware/src/main.rs`) is specified to
 /// ±30 ppm at 25 °C plus ±30 ppm over temperature (a typical HC-49 part's datasheet). Every
 /// timestamp the rig sends counts its ticks, so a fast clock stretches the rig's time and
-/// shrinks every rate derived from it. Default +20 ppm.
+/// shrinks every rate derived from it. Default +20 ppm. It stretches what the session sends
+/// (samples, index edges, status); the emulated firmware's control ticks (`SimRig`) keep the
+/// nominal clock, which moves no recorded timestamp.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct RigClock {
