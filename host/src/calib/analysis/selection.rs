@@ -69,6 +69,13 @@ pub fn separates_delay_and_index(data: &LoopData) -> bool {
     rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.abs().max(b.abs())))
 }
 
+/// Whether the runs turn the table at two distinct |θ2'| (speeds, whatever their direction):
+/// what an effect even in θ2' (the filter's droop, ∝ θ2'²) needs to be told from M.
+pub fn distinct_speeds(data: &LoopData) -> bool {
+    let rates: Vec<f64> = data.kin.runs.iter().map(|r| (r.gear_ratio * r.steady_rate_dps).abs()).collect();
+    rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.max(*b)))
+}
+
 /// Whether the runs include both directions.
 pub fn both_directions(data: &LoopData) -> bool {
     let r = &data.kin.runs;
@@ -110,6 +117,7 @@ fn in_situation<R>(data: &LoopData, current: &[Effect], evidence: &Evidence, f: 
         current,
         evidence: *evidence,
         separates_delay_and_index: separates_delay_and_index(data),
+        distinct_speeds: distinct_speeds(data),
         free_drift_keeps_constant_rates: free_drift_keeps_constant_rates(data),
         poses: data.poses.len(),
         temp_spread_c: &|| data.temp_spread_c(),

@@ -422,6 +422,8 @@ pub struct Situation<'a> {
     pub evidence: Evidence,
     /// Whether the runs hold two distinct signed θ2' (speeds or directions).
     pub separates_delay_and_index: bool,
+    /// Whether the runs hold two distinct |θ2'| (speeds, whatever their direction).
+    pub distinct_speeds: bool,
     /// Whether the free drift leaves the constant rate terms to the model
     /// (`selection::free_drift_keeps_constant_rates`).
     pub free_drift_keeps_constant_rates: bool,
