@@ -65,15 +65,23 @@ pub struct Score {
 
 /// Whether the runs contain two distinct signed θ2' (speeds or directions).
 pub fn separates_delay_and_index(data: &LoopData) -> bool {
-    let rates: Vec<f64> = data.kin.runs.iter().map(|r| r.gear_ratio * r.steady_rate_dps).collect();
+    two_distinct(&table_rates_dps(data))
+}
+
+/// Each run's steady θ2', °/s.
+fn table_rates_dps(data: &LoopData) -> Vec<f64> {
+    data.kin.runs.iter().map(|r| r.gear_ratio * r.steady_rate_dps).collect()
+}
+
+/// Whether two of `rates` differ by more than [`DISTINCT_RATE_FRACTION`] of the larger.
+fn two_distinct(rates: &[f64]) -> bool {
     rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.abs().max(b.abs())))
 }
 
 /// Whether the runs turn the table at two distinct |θ2'| (speeds, whatever their direction):
 /// what an effect even in θ2' (the filter's droop, ∝ θ2'²) needs to be told from M.
 pub fn distinct_speeds(data: &LoopData) -> bool {
-    let rates: Vec<f64> = data.kin.runs.iter().map(|r| (r.gear_ratio * r.steady_rate_dps).abs()).collect();
-    rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.max(*b)))
+    two_distinct(&table_rates_dps(data).iter().map(|r| r.abs()).collect::<Vec<_>>())
 }
 
 /// Whether the runs include both directions.
