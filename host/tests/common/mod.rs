@@ -178,7 +178,11 @@ pub fn spawn_virtual_rig(args: &[&str]) -> (std::process::Child, String) {
 /// loaded machine makes the test slower, never different. The operator's delays are counted in
 /// simulated time from the `at` answer current when the test sees the prompt, which is never
 /// earlier than the host's time when it printed it, so every answer comes ≥ 30 s after its
-/// question. Wall time is only measured (and bounded generously) for the signal tests' exit.
+/// question. That one instant depends on the wall clock (the test reads the host's output
+/// through a pipe): on a loaded machine the answer may come a few steps later, and the line's
+/// seeded losses then fall on other bytes. A test of a session with answers asserts what holds
+/// for any placement of the losses. Wall time is only measured (and bounded generously) for
+/// the signal tests' exit.
 pub struct LockstepBench {
     pub rig: std::process::Child,
     /// `None` once [`Self::advance`] ended the rig.
@@ -425,6 +429,18 @@ impl LockstepBench {
             assert!(t0.elapsed() < Duration::from_secs(60), "the virtual rig did not end: {:?}", self.log());
             thread::sleep(Duration::from_millis(10));
         }
+    }
+
+    /// For `--drop KIND:N`, `what` = `"KIND #N"`: the last command the rig received before it
+    /// dropped that message (the one it answered) and the first it received after (the host's
+    /// reply to the loss), by name. `None` if the rig never dropped it or heard nothing after.
+    pub fn dropped_and_repeated(&self, what: &str) -> Option<(String, String)> {
+        let log = self.log();
+        let at = log.iter().position(|l| *l == format!("virtual rig: dropped {what}"))?;
+        let name = |l: &String| Some(l.strip_prefix("virtual rig: received ")?.split(' ').next()?.to_string());
+        let before = log[..at].iter().rev().find_map(name)?;
+        let after = log[at + 1..].iter().find_map(name)?;
+        Some((before, after))
     }
 
     /// Simulated times (s) at which the rig received `command`.
