@@ -26,14 +26,16 @@
 //! speed `180`, two speeds `180,90`, both directions `180,-180`, three speeds `180,90,-180`, at
 //! 20, 120 and 300 s (12 designs). Effects: `none`; each switch of `host simulate --effect`
 //! alone (`host::sim::Effects::NAMES`) at its default size and at 3× it (`NAME=VALUE`, the
-//! value read from the simulator's own defaults); and `all`, the realistic set of the
-//! `all_effects` bench together at default size. Two switches have no size to scale and run at
+//! value read from the simulator's own defaults); `all`, the realistic set of the
+//! `all_effects` bench together at default size; and `drawn` (`host simulate --drawn-rig`):
+//! every effect of a real rig at once with its sizes, signs and phases drawn per seed, so each
+//! seed is another rig (12- or 16-pole gears among them), not the defaults' one. Two switches have no size to scale and run at
 //! size 1 only: `filter_delay` (the gyro's own low-pass, no value) and `earth_rotation` (its
 //! value is the latitude; Earth's rate is what it is). A value scales the switch's headline
 //! parameter only: `speed_ripple` its 1× harmonic, `nonlinearity` its quadratic term (the
 //! asymmetry stays), `offset_drift` the temperature rise; `g_sensitivity` and
 //! `gear_transmission` scale as a whole, `axis_delay` all three axes. The full matrix is 12 designs
-//! × 32 effect cases × 10 seeds = 3840 calibrations (and as many simulations, the first time). A calibration costs
+//! × 33 effect cases × 10 seeds = 3960 calibrations (and as many simulations, the first time). A calibration costs
 //! from 0.06 s of CPU (`180@20`, no effect) to ≈ 180 s (`180,90,-180@300`, `all`; 45 s at
 //! `180,90@120`): with effects on, about 0.1 s of CPU per second of run and pose. The long
 //! effectful cells dominate, and the full matrix takes of the order of a day on 2 cores: select.
@@ -43,7 +45,7 @@
 //! - `TRUST_DESIGNS="180@120;180,90@20"`: designs, the syntax of `all_effects`' `BENCH_PLANS`
 //!   (no `@`: 120 s);
 //! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order;
-//! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none` and `all` run once);
+//! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none`, `all` and `drawn` run once);
 //! - `TRUST_LIVE="180,90,-180@120"`: the live design of the third bar;
 //! - `TRUST_CACHE=0`: remove each capture once calibrated (see below).
 //!
@@ -83,9 +85,10 @@ const DEFAULT_LIVE: &str = "180,90,-180@120";
 /// Effects outside the calibration's catalogue: structure no model explains, flagged at best.
 const NOT_CATALOGUED: [&str; 1] = ["mystery_harmonic"];
 
-/// The no-effect case and the realistic set together.
+/// The no-effect case, the realistic set together, and a rig drawn at random per seed.
 const NONE: &str = "none";
 const ALL: &str = "all";
+const DRAWN: &str = "drawn";
 
 /// The simulator's effects with `name` switched on (`NAME` or `NAME=VALUE`).
 fn enabled(spec: &str) -> Effects {
@@ -120,8 +123,8 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
 struct Case {
     /// Its name in the table and its cache directory: `none`, `all`, `NAME`, `NAME_x3`.
     label: String,
-    /// The `--effect` arguments of `host simulate`.
-    specs: Vec<String>,
+    /// The effect options of `host simulate` (`--effect=…`, `--drawn-rig`).
+    options: Vec<String>,
     /// Every effect in it is in the calibration's catalogue.
     catalogued: bool,
 }
@@ -133,25 +136,29 @@ fn cases(effects: &[String], sizes: &[f64]) -> (Vec<Case>, Vec<String>) {
     for name in effects {
         let name = name.as_str();
         if name == NONE {
-            out.push(Case { label: NONE.into(), specs: Vec::new(), catalogued: true });
+            out.push(Case { label: NONE.into(), options: Vec::new(), catalogued: true });
             continue;
         }
         if name == ALL {
-            let specs = REALISTIC_EFFECTS.iter().map(|e| e.to_string()).collect();
+            let options = REALISTIC_EFFECTS.iter().map(|e| effect_option(e)).collect();
             let catalogued = REALISTIC_EFFECTS.iter().all(|e| !NOT_CATALOGUED.contains(e));
-            out.push(Case { label: ALL.into(), specs, catalogued });
+            out.push(Case { label: ALL.into(), options, catalogued });
+            continue;
+        }
+        if name == DRAWN {
+            out.push(Case { label: DRAWN.into(), options: vec!["--drawn-rig".into()], catalogued: true });
             continue;
         }
         assert!(
             known.contains(&name),
-            "TRUST_EFFECTS: unknown effect {name:?}; known: none, all, {}",
+            "TRUST_EFFECTS: unknown effect {name:?}; known: none, all, drawn, {}",
             known.join(", ")
         );
         let catalogued = !NOT_CATALOGUED.contains(&name);
         let default = headline(name, &enabled(name));
         for &size in sizes {
             if size == 1.0 {
-                out.push(Case { label: name.into(), specs: vec![name.into()], catalogued });
+                out.push(Case { label: name.into(), options: vec![effect_option(name)], catalogued });
                 continue;
             }
             let Some(d) = default else {
@@ -164,10 +171,15 @@ fn cases(effects: &[String], sizes: &[f64]) -> (Vec<Case>, Vec<String>) {
             // The value must land where `headline` reads it, or the case is not the size it says.
             let got = headline(name, &enabled(&spec)).expect("switched on");
             assert!((got - size * d).abs() <= 1e-9 * (size * d).abs(), "{spec} sets {got}, not {size} × {d}");
-            out.push(Case { label: format!("{name}_x{size}"), specs: vec![spec], catalogued });
+            out.push(Case { label: format!("{name}_x{size}"), options: vec![effect_option(&spec)], catalogued });
         }
     }
     (out, skipped)
+}
+
+/// `host simulate --effect=SPEC`.
+fn effect_option(spec: &str) -> String {
+    format!("--effect={spec}")
 }
 
 /// A comma-separated list in `var`, or `default`.
@@ -221,7 +233,7 @@ fn run_seed(design: &str, case: &Case, seed: u64, keep_capture: bool) -> SeedRun
 
 fn judge(dir: &Path, design: &str, case: &Case, seed: u64) -> SeedRun {
     let mut r = SeedRun { outcome: SeedOutcome::default(), wall_s: None, problem: None };
-    let usage = match replay::simulated(dir, design, seed, &case.specs).and_then(|cap| replay::calibrate(&cap)) {
+    let usage = match replay::simulated_with(dir, design, seed, &case.options).and_then(|cap| replay::calibrate(&cap)) {
         Ok(u) => u,
         Err(e) => {
             r.problem = Some(e);
@@ -299,8 +311,11 @@ fn main() {
         .map(|d| full_plan(d))
         .collect();
     let live = full_plan(&std::env::var("TRUST_LIVE").unwrap_or_else(|_| DEFAULT_LIVE.into()));
-    let default_effects =
-        std::iter::once(NONE).chain(Effects::NAMES.iter().map(|(n, _)| *n)).chain([ALL]).map(String::from).collect();
+    let default_effects = std::iter::once(NONE)
+        .chain(Effects::NAMES.iter().map(|(n, _)| *n))
+        .chain([ALL, DRAWN])
+        .map(String::from)
+        .collect();
     let effects = list_from_env("TRUST_EFFECTS", default_effects);
     let sizes: Vec<f64> = list_from_env("TRUST_SIZES", vec!["1".into(), "3".into()])
         .iter()

@@ -270,6 +270,11 @@ struct SimulateArgs {
     /// table_tilt, pose_fixture, bias_random_walk, axis_delay, rig_clock.
     #[arg(long = "effect")]
     effects: Vec<String>,
+    /// Every effect of a real rig (the realistic set, the delays between the gyro's axes and the
+    /// rig's clock) with each parameter drawn from the seed within its plausible range
+    /// (docs/simulation.md); an --effect NAME=VALUE then sets that one's headline value.
+    #[arg(long)]
+    drawn_rig: bool,
     /// Full configuration as JSON (a `SimConfig`); overrides the options above.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -550,7 +555,8 @@ fn replayed(replay: &[PathBuf], identity: Identity) -> Result<Source> {
 /// `host simulate`: a capture of the simulated rig and its truth (a thermal session's folder
 /// with `--chamber-c`), from the options or a whole `--config`.
 fn simulate_cmd(args: SimulateArgs) -> Result<ExitCode> {
-    let SimulateArgs { out, seed, duration, poses, rates_dps, full_scale, effects, config, chamber_c } = args;
+    let SimulateArgs { out, seed, duration, poses, rates_dps, full_scale, effects, drawn_rig, config, chamber_c } =
+        args;
     let cfg = match config {
         Some(path) => {
             let text = fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -571,6 +577,9 @@ fn simulate_cmd(args: SimulateArgs) -> Result<ExitCode> {
                 2000 => protocol::FullScale::Dps2000,
                 _ => protocol::FullScale::Dps500,
             };
+            if drawn_rig {
+                cfg.effects = sim::Effects::drawn(&mut sim::effects_rng(seed));
+            }
             for e in &effects {
                 cfg.effects.enable(e).map_err(|e| Usage(e.into()))?;
             }

@@ -103,6 +103,31 @@ fn simulate_refuses_a_rate_the_rig_refuses() {
     assert!(!out.exists());
 }
 
+/// `--drawn-rig`: the seed's rig has every effect of a real one, drawn from its own stream (the
+/// sensor is the one the same seed gives without it), and `--effect NAME=VALUE` still sets one.
+#[test]
+fn simulate_draws_a_rig_per_seed_and_keeps_the_seeds_sensor() {
+    let tmp = scratch("drawn");
+    let truth = |name: &str, extra: &[&str]| -> serde_json::Value {
+        let out = tmp.path().join(format!("{name}.cap"));
+        let mut args = vec!["simulate", "--seed", "3", "--duration", "5", "--out", out.to_str().unwrap()];
+        args.extend(extra);
+        let o = host(&args);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("truth.json")).unwrap()).unwrap()
+    };
+    let plain = truth("plain", &[]);
+    let drawn = truth("drawn", &["--drawn-rig"]);
+    let tilted = truth("tilted", &["--drawn-rig", "--effect", "table_tilt=0.25"]);
+    let expected = host::sim::Effects::drawn(&mut host::sim::effects_rng(3));
+    let effects: host::sim::Effects = serde_json::from_value(drawn["effects"].clone()).unwrap();
+    assert_eq!(effects, expected);
+    assert_eq!(drawn["m_counts_per_dps"], plain["m_counts_per_dps"]);
+    let tilted: host::sim::Effects = serde_json::from_value(tilted["effects"].clone()).unwrap();
+    assert_eq!(tilted.table_tilt.unwrap().tilt_deg, 0.25);
+    assert_eq!(host::sim::Effects { table_tilt: expected.table_tilt, ..tilted }, expected);
+}
+
 /// Issue 28: `--duration 1e12` wrote 4.27 GB in 57 s before it was killed; a run is now at most
 /// 6 h (`sim::MAX_RUN_S`), refused before any file is created.
 #[test]

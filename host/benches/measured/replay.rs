@@ -58,12 +58,18 @@ pub fn seeds_from_env(var: &str, default: u64) -> u64 {
 /// and then the arguments are written after the capture is complete, so together they mark a
 /// whole one: an interrupted simulation is redone.
 pub fn simulated(dir: &Path, plan: &str, seed: u64, effects: &[impl AsRef<str>]) -> Result<PathBuf, String> {
+    let effects: Vec<String> = effects.iter().map(|e| format!("--effect={}", e.as_ref())).collect();
+    simulated_with(dir, plan, seed, &effects)
+}
+
+/// [`simulated`] with `host simulate` options of any kind (`--effect=…`, `--drawn-rig`).
+pub fn simulated_with(dir: &Path, plan: &str, seed: u64, options: &[String]) -> Result<PathBuf, String> {
     let cap = dir.join("x.cap");
     let args_file = dir.join("simulate.args");
     let (rates, duration_s) = rates_and_duration(plan);
     // `=`: a plan starting with a negative rate must not read as an option.
     let mut args = vec![format!("--seed={seed}"), format!("--rates-dps={rates}"), format!("--duration={duration_s}")];
-    args.extend(effects.iter().map(|e| format!("--effect={}", e.as_ref())));
+    args.extend(options.iter().cloned());
     let args_text = args.join("\n") + "\n";
     if cap.exists()
         && dir.join("x.truth.json").exists()

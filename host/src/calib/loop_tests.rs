@@ -1018,3 +1018,52 @@ fn both_directions_at_one_speed_never_fit_the_filter_droop() {
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "realistic at ±180");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
+
+/// Twenty-second runs of a rig drawn at random (`host simulate --drawn-rig`, the trust bench's
+/// `drawn` column), calibrated with nothing declared.
+fn drawn_rig_loop(seed: u64, rates_dps: &[f64]) -> (LoopReport, Truth) {
+    let runs = Pose::ALL
+        .iter()
+        .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunSpec { pose, rate_dps, duration_s: 20.0 }))
+        .collect();
+    let mut cfg = SimConfig::with_runs(seed, runs);
+    cfg.effects = crate::sim::Effects::drawn(&mut crate::sim::effects_rng(seed));
+    let out = simulate(&cfg).unwrap();
+    let cap = decode(&out.bytes);
+    let r = close_loop(&cap.runs, &LoopOptions::default(), Some(out.truth.sensor())).expect("calibrates");
+    (r, out.truth)
+}
+
+/// The drawn rig of seed 1 at 180, 90 °/s for 20 s: the g-sensitivity was tried and its score
+/// fell below the test's χ² 35 once the tilt and the fixture were in, but along directions the
+/// runs see at λ between 25 and 50 a test of nine parameters misses an effect of plausible size
+/// one time in four or more, and the bias it left was 4.4σ at exit 0. Those directions are now
+/// carried in σ: within 3σ.
+#[test]
+fn a_test_too_weak_to_see_a_plausible_effect_does_not_speak_for_it() {
+    let (r, _) = drawn_rig_loop(1, &[180.0, 90.0]);
+    assert!(!r.effects().contains(&Effect::GSensitivity), "{}", r.summary());
+    assert!(
+        r.final_report().consider.iter().any(|t| t.effect == Effect::GSensitivity.key()),
+        "the g-sensitivity's unseen part must be carried\n{}",
+        r.summary()
+    );
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "drawn rig 1 at 180, 90 for 20 s");
+}
+
+/// The drawn rig of seed 1 at ±180 °/s for 20 s: its offset walks 0.0034 °/s/√s under a
+/// warm-up, which the loop fits as a curve. A curve never follows a walk, and in 20 s the walk's
+/// wander is not slow against the table's turn: it left 0.005° in a direction (4.6σ) at exit 0.
+/// The walk's steps between the finest knots are now carried in σ, at the size the residual
+/// allows (0.74 of the datasheet-sized prior here, whose 0.003 °/s/√s the drawn walk exceeds):
+/// the bar, |z| ≤ 4 at exit 0 (3.46 on this direction).
+#[test]
+fn an_offset_random_walk_no_knots_follow_is_carried_in_sigma() {
+    let (r, _) = drawn_rig_loop(1, &[180.0, -180.0]);
+    assert!(!r.effects().iter().any(|e| matches!(e, Effect::DriftKnots(10))), "{}", r.summary());
+    let walk = r.final_report().consider.iter().find(|t| t.effect == "drift_knots_10s");
+    assert!(walk.is_some_and(|t| t.unseparated > 0), "the walk's bound must be carried\n{}", r.summary());
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(t.max_z() <= 4.0, "drawn rig 1 at ±180 for 20 s: max |z| {:.2}\n{}", t.max_z(), r.summary());
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}

@@ -14,6 +14,7 @@
 //! Everything is deterministic for a seed, with independent random streams for the sensor, the
 //! rig, the noise and the timestamp jitter: one seed is one sensor whatever the runs.
 
+mod drawn;
 pub mod effects;
 mod filter;
 mod motion;
@@ -34,7 +35,7 @@ pub use effects::{
 };
 pub use rig::{serve, Port, SimRig};
 pub use sensor::NOISE_DENSITY_DPS_PER_SQRT_HZ;
-pub use session::FIRMWARE_VERSION;
+pub use session::{effects_rng, FIRMWARE_VERSION};
 pub use stream::FrameWriter;
 pub use truth::{RunTruth, Truth};
 

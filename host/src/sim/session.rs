@@ -64,6 +64,13 @@ enum Stream {
     Noise = 2,
     Jitter = 3,
     RandomWalk = 4,
+    Effects = 5,
+}
+
+/// The stream [`crate::sim::Effects::drawn`] draws a seed's rig from (`host simulate
+/// --drawn-rig`): its own, so the sensor, noise and rig of a seed are the same with and without it.
+pub fn effects_rng(seed: u64) -> ChaCha8Rng {
+    rng(seed, Stream::Effects)
 }
 
 fn rng(seed: u64, stream: Stream) -> ChaCha8Rng {

@@ -20,7 +20,7 @@
 //! considered effect's: the same sums a candidate's score is read from.
 
 use crate::calib::analysis::stats::chi2_upper_quantile;
-use crate::calib::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own};
+use crate::calib::effects::terms::{Col, ConsiderBound, ConsiderCtx, LinCol, Own, Reported};
 use crate::calib::effects::Effect;
 use crate::calib::engine::{accumulate_pairs, normal_equations, CrossSums, Fitted, Gram, LoopData, Reach, Selection};
 use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
@@ -33,6 +33,38 @@ use serde::{Deserialize, Serialize};
 /// effect of plausible size, past the loop's Bonferroni threshold for one parameter
 /// (χ²₁ at 1e-3/40: 16.4).
 pub const SEPARATED_SNR2: f64 = 25.0;
+
+/// One-sided normal quantile of the power the loop's test must have against an effect of
+/// plausible size for its silence to speak for a direction: 95 %.
+const POWER_Z: f64 = 1.645;
+
+/// The information (whitened, as [`SEPARATED_SNR2`]) from which a test of `dof` degrees of
+/// freedom at χ² threshold `threshold` sees an effect of plausible size along one direction with
+/// 95 % power: the least λ with k + λ − z·√(2(k + 2λ)) ≥ T, the normal approximation to the
+/// non-central χ²(k, λ) (mean k + λ, variance 2(k + 2λ); Johnson, Kotz & Balakrishnan,
+/// *Continuous Univariate Distributions* vol. 2, ch. 29). Never below [`SEPARATED_SNR2`]. A
+/// nine-parameter effect tested at χ² 35 needs λ ≈ 50, twice what one 5σ signal is: below it an
+/// effect of plausible size may pass the test unseen and still move M.
+fn seen_by_test(dof: usize, threshold: f64) -> f64 {
+    if !threshold.is_finite() {
+        return f64::INFINITY;
+    }
+    let k = dof as f64;
+    let short = |l: f64| k + l - POWER_Z * (2.0 * (k + 2.0 * l)).sqrt() < threshold;
+    let (mut lo, mut hi) = (0.0, SEPARATED_SNR2.max(threshold));
+    while short(hi) {
+        hi *= 2.0;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if short(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi.max(SEPARATED_SNR2)
+}
 
 /// Smallest added σ of a sensitivity (ppm) or a direction (°) that a term is reported for; below
 /// it the runs separate the effect in all that matters.
@@ -117,6 +149,9 @@ struct Candidate {
     /// Whether the loop tried it (`selection::tried`): a test then rules out what the runs
     /// see of it, and only what they do not see is considered.
     tried: bool,
+    /// For the levels of a walk ([`Effect::considered_as_walk`]): each column's predecessor
+    /// in its stretch (None for a stretch's first considered level). Empty otherwise.
+    walk: Vec<Option<usize>>,
 }
 
 fn candidates(
@@ -130,19 +165,31 @@ fn candidates(
     for effect in Effect::catalogue().into_iter().filter(|e| !f.model.effects.contains(e)) {
         let (lin, shared) = effect.params(&data.layout);
         let tried = crate::calib::analysis::selection::tried(data, &f.model.effects, effect);
-        let mut c = Candidate { effect, cols: Vec::new(), sigma: Vec::new(), params: Vec::new(), source: "", tried };
-        let mut add = |col: Col, own: Own, bound: Option<ConsiderBound>| {
-            let Some(mut b) = bound else { return };
+        let walk_step = effect.considered_as_walk();
+        let mut c = Candidate {
+            effect,
+            cols: Vec::new(),
+            sigma: Vec::new(),
+            params: Vec::new(),
+            source: "",
+            tried,
+            walk: Vec::new(),
+        };
+        let mut walk = Vec::new();
+        // Adds a column with its bound; whether it was (it has a size and a reported unit).
+        let mut add = |col: Col, own: Own, bound: Option<ConsiderBound>| -> bool {
+            let Some(mut b) = bound else { return false };
             let r = match col {
+                Col::Lin(LinCol::DriftKnot { .. }) => walk_step.clone().map(|step| Reported::new(step, 1.0, "°/s")),
                 Col::Lin(l) => l.reported(cx.full_scale_dps),
                 Col::Shared(p) => Some(p.reported()),
             };
-            let Some(r) = r else { return };
+            let Some(r) = r else { return false };
             if let Some(s) = overrides.of(effect) {
                 b = ConsiderBound { sigma: s, source: "given with --consider" };
             }
             if b.sigma <= 0.0 {
-                return;
+                return false;
             }
             let fitted = b.sigma / r.scale;
             c.sigma.push(match own {
@@ -152,15 +199,30 @@ fn candidates(
             c.params.push(ConsideredParam { name: r.name, sigma: b.sigma, unit: r.unit.into() });
             c.cols.push(col);
             c.source = b.source;
+            true
         };
+        let mut last_level: Option<(u16, usize)> = None;
         for l in lin {
-            if let LinCol::Of(_, kk) = l {
-                add(Col::Lin(l), Own::Lin(kk), effect.consider(Own::Lin(kk), cx));
+            match l {
+                LinCol::Of(_, kk) => {
+                    add(Col::Lin(l), Own::Lin(kk), effect.consider(Own::Lin(kk), cx));
+                }
+                // A stretch's first level is its offset's: the walk starts from it.
+                LinCol::DriftKnot { stretch, knot, .. } => {
+                    let level = knot > 0 && add(Col::Lin(l), Own::Lin(0), effect.consider(Own::Lin(0), cx));
+                    if level {
+                        walk.push(last_level.filter(|(s, _)| *s == stretch).map(|(_, i)| i));
+                        last_level = Some((stretch, walk.len() - 1));
+                    }
+                }
+                _ => {}
             }
         }
         for p in shared {
             add(Col::Shared(p), Own::Shared(p.k), effect.consider(Own::Shared(p.k), cx));
         }
+        debug_assert!(walk.is_empty() || walk.len() == c.cols.len(), "a walk is all levels");
+        c.walk = walk;
         if !c.cols.is_empty() {
             out.push(c);
         }
@@ -258,28 +320,28 @@ pub fn consider(
     let b_model = DVector::from_fn(model_idx.len(), |i, _| b_vec[model_idx[i]]);
     let mut out = Consideration::none();
     for (c, pl) in cands.iter().zip(&places) {
-        // The effect's parameters (a linear column is one per axis) and their prior σ.
-        let mut idx = Vec::new();
-        let mut sd = Vec::new();
-        for (&(is_lin, p), s) in pl.iter().zip(&c.sigma) {
-            if is_lin {
-                for (a, &sa) in s.iter().enumerate() {
-                    idx.push(lin_param(nl_ext, a, p));
-                    sd.push(sa);
-                }
-            } else {
-                idx.push(3 * nl_ext + p);
-                sd.push(s[0]);
-            }
-        }
-        let b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]);
+        let (idx, mut sd) = prior_params(c, pl, nl_ext);
+        // The parameters the prior bounds: the levels themselves, or a walk's steps (levels =
+        // A·steps, A summing each level's steps back to its stretch's start).
+        let a = walk_sums(&c.walk, idx.len());
+        let b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]) * &a;
         let s_mat = chol.solve(&b);
-        let c_mat = DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]);
+        let c_mat = a.transpose() * DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]) * &a;
         let info = &c_mat - b.transpose() * &s_mat;
         // The residual's correlation with the effect, beyond what the model's own step takes.
-        let grad = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
+        let grad = a.transpose() * DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
         let threshold = |dof: usize| chi2_upper_quantile(dof, alpha / cands.len() as f64);
-        let tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
+        let mut tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
+        let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
+        if !c.walk.is_empty() {
+            // A walk's size is read from the data (its scale's upper bound), every direction
+            // counted at it: no test of hundreds of steps speaks for any one of them.
+            let Some(scale) = walk_scale(&info, &grad, &sd) else { continue };
+            sd.iter_mut().for_each(|v| *v *= scale);
+            considered.iter_mut().for_each(|p| p.sigma *= scale);
+            source = format!("{source}, times {scale:.2}: as large as the residual's own wander allows (95 % bound)");
+            tried = None;
+        }
         let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd, tried) else {
             continue;
         };
@@ -292,8 +354,8 @@ pub fn consider(
         let term = ConsiderTerm {
             effect: c.effect.key(),
             name: c.effect.name(),
-            params: c.params.clone(),
-            source: c.source.into(),
+            params: considered,
+            source,
             k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),
             direction_sigma_deg: axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees()),
             unseparated: lambdas.len(),
@@ -309,6 +371,106 @@ pub fn consider(
     }
     out.terms.sort_by(|a, b| max3(b.k_sigma_ppm).total_cmp(&max3(a.k_sigma_ppm)));
     out
+}
+
+/// A candidate's parameters in the joint solve (a linear column is one per axis, of `nl_ext`
+/// linear columns) at its places `pl`, and their prior σs.
+fn prior_params(c: &Candidate, pl: &[(bool, usize)], nl_ext: usize) -> (Vec<usize>, Vec<f64>) {
+    let mut idx = Vec::new();
+    let mut sd = Vec::new();
+    for (&(is_lin, p), s) in pl.iter().zip(&c.sigma) {
+        if is_lin {
+            for (a, &sa) in s.iter().enumerate() {
+                idx.push(lin_param(nl_ext, a, p));
+                sd.push(sa);
+            }
+        } else {
+            idx.push(3 * nl_ext + p);
+            sd.push(s[0]);
+        }
+    }
+    (idx, sd)
+}
+
+/// Half the χ²₁ quantile of a one-sided 95 % bound (2.71 / 2): how far the log-likelihood of
+/// a walk's scale falls from its maximum at the bound [`walk_scale`] returns.
+const WALK_BOUND_DROP: f64 = 1.353;
+
+/// Empirical Bayes for a walk whose steps have prior σs `sd` times an unknown scale s: the
+/// upper 95 % bound of s from the data's own sight of the steps (partial information `info`,
+/// the residual's gradient `grad`). Along each eigendirection of the whitened information (λ),
+/// the whitened score p has variance λ + s²λ² (noise plus the walk), so the log-likelihood of s²
+/// is −½ Σ [ln(λ + s²λ²) + p²/(λ + s²λ²)]; the bound is where it falls [`WALK_BOUND_DROP`] below
+/// its maximum on the far side (Morris, JASA 78, 47, 1983, for the parametric empirical Bayes).
+/// A gyro whose residual shows no wander carries a fraction of the datasheet-sized walk, one
+/// that shows more carries more. None when the information is not finite.
+fn walk_scale(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<f64> {
+    let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
+    let w = &d * info * &d;
+    let w = (&w + w.transpose()) * 0.5;
+    if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
+        return None;
+    }
+    let eig = w.symmetric_eigen();
+    let g_w = &d * grad;
+    let seen: Vec<(f64, f64)> = (0..sd.len())
+        .filter(|&i| eig.eigenvalues[i] > 1e-9)
+        .map(|i| (eig.eigenvalues[i], eig.eigenvectors.column(i).dot(&g_w).powi(2)))
+        .collect();
+    let ll = |s2: f64| -> f64 {
+        -0.5 * seen.iter().map(|&(l, p2)| (l + s2 * l * l).ln() + p2 / (l + s2 * l * l)).sum::<f64>()
+    };
+    // The maximum on a grid of s² (0, then 1e-4 to 1e4 a tenth of a decade apart), refined by
+    // golden section between the best point's neighbours; then the bound beyond it by bisection.
+    let grid: Vec<f64> = std::iter::once(0.0).chain((0..=80).map(|i| 10f64.powf(-4.0 + 0.1 * f64::from(i)))).collect();
+    let at = (0..grid.len()).max_by(|&i, &j| ll(grid[i]).total_cmp(&ll(grid[j])))?;
+    let (mut a, mut b) = (grid[at.saturating_sub(1)], grid[(at + 1).min(grid.len() - 1)]);
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..80 {
+        let (c, d) = (b - golden * (b - a), a + golden * (b - a));
+        if ll(c) >= ll(d) {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let s2_best = 0.5 * (a + b);
+    let best = (s2_best, ll(s2_best).max(ll(grid[at])));
+    let floor = best.1 - WALK_BOUND_DROP;
+    let (mut lo, mut hi) = (best.0, best.0.max(1e-4));
+    while ll(hi) > floor {
+        if hi > 1e8 {
+            return Some(1e4);
+        }
+        lo = hi;
+        hi *= 2.0;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if ll(mid) > floor {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some(hi.sqrt())
+}
+
+/// The map from a candidate's prior parameters to its columns' (`n` of them, three per linear
+/// column in axis order): the identity, or for a walk (`walk` each column's predecessor) the
+/// sums that make each level from its own and its predecessors' steps, axis by axis.
+fn walk_sums(walk: &[Option<usize>], n: usize) -> DMatrix<f64> {
+    let mut a = DMatrix::identity(n, n);
+    for (col, _) in walk.iter().enumerate() {
+        let mut before = walk[col];
+        while let Some(j) = before {
+            for axis in 0..3 {
+                a[(3 * col + axis, 3 * j + axis)] = 1.0;
+            }
+            before = walk[j];
+        }
+    }
+    a
 }
 
 fn max3(v: [f64; 3]) -> f64 {
@@ -339,18 +501,21 @@ fn posterior(
     let eig = w.symmetric_eigen();
     let g_w = &d * grad;
     let lambdas: Vec<f64> = eig.eigenvalues.iter().map(|l| l.max(0.0)).collect();
+    // A direction the loop's test of the whole effect would see at plausible size with 95 %
+    // power; the test's silence speaks for no other.
+    let seen = tried.map_or(SEPARATED_SNR2, |threshold| seen_by_test(n, threshold(n)));
     // The score (Lagrange-multiplier) statistic of the separated directions, gᵀI⁻¹g over them:
     // what the loop's test of the effect reads. Past its threshold the model lacks an effect
     // the runs see (its candidate rule, gated by the residual's diagnostics, never let the loop
     // score it), so no test speaks for those directions either.
-    let separated: Vec<usize> = (0..n).filter(|&i| lambdas[i] >= SEPARATED_SNR2).collect();
+    let separated: Vec<usize> = (0..n).filter(|&i| lambdas[i] >= seen).collect();
     let score: f64 = separated.iter().map(|&i| eig.eigenvectors.column(i).dot(&g_w).powi(2) / lambdas[i]).sum();
     let tested = tried.is_some_and(|threshold| separated.is_empty() || score <= threshold(separated.len()));
     let mut var = DMatrix::zeros(n, n);
     let mut mean = DVector::zeros(n);
     let mut unseparated = Vec::new();
     for (i, &lambda) in lambdas.iter().enumerate() {
-        if tested && lambda >= SEPARATED_SNR2 {
+        if tested && lambda >= seen {
             continue;
         }
         unseparated.push(lambda);
@@ -370,10 +535,18 @@ mod tests {
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], Some(&|_| f64::INFINITY)).expect("finite");
+        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], Some(&|_| 16.4)).expect("finite");
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
+        // Seen at λ = 40 (a 6σ signal at plausible size) but by a test at χ² 35, which would
+        // miss it one time in four: counted.
+        let info40 = DMatrix::from_row_slice(1, 1, &[40.0]);
+        let (c, n) = posterior(&info40, &DVector::zeros(1), &[1.0], Some(&|_| 35.0)).expect("finite");
+        assert_eq!(n, [40.0]);
+        assert!((c[(0, 0)] - 1.0 / 41.0).abs() < 1e-12, "{c}");
+        let (_, n) = posterior(&info40, &DVector::zeros(1), &[1.0], Some(&|_| 16.4)).expect("finite");
+        assert!(n.is_empty(), "{n:?}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
         let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
@@ -401,6 +574,50 @@ mod tests {
         let (c, _) =
             posterior(&info, &DVector::from_element(1, 2.0), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
         assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
+    }
+
+    /// The power bound: one parameter at the loop's usual χ² 16.4 needs λ ≈ 35; nine at 35.2
+    /// need ≈ 50.6 (from k + λ − 1.645·√(2(k + 2λ)) = T); a weak test never falls below 25.
+    #[test]
+    fn a_test_speaks_for_what_it_would_see_with_95_percent_power() {
+        assert!((seen_by_test(1, 16.4) - 35.0).abs() < 0.1, "{}", seen_by_test(1, 16.4));
+        assert!((seen_by_test(9, 35.2) - 50.6).abs() < 0.1, "{}", seen_by_test(9, 35.2));
+        assert_eq!(seen_by_test(1, 1.0), SEPARATED_SNR2);
+        assert_eq!(seen_by_test(3, f64::INFINITY), f64::INFINITY);
+    }
+
+    /// A walk's levels are its steps summed back to its stretch's start, axis by axis: levels
+    /// 0, 1 of one stretch and level 2 of the next.
+    #[test]
+    fn a_walks_levels_sum_its_steps_within_a_stretch() {
+        let a = walk_sums(&[None, Some(0), None], 9);
+        for axis in 0..3 {
+            for (level, steps) in [(0, vec![0]), (1, vec![0, 1]), (2, vec![2])] {
+                for step in 0..3 {
+                    let want = if steps.contains(&step) { 1.0 } else { 0.0 };
+                    assert_eq!(a[(3 * level + axis, 3 * step + axis)], want, "level {level} step {step}");
+                }
+            }
+            assert_eq!(a.row(axis).sum(), 1.0);
+        }
+        assert_eq!(a.sum(), 12.0);
+        assert_eq!(walk_sums(&[], 4), DMatrix::identity(4, 4));
+    }
+
+    /// A hundred steps seen at λ = 4 each: where the scores are what noise alone gives (p² = λ)
+    /// the walk's bound is a small fraction of its prior; where they carry a walk of the prior's
+    /// size (p² = λ + λ²) the bound is just above 1.
+    #[test]
+    fn a_walks_size_is_bounded_by_the_wander_the_data_show() {
+        let n = 100;
+        let info = DMatrix::from_diagonal_element(n, n, 4.0);
+        let quiet = walk_scale(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite");
+        assert!(quiet > 0.05 && quiet < 0.3, "{quiet}");
+        let walking = walk_scale(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite");
+        assert!(walking > 1.0 && walking < 1.4, "{walking}");
+        // The prior's σs only set the units: for the same data, twice the σ, half the scale.
+        let halved = walk_scale(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]);
+        assert!((halved.expect("finite") - walking / 2.0).abs() < 1e-6 * walking);
     }
 
     #[test]

@@ -3,7 +3,11 @@
 use super::terms::{
     AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
 };
-use super::{Behaviour, Effect, Layout};
+use super::{Behaviour, Effect, Layout, DRIFT_KNOT_SPACINGS_S};
+
+/// One σ of the offset's rate random walk that the consider covariance carries while no free
+/// drift is fitted, °/s/√s ([`DriftKnots`]'s `consider`).
+pub const RANDOM_WALK_DPS_PER_SQRT_S: f64 = 0.003;
 
 /// Offsets that wander with no assumed shape (a rate random walk on top of a warm-up that lags
 /// the die temperature): linear between knots about this many seconds apart, one continuous
@@ -69,9 +73,25 @@ impl Behaviour for DriftKnots {
         0.0
     }
 
-    /// None: an offset drift moves slowly against the table's turn: what it leaves in M is what the drift models and the free drift are tested for.
-    fn consider(&self, _: Own, _: &ConsiderCtx) -> Option<ConsiderBound> {
-        None
+    /// The rate random walk every MEMS offset has, while the model holds no knots this fine: the
+    /// finest spacing's knots, each step between neighbours K·√T (T the spacing). A drift curve
+    /// (a warm-up, a polynomial) never follows a walk, and in short runs the walk's wander is
+    /// not slow against the table's turn: 0.0034 °/s/√s under a fitted warm-up left 0.005° in a
+    /// direction at 20-s runs (max |z| 4.6). K = 0.003 °/s/√s, the middle of MEMS gyros'
+    /// 0.001-0.005 (IEEE Std 952's rate random walk; the L3G4200D datasheet gives none),
+    /// engineering judgement. The knots' columns are levels; the consider covariance takes the
+    /// bound on their steps ([`Behaviour::considered_as_walk`]).
+    fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
+        let finest = DRIFT_KNOT_SPACINGS_S.iter().copied().min().unwrap_or(self.0);
+        let held = cx.current.iter().any(|e| matches!(e, Effect::DriftKnots(sp) if *sp <= self.0));
+        (self.0 == finest && !held).then(|| ConsiderBound {
+            sigma: RANDOM_WALK_DPS_PER_SQRT_S * f64::from(self.0).sqrt(),
+            source: "rate random walk of a MEMS gyro's offset, 0.001-0.005 °/s/√s (IEEE Std 952; none in the L3G4200D datasheet), 0.003 taken (engineering judgement)",
+        })
+    }
+
+    fn considered_as_walk(&self) -> Option<String> {
+        Some(format!("offset step over {} s", self.0))
     }
 
     /// On top of a drift curve whose residual still drifts (a random walk, a warm-up that lags

@@ -105,6 +105,13 @@ pub trait Behaviour {
     /// Where the runs cannot separate it, that size is carried in the calibration's σ.
     fn consider(&self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound>;
 
+    /// Whether its linear columns are the levels of a walk, each stretch's first level held by
+    /// the offsets: [`Behaviour::consider`] then bounds the steps between neighbouring levels,
+    /// which the walk takes independently, and this names one step. None for every other effect.
+    fn considered_as_walk(&self) -> Option<String> {
+        None
+    }
+
     /// What of a point parameter `own` needs beyond eq. 1-2.
     fn needs(&self, own: Own) -> Needs {
         let _ = own;
@@ -263,6 +270,11 @@ impl Effect {
     /// Its plausible size while the model lacks it ([`Behaviour::consider`]).
     pub fn consider(self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
         self.behaviour(|b| b.consider(own, cx))
+    }
+
+    /// [`Behaviour::considered_as_walk`].
+    pub fn considered_as_walk(self) -> Option<String> {
+        self.behaviour(|b| b.considered_as_walk())
     }
 }
 
