@@ -42,28 +42,17 @@ const POWER_Z: f64 = 1.645;
 /// freedom at χ² threshold `threshold` sees an effect of plausible size along one direction with
 /// 95 % power: the least λ with k + λ − z·√(2(k + 2λ)) ≥ T, the normal approximation to the
 /// non-central χ²(k, λ) (mean k + λ, variance 2(k + 2λ); Johnson, Kotz & Balakrishnan,
-/// *Continuous Univariate Distributions* vol. 2, ch. 29). Never below [`SEPARATED_SNR2`]. A
-/// nine-parameter effect tested at χ² 35 needs λ ≈ 50, twice what one 5σ signal is: below it an
-/// effect of plausible size may pass the test unseen and still move M.
+/// *Continuous Univariate Distributions* vol. 2, ch. 29). With m = k + λ − T ≥ 0 the equality
+/// is m² − 4z²·m − 2z²·(2T − k) = 0, whose larger root gives λ. Never below [`SEPARATED_SNR2`].
+/// A nine-parameter effect tested at χ² 35 needs λ ≈ 50, twice what one 5σ signal is: below it
+/// an effect of plausible size may pass the test unseen and still move M.
 fn seen_by_test(dof: usize, threshold: f64) -> f64 {
     if !threshold.is_finite() {
         return f64::INFINITY;
     }
-    let k = dof as f64;
-    let short = |l: f64| k + l - POWER_Z * (2.0 * (k + 2.0 * l)).sqrt() < threshold;
-    let (mut lo, mut hi) = (0.0, SEPARATED_SNR2.max(threshold));
-    while short(hi) {
-        hi *= 2.0;
-    }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if short(mid) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi.max(SEPARATED_SNR2)
+    let (k, z2) = (dof as f64, POWER_Z * POWER_Z);
+    let m = 2.0 * z2 + (4.0 * z2 * z2 + 2.0 * z2 * (2.0 * threshold - k)).max(0.0).sqrt();
+    (m + threshold - k).max(SEPARATED_SNR2)
 }
 
 /// Smallest added σ of a sensitivity (ppm) or a direction (°) that a term is reported for; below
@@ -321,15 +310,21 @@ pub fn consider(
     let mut out = Consideration::none();
     for (c, pl) in cands.iter().zip(&places) {
         let (idx, mut sd) = prior_params(c, pl, nl_ext);
-        // The parameters the prior bounds: the levels themselves, or a walk's steps (levels =
-        // A·steps, A summing each level's steps back to its stretch's start).
-        let a = walk_sums(&c.walk, idx.len());
-        let b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]) * &a;
+        let mut b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]);
+        let mut c_mat = DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]);
+        let mut b_own = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]);
+        if !c.walk.is_empty() {
+            // The parameters the prior bounds are a walk's steps: levels = A·steps, A summing
+            // each level's steps back to its stretch's start.
+            let a = walk_sums(&c.walk, idx.len());
+            b *= &a;
+            c_mat = a.transpose() * c_mat * &a;
+            b_own = a.transpose() * b_own;
+        }
         let s_mat = chol.solve(&b);
-        let c_mat = a.transpose() * DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]) * &a;
         let info = &c_mat - b.transpose() * &s_mat;
         // The residual's correlation with the effect, beyond what the model's own step takes.
-        let grad = a.transpose() * DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]) - s_mat.transpose() * &b_model;
+        let grad = b_own - s_mat.transpose() * &b_model;
         let threshold = |dof: usize| chi2_upper_quantile(dof, alpha / cands.len() as f64);
         let mut tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
         let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
@@ -461,8 +456,8 @@ fn walk_scale(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<f6
 /// sums that make each level from its own and its predecessors' steps, axis by axis.
 fn walk_sums(walk: &[Option<usize>], n: usize) -> DMatrix<f64> {
     let mut a = DMatrix::identity(n, n);
-    for (col, _) in walk.iter().enumerate() {
-        let mut before = walk[col];
+    for (col, &first) in walk.iter().enumerate() {
+        let mut before = first;
         while let Some(j) = before {
             for axis in 0..3 {
                 a[(3 * col + axis, 3 * j + axis)] = 1.0;
