@@ -45,7 +45,8 @@
 //! - `TRUST_DESIGNS="180@120;180,90@20"`: designs, the syntax of `all_effects`' `BENCH_PLANS`
 //!   (no `@`: 120 s);
 //! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order;
-//! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none`, `all` and `drawn` run once);
+//! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none` and `all` run once; `drawn` at
+//!   size S is `--drawn-rig=S`, every range of the draw S times wide);
 //! - `TRUST_LIVE="180,90,-180@120"`: the live design of the third bar;
 //! - `TRUST_CACHE=0`: remove each capture once calibrated (see below).
 //!
@@ -146,7 +147,14 @@ fn cases(effects: &[String], sizes: &[f64]) -> (Vec<Case>, Vec<String>) {
             continue;
         }
         if name == DRAWN {
-            out.push(Case { label: DRAWN.into(), options: vec!["--drawn-rig".into()], catalogued: true });
+            // The drawn rig at each size: `--drawn-rig=SIZE`, every plausible range SIZE times.
+            for &size in sizes {
+                let (label, option) = match size {
+                    1.0 => (DRAWN.into(), "--drawn-rig".into()),
+                    _ => (format!("{DRAWN}_x{size}"), format!("--drawn-rig={size}")),
+                };
+                out.push(Case { label, options: vec![option], catalogued: true });
+            }
             continue;
         }
         assert!(

@@ -273,8 +273,11 @@ struct SimulateArgs {
     /// Every effect of a real rig (the realistic set, the delays between the gyro's axes and the
     /// rig's clock) with each parameter drawn from the seed within its plausible range
     /// (docs/simulation.md); an --effect NAME=VALUE then sets that one's headline value.
-    #[arg(long)]
-    drawn_rig: bool,
+    /// `--drawn-rig=SCALE` widens every size range SCALE times (0-10; not the latitude, the
+    /// warm-up's time constant or the rig clock): the same seed's rig, grown.
+    #[arg(long, value_name = "SCALE", num_args = 0..=1, require_equals = true, default_missing_value = "1",
+          value_parser = parse_drawn_scale)]
+    drawn_rig: Option<f64>,
     /// Full configuration as JSON (a `SimConfig`); overrides the options above.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -394,6 +397,16 @@ fn parse_full_scale(s: &str) -> Result<u16, String> {
     match s {
         "250" | "500" | "2000" => Ok(s.parse().expect("matched digits")),
         _ => Err(format!("full scale must be 250, 500 or 2000 °/s, not {s:?}")),
+    }
+}
+
+/// `--drawn-rig=SCALE`: a finite multiple of the plausible ranges, 0 to [`sim::MAX_DRAWN_SCALE`].
+fn parse_drawn_scale(text: &str) -> Result<f64, String> {
+    let scale: f64 = text.parse().map_err(|_| format!("{text:?} is not a number"))?;
+    if (0.0..=sim::MAX_DRAWN_SCALE).contains(&scale) {
+        Ok(scale)
+    } else {
+        Err(format!("{text} is outside 0-{}", sim::MAX_DRAWN_SCALE))
     }
 }
 
@@ -577,8 +590,8 @@ fn simulate_cmd(args: SimulateArgs) -> Result<ExitCode> {
                 2000 => protocol::FullScale::Dps2000,
                 _ => protocol::FullScale::Dps500,
             };
-            if drawn_rig {
-                cfg.effects = sim::Effects::drawn(&mut sim::effects_rng(seed));
+            if let Some(scale) = drawn_rig {
+                cfg.effects = sim::Effects::drawn_scaled(&mut sim::effects_rng(seed), scale);
             }
             for e in &effects {
                 cfg.effects.enable(e).map_err(|e| Usage(e.into()))?;

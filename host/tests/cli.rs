@@ -104,7 +104,8 @@ fn simulate_refuses_a_rate_the_rig_refuses() {
 }
 
 /// `--drawn-rig`: the seed's rig has every effect of a real one, drawn from its own stream (the
-/// sensor is the one the same seed gives without it), and `--effect NAME=VALUE` still sets one.
+/// sensor is the one the same seed gives without it), and `--effect NAME=VALUE` still sets one;
+/// `--drawn-rig=3` grows the same rig, and a scale past 10 is refused before a file is made.
 #[test]
 fn simulate_draws_a_rig_per_seed_and_keeps_the_seeds_sensor() {
     let tmp = scratch("drawn");
@@ -126,6 +127,18 @@ fn simulate_draws_a_rig_per_seed_and_keeps_the_seeds_sensor() {
     let tilted: host::sim::Effects = serde_json::from_value(tilted["effects"].clone()).unwrap();
     assert_eq!(tilted.table_tilt.unwrap().tilt_deg, 0.25);
     assert_eq!(host::sim::Effects { table_tilt: expected.table_tilt, ..tilted }, expected);
+    let grown = truth("grown", &["--drawn-rig=3"]);
+    let grown: host::sim::Effects = serde_json::from_value(grown["effects"].clone()).unwrap();
+    assert_eq!(grown, host::sim::Effects::drawn_scaled(&mut host::sim::effects_rng(3), 3.0));
+    let out = tmp.path().join("too-big.cap");
+    let o = host(&["simulate", "--seed", "3", "--duration", "5", "--drawn-rig=11", "--out", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).starts_with("error: invalid value '11' for '--drawn-rig[=<SCALE>]': 11 is outside 0-10\n"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
 }
 
 /// Issue 28: `--duration 1e12` wrote 4.27 GB in 57 s before it was killed; a run is now at most

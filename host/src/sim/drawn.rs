@@ -55,16 +55,29 @@ pub const AXIS_DELAY_MS: f64 = 0.1;
 /// Rig crystal's frequency error, ±ppm (an HC-49 part at 25 °C).
 pub const RIG_CLOCK_PPM: f64 = 30.0;
 
+/// Largest `--drawn-rig=SCALE`: ten times every plausible range is far past any sound part (a
+/// 50° index plate, 8 % speed ripple), engineering judgement of where a stress test stops.
+pub const MAX_DRAWN_SCALE: f64 = 10.0;
+
 impl Effects {
     /// A rig with every effect above on, its parameters drawn from `rng`.
     pub fn drawn(rng: &mut impl Rng) -> Self {
+        Self::drawn_scaled(rng, 1.0)
+    }
+
+    /// [`Effects::drawn`] with every size range `scale` times as wide: the same draws from
+    /// `rng`, so a seed's rig keeps its signs and phases and only grows. Kept as they are: the
+    /// lab's latitude and the warm-up's time constant (facts of the place and the board, not
+    /// sizes of an imperfection), the gears' pole count, and the rig clock (a crystal outside its
+    /// ±30 ppm is a broken part, and no design separates it from the sensitivities).
+    pub fn drawn_scaled(rng: &mut impl Rng, scale: f64) -> Self {
         let mut sym = |r: f64| rng.random_range(-r..=r);
-        let index_offset = IndexOffset { offset_deg: sym(INDEX_OFFSET_DEG) };
-        let dps_per_c = [0; 3].map(|_| sym(OFFSET_DPS_PER_C));
-        let g = [[0; 3]; 3].map(|row| row.map(|_| sym(G_SENSITIVITY_DPS_PER_G)));
-        let table_tilt = TableTilt { tilt_deg: sym(TABLE_TILT_DEG) };
-        let pose_fixture = PoseFixture { z2_deg: sym(POSE_FIXTURE_DEG) };
-        let axis_delay = AxisDelay { delay_ms: [0.0, sym(AXIS_DELAY_MS), sym(AXIS_DELAY_MS)] };
+        let index_offset = IndexOffset { offset_deg: sym(scale * INDEX_OFFSET_DEG) };
+        let dps_per_c = [0; 3].map(|_| sym(scale * OFFSET_DPS_PER_C));
+        let g = [[0; 3]; 3].map(|row| row.map(|_| sym(scale * G_SENSITIVITY_DPS_PER_G)));
+        let table_tilt = TableTilt { tilt_deg: sym(scale * TABLE_TILT_DEG) };
+        let pose_fixture = PoseFixture { z2_deg: sym(scale * POSE_FIXTURE_DEG) };
+        let axis_delay = AxisDelay { delay_ms: [0.0, sym(scale * AXIS_DELAY_MS), sym(scale * AXIS_DELAY_MS)] };
         let rig_clock = RigClock { error_ppm: sym(RIG_CLOCK_PPM) };
         let latitude_deg = sym(LATITUDE_DEG);
         let poles = POLE_PASS[rng.random_range(0..POLE_PASS.len())];
@@ -73,16 +86,17 @@ impl Effects {
         let orders = [1, 2, poles];
         let ripple = [0, 1, 2].map(|i| RippleHarmonic {
             order: orders[i],
-            amplitude: rng.random_range(0.0..=RIPPLE[i]),
+            amplitude: rng.random_range(0.0..=scale * RIPPLE[i]),
             phase_rad: phases[i],
         });
         let transmission = [(poles, TRANSMISSION_DEG[0], phases[3]), (2 * poles, TRANSMISSION_DEG[1], phases[4])]
-            .map(|(n, a, ph)| (n, rng.random_range(0.0..=a), ph));
+            .map(|(n, a, ph)| (n, rng.random_range(0.0..=scale * a), ph));
+        let (rise, walk) = (WARM_UP_RISE_C, RANDOM_WALK_DPS_PER_SQRT_S);
         Self {
             filter_delay: Some(FilterDelay::default()),
             index_offset: Some(index_offset),
             offset_drift: Some(OffsetDrift {
-                rise_c: rng.random_range(WARM_UP_RISE_C.0..=WARM_UP_RISE_C.1),
+                rise_c: rng.random_range(scale * rise.0..=scale * rise.1),
                 tau_s: rng.random_range(WARM_UP_TAU_S.0..=WARM_UP_TAU_S.1),
                 dps_per_c,
             }),
@@ -93,7 +107,7 @@ impl Effects {
             table_tilt: Some(table_tilt),
             pose_fixture: Some(pose_fixture),
             bias_random_walk: Some(BiasRandomWalk {
-                k_dps_per_sqrt_s: rng.random_range(RANDOM_WALK_DPS_PER_SQRT_S.0..=RANDOM_WALK_DPS_PER_SQRT_S.1),
+                k_dps_per_sqrt_s: rng.random_range(scale * walk.0..=scale * walk.1),
             }),
             axis_delay: Some(axis_delay),
             rig_clock: Some(rig_clock),
@@ -139,5 +153,28 @@ mod tests {
         }
         assert_eq!(Effects::drawn(&mut ChaCha8Rng::seed_from_u64(7)), draws[7]);
         assert_ne!(draws[7], draws[8]);
+    }
+
+    /// A scaled rig is the same seed's rig with every size `scale` times: signs, phases, pole
+    /// count, time constant, latitude and clock unchanged.
+    #[test]
+    fn a_scaled_rig_is_the_seeds_rig_grown() {
+        let rng = || ChaCha8Rng::seed_from_u64(5);
+        let (one, three) = (Effects::drawn(&mut rng()), Effects::drawn_scaled(&mut rng(), 3.0));
+        let near = |a: f64, b: f64| assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-300), "{a} vs {b}");
+        near(3.0 * one.index_offset.unwrap().offset_deg, three.index_offset.unwrap().offset_deg);
+        near(3.0 * one.g_sensitivity.unwrap().dps_per_g[2][1], three.g_sensitivity.unwrap().dps_per_g[2][1]);
+        near(3.0 * one.axis_delay.unwrap().delay_ms[2], three.axis_delay.unwrap().delay_ms[2]);
+        near(
+            3.0 * one.speed_ripple.unwrap().harmonics[0].amplitude,
+            three.speed_ripple.unwrap().harmonics[0].amplitude,
+        );
+        near(3.0 * one.gear_transmission.unwrap().harmonics[1].1, three.gear_transmission.unwrap().harmonics[1].1);
+        near(3.0 * one.offset_drift.unwrap().rise_c, three.offset_drift.unwrap().rise_c);
+        near(3.0 * one.bias_random_walk.unwrap().k_dps_per_sqrt_s, three.bias_random_walk.unwrap().k_dps_per_sqrt_s);
+        assert_eq!(one.offset_drift.unwrap().tau_s, three.offset_drift.unwrap().tau_s);
+        assert_eq!(one.earth_rotation, three.earth_rotation);
+        assert_eq!(one.rig_clock, three.rig_clock);
+        assert_eq!(one.gear_transmission.unwrap().harmonics[0].0, three.gear_transmission.unwrap().harmonics[0].0);
     }
 }

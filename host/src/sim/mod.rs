@@ -15,6 +15,7 @@
 //! rig, the noise and the timestamp jitter: one seed is one sensor whatever the runs.
 
 mod drawn;
+pub use drawn::MAX_DRAWN_SCALE;
 pub mod effects;
 mod filter;
 mod motion;

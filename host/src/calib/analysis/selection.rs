@@ -475,7 +475,7 @@ impl CandidateFit<'_> {
             }
         }
         let f = fit(data, start, self.weights).map_err(|e| e.to_string())?;
-        match f.at_bound() {
+        match f.at_bound().or_else(|| f.beyond_physics()) {
             Some(why) => Err(why),
             None if !f.converged => Err(not_converged(&f)),
             None => Ok(f),

@@ -105,6 +105,15 @@ pub trait Behaviour {
     /// Where the runs cannot separate it, that size is carried in the calibration's σ.
     fn consider(&self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound>;
 
+    /// Why its fitted values cannot be the physics it stands for, given the fit (`fitted(p)`: a
+    /// shared parameter's value and σ, when the model has it): a value the data put beyond
+    /// what the effect can physically be, by more than their noise, says it soaks up something
+    /// else, and its fit is refused. None (the default) when nothing bounds it but the data.
+    fn beyond_physics(&self, fitted: &dyn Fn(SharedPar) -> Option<(f64, f64)>) -> Option<String> {
+        let _ = fitted;
+        None
+    }
+
     /// Whether its linear columns are the levels of a walk, each stretch's first level held by
     /// the offsets: [`Behaviour::consider`] then bounds the steps between neighbouring levels,
     /// which the walk takes independently, and this names one step. None for every other effect.
@@ -275,6 +284,11 @@ impl Effect {
     /// [`Behaviour::considered_as_walk`].
     pub fn considered_as_walk(self) -> Option<String> {
         self.behaviour(|b| b.considered_as_walk())
+    }
+
+    /// [`Behaviour::beyond_physics`].
+    pub fn beyond_physics(self, fitted: &dyn Fn(SharedPar) -> Option<(f64, f64)>) -> Option<String> {
+        self.behaviour(|b| b.beyond_physics(fitted))
     }
 }
 

@@ -197,6 +197,16 @@ impl Fitted {
         None
     }
 
+    /// Why the fit is not physics, if an effect's fitted values lie beyond what it can be
+    /// ([`crate::calib::effects::Behaviour::beyond_physics`]).
+    pub fn beyond_physics(&self) -> Option<String> {
+        let fitted = |p: SharedPar| {
+            let q = self.model.shared.iter().position(|&s| s == p)?;
+            Some((self.model.theta[q], self.shared_index(p).map_or(f64::NAN, |i| self.sigma(i))))
+        };
+        self.model.effects.iter().find_map(|e| e.beyond_physics(&fitted))
+    }
+
     /// 1-σ of a parameter by its index.
     pub fn sigma(&self, index: usize) -> f64 {
         self.solution.cov[(index, index)].max(0.0).sqrt()
