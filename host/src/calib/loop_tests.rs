@@ -1022,12 +1022,18 @@ fn both_directions_at_one_speed_never_fit_the_filter_droop() {
 /// Twenty-second runs of a rig drawn at random (`host simulate --drawn-rig`, the trust bench's
 /// `drawn` column), calibrated with nothing declared.
 fn drawn_rig_loop(seed: u64, rates_dps: &[f64]) -> (LoopReport, Truth) {
+    grown_rig_loop(seed, rates_dps, 20.0, 1.0)
+}
+
+/// [`drawn_rig_loop`] with runs of `duration_s` and every size range `scale` times
+/// (`--drawn-rig=SCALE`).
+fn grown_rig_loop(seed: u64, rates_dps: &[f64], duration_s: f64, scale: f64) -> (LoopReport, Truth) {
     let runs = Pose::ALL
         .iter()
-        .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunSpec { pose, rate_dps, duration_s: 20.0 }))
+        .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunSpec { pose, rate_dps, duration_s }))
         .collect();
     let mut cfg = SimConfig::with_runs(seed, runs);
-    cfg.effects = crate::sim::Effects::drawn(&mut crate::sim::effects_rng(seed));
+    cfg.effects = crate::sim::Effects::drawn_scaled(&mut crate::sim::effects_rng(seed), scale);
     let out = simulate(&cfg).unwrap();
     let cap = decode(&out.bytes);
     let r = close_loop(&cap.runs, &LoopOptions::default(), Some(out.truth.sensor())).expect("calibrates");
@@ -1066,4 +1072,24 @@ fn an_offset_random_walk_no_knots_follow_is_carried_in_sigma() {
     let t = truth_of(r.steps.last().expect("steps"));
     assert!(t.max_z() <= 4.0, "drawn rig 1 at ±180 for 20 s: max |z| {:.2}\n{}", t.max_z(), r.summary());
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
+/// The drawn rig of seed 2 with every range tripled, at 180, 90 °/s for 30 s: the loop fitted the
+/// filter gain at κ ≈ −970 ms², 500 times what a low-pass with the fitted 1.9-ms delay allows,
+/// with a g-sensitivity diagonal of 1 °/s/g, both standing in for a speed ripple no effect
+/// models (at 120 s every sensitivity ended 1.5 % off, 8σ, at exit 0). The fit is refused for
+/// it, and what the loop ends with is within 4σ or flagged.
+#[test]
+fn a_filter_gain_beyond_a_low_pass_of_the_fitted_delay_is_refused() {
+    let (r, _) = grown_rig_loop(2, &[180.0, 90.0], 30.0, 3.0);
+    assert!(!r.effects().contains(&Effect::FilterGain), "{}", r.summary());
+    let why = r.skipped.iter().find(|s| s.effect == Effect::FilterGain).map(|s| s.why.as_str());
+    assert!(why.is_some_and(|w| w.starts_with("its filter curvature κ = -")), "{why:?}\n{}", r.summary());
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(
+        r.verdict() != Verdict::AtNoiseFloor || t.max_z() <= 4.0,
+        "max |z| {:.2} at the noise floor\n{}",
+        t.max_z(),
+        r.summary()
+    );
 }
