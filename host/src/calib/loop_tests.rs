@@ -1074,17 +1074,18 @@ fn an_offset_random_walk_no_knots_follow_is_carried_in_sigma() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
-/// The drawn rig of seed 2 with every range tripled, at 180, 90 °/s for 30 s: the loop fitted the
-/// filter gain at κ ≈ −970 ms², 500 times what a low-pass with the fitted 1.9-ms delay allows,
-/// with a g-sensitivity diagonal of 1 °/s/g, both standing in for a speed ripple no effect
-/// models (at 120 s every sensitivity ended 1.5 % off, 8σ, at exit 0). The fit is refused for
-/// it, and what the loop ends with is within 4σ or flagged.
+/// The drawn rig of seed 2 with every range tripled, at 180, 90 °/s for 30 s: once the
+/// g-sensitivity was in, the loop fitted the filter gain at κ ≈ −970 ms², 500 times what a
+/// low-pass with the fitted 1.9-ms delay allows, the pair standing in for a speed ripple no
+/// effect models (at 120 s every sensitivity ended 1.5 % off, 8σ, at exit 0). Two speeds in one
+/// direction cannot tell the droop (∝ θ2'³) from M and gravity: it is no longer tried, and what
+/// the loop ends with is within 4σ or flagged.
 #[test]
-fn a_filter_gain_beyond_a_low_pass_of_the_fitted_delay_is_refused() {
+fn a_filter_gain_the_rates_cannot_tell_from_m_and_gravity_is_not_tried() {
     let (r, _) = grown_rig_loop(2, &[180.0, 90.0], 30.0, 3.0);
+    assert!(r.effects().contains(&Effect::GSensitivity), "{}", r.summary());
     assert!(!r.effects().contains(&Effect::FilterGain), "{}", r.summary());
-    let why = r.skipped.iter().find(|s| s.effect == Effect::FilterGain).map(|s| s.why.as_str());
-    assert!(why.is_some_and(|w| w.starts_with("its filter curvature κ = -")), "{why:?}\n{}", r.summary());
+    assert!(!r.skipped.iter().any(|s| s.effect == Effect::FilterGain), "{:?}\n{}", r.skipped, r.summary());
     let t = truth_of(r.steps.last().expect("steps"));
     assert!(
         r.verdict() != Verdict::AtNoiseFloor || t.max_z() <= 4.0,

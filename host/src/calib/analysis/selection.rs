@@ -78,6 +78,18 @@ fn two_distinct(rates: &[f64]) -> bool {
     rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.abs().max(b.abs())))
 }
 
+/// The runs' distinct signed θ2', °/s: each rate once, rates within [`DISTINCT_RATE_FRACTION`]
+/// of each other counted as one.
+pub fn distinct_rates_dps(data: &LoopData) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for r in table_rates_dps(data) {
+        if !out.iter().any(|&o| !two_distinct(&[o, r])) {
+            out.push(r);
+        }
+    }
+    out
+}
+
 /// Whether the runs turn the table at two distinct |θ2'| (speeds, whatever their direction):
 /// what an effect even in θ2' (the filter's droop, ∝ θ2'²) needs to be told from M.
 pub fn distinct_speeds(data: &LoopData) -> bool {
@@ -126,6 +138,7 @@ fn in_situation<R>(data: &LoopData, current: &[Effect], evidence: &Evidence, f: 
         evidence: *evidence,
         separates_delay_and_index: separates_delay_and_index(data),
         distinct_speeds: distinct_speeds(data),
+        distinct_rates_dps: &distinct_rates_dps(data),
         free_drift_keeps_constant_rates: free_drift_keeps_constant_rates(data),
         poses: data.poses.len(),
         temp_spread_c: &|| data.temp_spread_c(),

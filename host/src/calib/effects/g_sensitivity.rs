@@ -70,7 +70,11 @@ impl Behaviour for GSensitivity {
     /// delay or index offset wins when the structure is a phase; keeping it out while a phase is
     /// suspected let a real g-sensitivity end in a drift model and a biased M (the trust bench,
     /// `180,90@120`, `g_sensitivity`: 300 ppm, flagged only by the runs' disagreement).
+    ///
+    /// With the filter's droop in the model, only where the rates also tell gravity (∝ 1) from
+    /// M (∝ θ2') and the droop (∝ θ2'³) ([`Situation::separates_rate_powers`]).
     fn candidate(&self, s: &Situation) -> bool {
-        s.separates_delay_and_index && !s.has(Effect::GSensitivity)
+        let shapes_apart = !s.has(Effect::FilterGain) || s.separates_rate_powers(&[0, 1, 3]);
+        s.separates_delay_and_index && !s.has(Effect::GSensitivity) && shapes_apart
     }
 }

@@ -424,6 +424,8 @@ pub struct Situation<'a> {
     pub separates_delay_and_index: bool,
     /// Whether the runs hold two distinct |θ2'| (speeds, whatever their direction).
     pub distinct_speeds: bool,
+    /// The runs' distinct signed θ2', °/s (speeds and directions, each once).
+    pub distinct_rates_dps: &'a [f64],
     /// Whether the free drift leaves the constant rate terms to the model
     /// (`selection::free_drift_keeps_constant_rates`).
     pub free_drift_keeps_constant_rates: bool,
@@ -438,6 +440,32 @@ impl Situation<'_> {
     /// Whether `e` is in the model.
     pub fn has(&self, e: Effect) -> bool {
         self.current.contains(&e)
+    }
+
+    /// Whether the runs tell apart effects whose part turning with θ2 grows as these powers of
+    /// θ2' (M's signal: 1; a vector fixed to the base, gravity's or Earth's vertical rate: 0;
+    /// the filter's droop κθ2'²·θ1': 3): the distinct rates' powers, a row per rate, have full
+    /// column rank. At one speed in both directions r³ is r times a constant; at two speeds in
+    /// one direction 1, r and r³ are three shapes over two values.
+    pub fn separates_rate_powers(&self, powers: &[i32]) -> bool {
+        let top = self.distinct_rates_dps.iter().fold(0.0f64, |m, r| m.max(r.abs()));
+        if self.distinct_rates_dps.len() < powers.len() || top <= 0.0 {
+            return false;
+        }
+        let m = nalgebra::DMatrix::from_fn(self.distinct_rates_dps.len(), powers.len(), |i, j| {
+            (self.distinct_rates_dps[i] / top).powi(powers[j])
+        });
+        let sv = m.singular_values();
+        let largest = sv.max();
+        // Rank to 1e-6 of the largest singular value: the rates are known to better than 1e-4
+        // (the encoder's count over a run), and a shape that close to the others is no shape.
+        sv.iter().all(|&v| v > 1e-6 * largest)
+    }
+
+    /// Whether a vector fixed to the base turns in the model: the g-sensitivity's gravity, or
+    /// Earth's vertical rate fitted.
+    pub fn has_base_vector(&self) -> bool {
+        self.has(Effect::GSensitivity) || self.has(Effect::EarthRotation)
     }
 
     /// Whether a drift model is in.
@@ -519,7 +547,7 @@ impl ConsiderCtx<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::IndexEdge;
+    use super::{Effect, Evidence, IndexEdge, Situation};
 
     /// The error at mesh angle θ of harmonics (n, a, b), rad: Σ (a·sin nθ − b·cos nθ)/n.
     fn error_rad(harmonics: &[(u32, f64, f64)], theta_rad: f64) -> f64 {
@@ -553,5 +581,40 @@ mod tests {
         // No ripple: no shift, whatever the plate.
         let none = IndexEdge::new(h_rad, rate_rad_s, lag_s, std::iter::empty());
         assert_eq!((none.shift_rad, none.dshift_dlag), (0.0, 0.0));
+    }
+
+    /// The situation of a model holding `current` on runs at `rates` (°/s, distinct).
+    fn situation<'a>(rates: &'a [f64], current: &'a [Effect]) -> Situation<'a> {
+        fn no_spread() -> f64 {
+            0.0
+        }
+        Situation {
+            current,
+            evidence: Evidence { phase: false, drift: false, rate_scale: false, orders: [false; 33] },
+            separates_delay_and_index: true,
+            distinct_speeds: true,
+            distinct_rates_dps: rates,
+            free_drift_keeps_constant_rates: true,
+            poses: 2,
+            temp_spread_c: &no_spread,
+        }
+    }
+
+    /// Which designs tell the filter's droop (θ2'³) from M (θ2') and a base-fixed vector (1),
+    /// and which effects are such a vector.
+    #[test]
+    fn rate_powers_are_told_apart_by_enough_distinct_rates() {
+        let apart = |rates: &[f64], powers: &[i32]| situation(rates, &[]).separates_rate_powers(powers);
+        let (droop, with_base) = ([1, 3], [0, 1, 3]);
+        assert!(apart(&[360.0, 180.0], &droop));
+        assert!(!apart(&[360.0, -360.0], &droop), "at ±r, r³ is r·r²");
+        assert!(!apart(&[360.0], &droop));
+        assert!(!apart(&[360.0, 180.0], &with_base), "three shapes over two rates");
+        assert!(!apart(&[360.0, -360.0, 720.0, -720.0][..2], &with_base));
+        assert!(apart(&[360.0, 180.0, -360.0], &with_base));
+        assert!(apart(&[360.0, -360.0, 720.0, -720.0], &with_base));
+        assert!(situation(&[], &[Effect::GSensitivity]).has_base_vector());
+        assert!(situation(&[], &[Effect::EarthRotation]).has_base_vector());
+        assert!(!situation(&[], &[Effect::EarthRotationHorizontal, Effect::FilterGain]).has_base_vector());
     }
 }
