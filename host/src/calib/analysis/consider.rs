@@ -309,7 +309,7 @@ pub fn consider(
     let b_model = DVector::from_fn(model_idx.len(), |i, _| b_vec[model_idx[i]]);
     let mut out = Consideration::none();
     for (c, pl) in cands.iter().zip(&places) {
-        let (idx, mut sd) = prior_params(c, pl, nl_ext);
+        let (idx, sd) = prior_params(c, pl, nl_ext);
         let mut b = DMatrix::from_fn(model_idx.len(), idx.len(), |i, j| n_mat[(model_idx[i], idx[j])]);
         let mut c_mat = DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]);
         let mut b_own = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]);
@@ -328,18 +328,17 @@ pub fn consider(
         let threshold = |dof: usize| chi2_upper_quantile(dof, alpha / cands.len() as f64);
         let mut tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
         let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
+        let Some(mut whitened) = whiten(&info, &grad, &sd) else { continue };
         if !c.walk.is_empty() {
             // A walk's size is read from the data (its scale's upper bound), every direction
             // counted at it: no test of hundreds of steps speaks for any one of them.
-            let Some(scale) = walk_scale(&info, &grad, &sd) else { continue };
-            sd.iter_mut().for_each(|v| *v *= scale);
+            let Some(scale) = walk_scale(&whitened) else { continue };
+            whitened = whitened.scaled(scale);
             considered.iter_mut().for_each(|p| p.sigma *= scale);
             source = format!("{source}, times {scale:.2}: as large as the residual's own wander allows (95 % bound)");
             tried = None;
         }
-        let Some((sigma_c, lambdas)) = posterior(&info, &grad, &sd, tried) else {
-            continue;
-        };
+        let (sigma_c, lambdas) = posterior(&whitened, tried);
         if lambdas.is_empty() {
             continue;
         }
@@ -399,18 +398,10 @@ const WALK_BOUND_DROP: f64 = 1.353;
 /// its maximum on the far side (Morris, JASA 78, 47, 1983, for the parametric empirical Bayes).
 /// A gyro whose residual shows no wander carries a fraction of the datasheet-sized walk, one
 /// that shows more carries more. None when the information is not finite.
-fn walk_scale(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<f64> {
-    let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
-    let w = &d * info * &d;
-    let w = (&w + w.transpose()) * 0.5;
-    if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
-        return None;
-    }
-    let eig = w.symmetric_eigen();
-    let g_w = &d * grad;
-    let seen: Vec<(f64, f64)> = (0..sd.len())
-        .filter(|&i| eig.eigenvalues[i] > 1e-9)
-        .map(|i| (eig.eigenvalues[i], eig.eigenvectors.column(i).dot(&g_w).powi(2)))
+fn walk_scale(w: &Whitened) -> Option<f64> {
+    let seen: Vec<(f64, f64)> = (0..w.sd.len())
+        .filter(|&i| w.eigenvalues[i] > 1e-9)
+        .map(|i| (w.eigenvalues[i], w.projections[i].powi(2)))
         .collect();
     let ll = |s2: f64| -> f64 {
         -0.5 * seen.iter().map(|&(l, p2)| (l + s2 * l * l).ln() + p2 / (l + s2 * l * l)).sum::<f64>()
@@ -480,22 +471,9 @@ fn max3(v: [f64; 3]) -> f64 {
 /// they say it is. One it tried (`tried` the loop's χ² threshold for a number of degrees of
 /// freedom) has its separated directions left to the test, unless the residual's score along
 /// them passes that threshold. None when the information is not finite.
-fn posterior(
-    info: &DMatrix<f64>,
-    grad: &DVector<f64>,
-    sd: &[f64],
-    tried: Option<&dyn Fn(usize) -> f64>,
-) -> Option<(DMatrix<f64>, Vec<f64>)> {
-    let n = sd.len();
-    let d = DMatrix::from_diagonal(&DVector::from_column_slice(sd));
-    let mut w = &d * info * &d;
-    w = (&w + w.transpose()) * 0.5;
-    if w.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let eig = w.symmetric_eigen();
-    let g_w = &d * grad;
-    let lambdas: Vec<f64> = eig.eigenvalues.iter().map(|l| l.max(0.0)).collect();
+fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
+    let n = w.sd.len();
+    let lambdas: Vec<f64> = w.eigenvalues.iter().map(|l| l.max(0.0)).collect();
     // A direction the loop's test of the whole effect would see at plausible size with 95 %
     // power; the test's silence speaks for no other.
     let seen = tried.map_or(SEPARATED_SNR2, |threshold| seen_by_test(n, threshold(n)));
@@ -504,22 +482,53 @@ fn posterior(
     // the runs see (its candidate rule, gated by the residual's diagnostics, never let the loop
     // score it), so no test speaks for those directions either.
     let separated: Vec<usize> = (0..n).filter(|&i| lambdas[i] >= seen).collect();
-    let score: f64 = separated.iter().map(|&i| eig.eigenvectors.column(i).dot(&g_w).powi(2) / lambdas[i]).sum();
+    let score: f64 = separated.iter().map(|&i| w.projections[i].powi(2) / lambdas[i]).sum();
     let tested = tried.is_some_and(|threshold| separated.is_empty() || score <= threshold(separated.len()));
-    let mut var = DMatrix::zeros(n, n);
-    let mut mean = DVector::zeros(n);
-    let mut unseparated = Vec::new();
-    for (i, &lambda) in lambdas.iter().enumerate() {
-        if tested && lambda >= seen {
-            continue;
-        }
-        unseparated.push(lambda);
-        let u = eig.eigenvectors.column(i);
-        var += u * u.transpose() / (1.0 + lambda);
-        mean += u * (u.dot(&g_w) / (1.0 + lambda));
+    let kept: Vec<usize> = (0..n).filter(|&i| !(tested && lambdas[i] >= seen)).collect();
+    // Σ u uᵀ/(1 + λ) and Σ u (u·g)/(1 + λ) over the kept directions, as one product each: a walk
+    // has hundreds of them, and a rank-one update per direction was most of a 1-h replay.
+    let u = DMatrix::from_fn(n, kept.len(), |r, c| w.vectors[(r, kept[c])]);
+    let shrink = DVector::from_iterator(kept.len(), kept.iter().map(|&i| 1.0 / (1.0 + lambdas[i])));
+    let scaled = DMatrix::from_fn(n, kept.len(), |r, c| u[(r, c)] * shrink[c]);
+    let along = DVector::from_iterator(kept.len(), kept.iter().map(|&i| w.projections[i]));
+    let mean = &scaled * along;
+    let whitened = &scaled * u.transpose() + &mean * mean.transpose();
+    let cov = DMatrix::from_fn(n, n, |r, c| w.sd[r] * whitened[(r, c)] * w.sd[c]);
+    (cov, kept.iter().map(|&i| lambdas[i]).collect())
+}
+
+/// An effect's partial information and the residual's gradient in units of its prior σs: the
+/// eigen-decomposition of diag(sd)·info·diag(sd) and the whitened gradient's projection on each
+/// eigenvector. [`walk_scale`] and [`posterior`] both read it.
+struct Whitened {
+    sd: Vec<f64>,
+    eigenvalues: DVector<f64>,
+    vectors: DMatrix<f64>,
+    projections: Vec<f64>,
+}
+
+/// [`Whitened`] of `info`, `grad` and prior σs `sd`; None when any is not finite.
+fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whitened> {
+    let n = sd.len();
+    let w = DMatrix::from_fn(n, n, |r, c| 0.5 * (info[(r, c)] + info[(c, r)]) * sd[r] * sd[c]);
+    if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
+        return None;
     }
-    let whitened = var + &mean * mean.transpose();
-    Some((&d * whitened * &d, unseparated))
+    let eig = w.symmetric_eigen();
+    let g_w = DVector::from_fn(n, |r, _| grad[r] * sd[r]);
+    let projections = (0..n).map(|i| eig.eigenvectors.column(i).dot(&g_w)).collect();
+    Some(Whitened { sd: sd.to_vec(), eigenvalues: eig.eigenvalues, vectors: eig.eigenvectors, projections })
+}
+
+impl Whitened {
+    /// The same effect with prior σs `scale` times: information and gradient along the same
+    /// eigenvectors, the one by scale², the other by scale.
+    fn scaled(mut self, scale: f64) -> Self {
+        self.sd.iter_mut().for_each(|v| *v *= scale);
+        self.eigenvalues *= scale * scale;
+        self.projections.iter_mut().for_each(|p| *p *= scale);
+        self
+    }
 }
 
 #[cfg(test)]
@@ -530,44 +539,46 @@ mod tests {
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior(&info, &DVector::zeros(2), &[2.0, 3.0], Some(&|_| 16.4)).expect("finite");
+        let (c, n) = posterior(&whiten(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), Some(&|_| 16.4));
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Seen at λ = 40 (a 6σ signal at plausible size) but by a test at χ² 35, which would
         // miss it one time in four: counted.
         let info40 = DMatrix::from_row_slice(1, 1, &[40.0]);
-        let (c, n) = posterior(&info40, &DVector::zeros(1), &[1.0], Some(&|_| 35.0)).expect("finite");
+        let (c, n) = posterior(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 35.0));
         assert_eq!(n, [40.0]);
         assert!((c[(0, 0)] - 1.0 / 41.0).abs() < 1e-12, "{c}");
-        let (_, n) = posterior(&info40, &DVector::zeros(1), &[1.0], Some(&|_| 16.4)).expect("finite");
+        let (_, n) = posterior(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 16.4));
         assert!(n.is_empty(), "{n:?}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
-        let (c, n) = posterior(&info, &DVector::zeros(1), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
+        let (c, n) = posterior(&whiten(&info, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| f64::INFINITY));
         assert_eq!(n.len(), 1);
         assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
         // A direction seen well (whitened λ = 3²·1e6 ≥ 25) of an effect the loop did not try is
         // counted: its posterior variance is 1/(1 + λ) of the prior's.
         let info2 = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c2, n2) = posterior(&info2, &DVector::zeros(2), &[2.0, 3.0], None).expect("finite");
+        let (c2, n2) = posterior(&whiten(&info2, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), None);
         assert_eq!(n2.len(), 2);
         assert!((c2[(1, 1)] - 9.0 / (1.0 + 9e6)).abs() < 1e-15, "{c2}");
         // A tried effect whose separated direction the residual pulls on past the test's
         // threshold (whitened g = 3·3000, score 9000²/9e6 = 9 > 0.5) was never tested: it is counted, with
         // the posterior mean g_w/(1 + λ) = 9000/(1 + 9e6) of its whitened σ (3).
         let g = DVector::from_column_slice(&[0.0, 3000.0]);
-        let (c3, n3) = posterior(&info2, &g, &[2.0, 3.0], Some(&|_| 0.5)).expect("finite");
+        let (c3, n3) = posterior(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 0.5));
         assert_eq!(n3.len(), 2);
         let mean = 3.0 * 9000.0 / (1.0 + 9e6);
         assert!((c3[(1, 1)] - (9.0 / (1.0 + 9e6) + mean * mean)).abs() < 1e-15, "{c3}");
         // Below the threshold (9 ≤ 10) the test speaks for it.
-        let (c4, n4) = posterior(&info2, &g, &[2.0, 3.0], Some(&|_| 10.0)).expect("finite");
+        let (c4, n4) = posterior(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 10.0));
         assert_eq!((n4.len(), c4[(1, 1)]), (1, 0.0));
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
-        let (c, _) =
-            posterior(&info, &DVector::from_element(1, 2.0), &[1.0], Some(&|_| f64::INFINITY)).expect("finite");
+        let (c, _) = posterior(
+            &whiten(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite"),
+            Some(&|_| f64::INFINITY),
+        );
         assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
     }
 
@@ -606,12 +617,16 @@ mod tests {
     fn a_walks_size_is_bounded_by_the_wander_the_data_show() {
         let n = 100;
         let info = DMatrix::from_diagonal_element(n, n, 4.0);
-        let quiet = walk_scale(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite");
+        let quiet =
+            walk_scale(&whiten(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite")).expect("finite");
         assert!(quiet > 0.05 && quiet < 0.3, "{quiet}");
-        let walking = walk_scale(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite");
+        let walking =
+            walk_scale(&whiten(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite"))
+                .expect("finite");
         assert!(walking > 1.0 && walking < 1.4, "{walking}");
         // The prior's σs only set the units: for the same data, twice the σ, half the scale.
-        let halved = walk_scale(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]);
+        let halved =
+            walk_scale(&whiten(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]).expect("finite"));
         assert!((halved.expect("finite") - walking / 2.0).abs() < 1e-6 * walking);
     }
 
@@ -631,6 +646,21 @@ mod tests {
         let keys = considered_keys();
         for k in ["g_sensitivity", "earth_rotation", "rate_scale", "filter_gain", "table_tilt", "pose_fixture"] {
             assert!(keys.iter().any(|x| x == k), "{k} in {keys:?}");
+        }
+    }
+
+    /// Scaling a whitening's priors gives what whitening with the scaled priors gives: the walk's
+    /// posterior reuses the decomposition its scale was read from.
+    #[test]
+    fn a_scaled_whitening_is_the_whitening_of_scaled_priors() {
+        let info = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0]);
+        let grad = DVector::from_column_slice(&[1.0, -2.0, 0.5]);
+        let sd = [0.5, 1.5, 2.0];
+        let (c1, l1) = posterior(&whiten(&info, &grad, &sd).expect("finite").scaled(3.0), None);
+        let (c2, l2) = posterior(&whiten(&info, &grad, &sd.map(|v| 3.0 * v)).expect("finite"), None);
+        assert!((c1 - &c2).amax() <= 1e-12 * c2.amax(), "{c2}");
+        for (a, b) in l1.iter().zip(&l2) {
+            assert!((a - b).abs() <= 1e-12 * b.abs(), "{l1:?} against {l2:?}");
         }
     }
 }
