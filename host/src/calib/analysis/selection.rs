@@ -90,12 +90,6 @@ pub fn distinct_rates_dps(data: &LoopData) -> Vec<f64> {
     out
 }
 
-/// Whether the runs turn the table at two distinct |θ2'| (speeds, whatever their direction):
-/// what an effect even in θ2' (the filter's droop, ∝ θ2'²) needs to be told from M.
-pub fn distinct_speeds(data: &LoopData) -> bool {
-    two_distinct(&table_rates_dps(data).iter().map(|r| r.abs()).collect::<Vec<_>>())
-}
-
 /// Whether the runs include both directions.
 pub fn both_directions(data: &LoopData) -> bool {
     let r = &data.kin.runs;
@@ -137,7 +131,6 @@ fn in_situation<R>(data: &LoopData, current: &[Effect], evidence: &Evidence, f: 
         current,
         evidence: *evidence,
         separates_delay_and_index: separates_delay_and_index(data),
-        distinct_speeds: distinct_speeds(data),
         distinct_rates_dps: &distinct_rates_dps(data),
         free_drift_keeps_constant_rates: free_drift_keeps_constant_rates(data),
         poses: data.poses.len(),

@@ -422,8 +422,6 @@ pub struct Situation<'a> {
     pub evidence: Evidence,
     /// Whether the runs hold two distinct signed θ2' (speeds or directions).
     pub separates_delay_and_index: bool,
-    /// Whether the runs hold two distinct |θ2'| (speeds, whatever their direction).
-    pub distinct_speeds: bool,
     /// The runs' distinct signed θ2', °/s (speeds and directions, each once).
     pub distinct_rates_dps: &'a [f64],
     /// Whether the free drift leaves the constant rate terms to the model
@@ -592,7 +590,6 @@ mod tests {
             current,
             evidence: Evidence { phase: false, drift: false, rate_scale: false, orders: [false; 33] },
             separates_delay_and_index: true,
-            distinct_speeds: true,
             distinct_rates_dps: rates,
             free_drift_keeps_constant_rates: true,
             poses: 2,
