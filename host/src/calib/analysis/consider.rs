@@ -390,14 +390,14 @@ fn prior_params(c: &Candidate, pl: &[(bool, usize)], nl_ext: usize) -> (Vec<usiz
 /// a walk's scale falls from its maximum at the bound [`walk_scale`] returns.
 const WALK_BOUND_DROP: f64 = 1.353;
 
-/// Empirical Bayes for a walk whose steps have prior σs `sd` times an unknown scale s: the
-/// upper 95 % bound of s from the data's own sight of the steps (partial information `info`,
-/// the residual's gradient `grad`). Along each eigendirection of the whitened information (λ),
+/// Empirical Bayes for a walk whose steps have prior σs times an unknown scale s: the upper
+/// 95 % bound of s from the data's own sight of the steps (`w`, their partial information and
+/// the residual's gradient whitened by those σs). Along each eigendirection of it (λ),
 /// the whitened score p has variance λ + s²λ² (noise plus the walk), so the log-likelihood of s²
 /// is −½ Σ [ln(λ + s²λ²) + p²/(λ + s²λ²)]; the bound is where it falls [`WALK_BOUND_DROP`] below
 /// its maximum on the far side (Morris, JASA 78, 47, 1983, for the parametric empirical Bayes).
 /// A gyro whose residual shows no wander carries a fraction of the datasheet-sized walk, one
-/// that shows more carries more. None when the information is not finite.
+/// that shows more carries more.
 fn walk_scale(w: &Whitened) -> Option<f64> {
     let seen: Vec<(f64, f64)> = (0..w.sd.len())
         .filter(|&i| w.eigenvalues[i] > 1e-9)
@@ -464,13 +464,13 @@ fn max3(v: [f64; 3]) -> f64 {
 }
 
 /// The covariance (posterior variance plus the square of the posterior mean) of an effect's
-/// parameters in the directions the runs do not separate, from its partial information `info`,
-/// the residual's gradient `grad` along its columns and its prior σs `sd`; with those
-/// directions' information λ. An effect the loop did not try (`tried` None) has every
+/// parameters in the directions the runs do not separate, from its partial information and the
+/// residual's gradient along its columns, whitened by its prior σs (`w`); with those directions'
+/// information λ. An effect the loop did not try (`tried` None) has every
 /// direction counted: no test ruled out what the runs see of it, and its posterior mean is what
 /// they say it is. One it tried (`tried` the loop's χ² threshold for a number of degrees of
 /// freedom) has its separated directions left to the test, unless the residual's score along
-/// them passes that threshold. None when the information is not finite.
+/// them passes that threshold.
 fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
     let n = w.sd.len();
     let lambdas: Vec<f64> = w.eigenvalues.iter().map(|l| l.max(0.0)).collect();
@@ -487,9 +487,8 @@ fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64
     let kept: Vec<usize> = (0..n).filter(|&i| !(tested && lambdas[i] >= seen)).collect();
     // Σ u uᵀ/(1 + λ) and Σ u (u·g)/(1 + λ) over the kept directions, as one product each: a walk
     // has hundreds of them, and a rank-one update per direction was most of a 1-h replay.
-    let u = DMatrix::from_fn(n, kept.len(), |r, c| w.vectors[(r, kept[c])]);
-    let shrink = DVector::from_iterator(kept.len(), kept.iter().map(|&i| 1.0 / (1.0 + lambdas[i])));
-    let scaled = DMatrix::from_fn(n, kept.len(), |r, c| u[(r, c)] * shrink[c]);
+    let u = w.vectors.select_columns(&kept);
+    let scaled = DMatrix::from_fn(n, kept.len(), |r, c| u[(r, c)] / (1.0 + lambdas[kept[c]]));
     let along = DVector::from_iterator(kept.len(), kept.iter().map(|&i| w.projections[i]));
     let mean = &scaled * along;
     let whitened = &scaled * u.transpose() + &mean * mean.transpose();
