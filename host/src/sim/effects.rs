@@ -45,6 +45,9 @@ pub struct Effects {
     /// The rig's time base (the MCU's crystal) off its nominal frequency.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig_clock: Option<RigClock>,
+    /// The sensor package turned on its mount by the load of its own rotation (no model).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount_compliance: Option<MountCompliance>,
     /// Offset, sensitivity and direction as functions of die temperature (`host simulate
     /// --chamber-c` switches it on; not in [`Effects::NAMES`]: a single session at one
     /// temperature cannot show it).
@@ -392,6 +395,40 @@ impl Default for MysteryHarmonic {
     }
 }
 
+/// Structure outside every model that changes with speed: the sensor package, held by a
+/// compliant mount (a PCB on standoffs, an adhesive pad), turns on it under the load of the
+/// tables' rotation, by an angle in proportion to |ω2|² (a centripetal load on a linear spring)
+/// about an axis fixed in the table. At rest its axes are the truth's; at speed every direction
+/// the rig sees is turned, and on this rig |ω2| is the same at every instant of a run, so at one
+/// speed it is M. Default: 0.03° at 180 °/s on both tables, about the table's x axis (the size
+/// of issue 24's uncatalogued effects, 0.015-0.07°).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MountCompliance {
+    /// The turn at θ1' = θ2' = 180 °/s, degrees.
+    pub deg_at_180: f64,
+    /// The axis it turns about, in the table frame O2 (normalised when used).
+    pub axis_table: [f64; 3],
+}
+
+impl Default for MountCompliance {
+    fn default() -> Self {
+        Self { deg_at_180: 0.03, axis_table: [1.0, 0.0, 0.0] }
+    }
+}
+
+impl MountCompliance {
+    /// |ω2|² at θ1' = θ2' = 180 °/s, (°/s)².
+    const REFERENCE_LOAD_DPS2: f64 = 2.0 * 180.0 * 180.0;
+
+    /// The package's turn on its mount (table frame) at table rate `omega2_dps`.
+    pub fn turn(&self, omega2_dps: &nalgebra::Vector3<f64>) -> nalgebra::Matrix3<f64> {
+        let angle_rad = self.deg_at_180.to_radians() * omega2_dps.norm_squared() / Self::REFERENCE_LOAD_DPS2;
+        let axis = nalgebra::Unit::new_normalize(nalgebra::Vector3::from(self.axis_table));
+        *nalgebra::Rotation3::from_axis_angle(&axis, angle_rad).matrix()
+    }
+}
+
 /// An effect name or value that `Effects::enable` does not understand.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct EffectSpecError(pub String);
@@ -408,7 +445,7 @@ impl Effects {
     /// Every physical effect of the realistic rig (issue 10), each at its default size: what
     /// the all-effects bench, the trust matrix's `all` and the golden session switch on. The
     /// other switches (`delay_ms`, `nonlinearity`, `gear_ratio_error`, `mystery_harmonic`,
-    /// `temperature_dependence`) stay off.
+    /// `mount_compliance`, `temperature_dependence`) stay off.
     pub const REALISTIC: [&'static str; 10] = [
         "filter_delay",
         "index_offset_deg",
@@ -423,7 +460,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 16] = [
+    pub const NAMES: [(&'static str, &'static str); 17] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -432,6 +469,7 @@ impl Effects {
         ("nonlinearity", "quadratic term at full scale, fraction (default 0.002)"),
         ("gear_ratio_error", "gear ratio error, ppm (default 200)"),
         ("mystery_harmonic", "3×θ2 harmonic on x, °/s (default 0.3)"),
+        ("mount_compliance", "package turned on its mount ∝ |ω2|², degrees at 180 °/s (default 0.03)"),
         ("earth_rotation", "Earth's rotation at this latitude, degrees (default 45)"),
         ("gear_transmission", "magnetic-gear error at 12×, degrees (default 0.03; 24× scales with it)"),
         ("g_sensitivity", "bias from gravity, largest coefficient in °/s/g (default 0.05)"),
@@ -508,6 +546,13 @@ impl Effects {
                     m.amplitude_dps = v;
                 }
                 self.mystery_harmonic = Some(m);
+            }
+            "mount_compliance" => {
+                let mut m = MountCompliance::default();
+                if let Some(v) = value {
+                    m.deg_at_180 = v;
+                }
+                self.mount_compliance = Some(m);
             }
             "earth_rotation" => {
                 let mut e = EarthRotation::default();

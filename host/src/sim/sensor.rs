@@ -3,7 +3,7 @@
 //! Model (EXCITER.md eq. 6): `v = K S ω_s + v_off`, with each axis `s_i` tilted from the package
 //! axis `e_i`, its own sensitivity `k_i` and offset, white noise, rounding to i16 and clipping.
 
-use super::effects::{Effects, GSensitivity, MysteryHarmonic, Nonlinearity, OffsetDrift};
+use super::effects::{Effects, GSensitivity, MountCompliance, MysteryHarmonic, Nonlinearity, OffsetDrift};
 use super::thermal::{ChamberStep, TemperatureDependence};
 use nalgebra::{Matrix3, Vector3};
 use protocol::FullScale;
@@ -164,6 +164,7 @@ pub struct SenseChain {
     full_scale_dps: f64,
     nonlinearity: Option<Nonlinearity>,
     mystery: Option<MysteryHarmonic>,
+    mount_compliance: Option<MountCompliance>,
     /// R_qᵀ: table frame → package frame (for the specific force).
     package_from_table: Matrix3<f64>,
     g_sensitivity: Option<GSensitivity>,
@@ -178,6 +179,7 @@ impl SenseChain {
             full_scale_dps: f64::from(fs.range_dps()),
             nonlinearity: effects.nonlinearity,
             mystery: effects.mystery_harmonic,
+            mount_compliance: effects.mount_compliance,
             package_from_table: r_pose.transpose(),
             g_sensitivity: effects.g_sensitivity,
         }
@@ -186,7 +188,11 @@ impl SenseChain {
     /// Sensed rate in counts (before offset, noise and quantisation) for the table rate ω2 (°/s)
     /// at table angle `theta2_rad`.
     pub fn counts(&self, omega2_dps: &Vector3<f64>, theta2_rad: f64) -> [f64; 3] {
-        let x = self.axes_from_table * omega2_dps;
+        // A package turned by C on its mount (table frame) feels Cᵀ·ω2.
+        let x = match &self.mount_compliance {
+            Some(c) => self.axes_from_table * (c.turn(omega2_dps).transpose() * omega2_dps),
+            None => self.axes_from_table * omega2_dps,
+        };
         let mut y = [x[0], x[1], x[2]];
         if let Some(n) = &self.nonlinearity {
             for v in &mut y {
@@ -286,5 +292,32 @@ mod tests {
         let c = chain.counts(&Vector3::zeros(), 0.5);
         assert!((c[0] / k - 0.3 * (1.5f64 + 0.4).sin()).abs() < 1e-12);
         assert_eq!([c[1], c[2]], [0.0, 0.0]);
+    }
+
+    /// The package turns about the table's x axis by 0.03° at 180 °/s on both tables, by a
+    /// quarter of that at half the speed, and not at rest.
+    #[test]
+    fn a_compliant_mount_turns_the_package_by_its_load() {
+        let truth = SensorTruth {
+            s: [Vector3::x(), Vector3::y(), Vector3::z()],
+            tilt_deg: [0.0; 3],
+            k_rel: [1.0; 3],
+            offset_dps: [0.0; 3],
+        };
+        let effects = Effects { mount_compliance: Some(MountCompliance::default()), ..Effects::default() };
+        let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
+        let k = nominal_counts_per_dps(FullScale::Dps500);
+        for (rate_dps, turn_deg) in [(180.0, 0.03), (90.0, 0.0075), (-180.0, 0.03)] {
+            // ω2 = (0, θ1', θ2') at θ2 = 0 (EXCITER.md eq. 1): |ω2|² = 2·rate².
+            let w2 = Vector3::new(0.0, rate_dps, rate_dps);
+            let c = chain.counts(&w2, 0.0).map(|v| v / k);
+            // The package turned by +δ about x feels ω2 turned by −δ.
+            let d = f64::to_radians(turn_deg);
+            let want = [0.0, rate_dps * (d.cos() + d.sin()), rate_dps * (d.cos() - d.sin())];
+            for (got, want) in c.iter().zip(want) {
+                assert!((got - want).abs() < 1e-9, "{rate_dps}: {c:?} against {want:?}");
+            }
+        }
+        assert_eq!(chain.counts(&Vector3::zeros(), 0.3), [0.0; 3]);
     }
 }
