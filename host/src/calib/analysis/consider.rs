@@ -513,10 +513,71 @@ fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whiten
     if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
         return None;
     }
-    let eig = w.symmetric_eigen();
+    let (eigenvalues, vectors) = block_eigen(&w);
     let g_w = DVector::from_fn(n, |r, _| grad[r] * sd[r]);
-    let projections = (0..n).map(|i| eig.eigenvectors.column(i).dot(&g_w)).collect();
-    Some(Whitened { sd: sd.to_vec(), eigenvalues: eig.eigenvalues, vectors: eig.eigenvectors, projections })
+    let projections = (0..n).map(|i| vectors.column(i).dot(&g_w)).collect();
+    Some(Whitened { sd: sd.to_vec(), eigenvalues, vectors, projections })
+}
+
+/// The eigen-decomposition of the symmetric `w`, block by block: its parameters fall into
+/// groups no entry links (the three axes' walks when no shared parameter of the model couples
+/// the axes), each decomposed alone. The same eigenpairs as one decomposition, in another
+/// order, at a ninth of its cost for three equal blocks: a 1-h capture's walk has 3 × 360 steps,
+/// and one decomposition of all 1080 was a fifth of its replay.
+fn block_eigen(w: &DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    let n = w.nrows();
+    let blocks = linked_groups(n, |r, c| w[(r, c)] != 0.0);
+    if blocks.len() <= 1 {
+        let eig = w.clone().symmetric_eigen();
+        return (eig.eigenvalues, eig.eigenvectors);
+    }
+    let mut values = DVector::zeros(n);
+    let mut vectors = DMatrix::zeros(n, n);
+    let mut at = 0;
+    for idx in blocks {
+        let eig = w.select_rows(&idx).select_columns(&idx).symmetric_eigen();
+        for j in 0..idx.len() {
+            values[at] = eig.eigenvalues[j];
+            for (i, &r) in idx.iter().enumerate() {
+                vectors[(r, at)] = eig.eigenvectors[(i, j)];
+            }
+            at += 1;
+        }
+    }
+    (values, vectors)
+}
+
+/// The groups of `0..n` that `linked(r, c)` (for r < c) joins, directly or through others,
+/// each in increasing order, the groups in order of their first member.
+fn linked_groups(n: usize, linked: impl Fn(usize, usize) -> bool) -> Vec<Vec<usize>> {
+    // Union-find with the smallest member as each group's root.
+    let mut root: Vec<usize> = (0..n).collect();
+    fn find(root: &mut [usize], mut i: usize) -> usize {
+        while root[i] != i {
+            root[i] = root[root[i]];
+            i = root[i];
+        }
+        i
+    }
+    for r in 0..n {
+        for c in r + 1..n {
+            if linked(r, c) {
+                let (a, b) = (find(&mut root, r), find(&mut root, c));
+                root[a.max(b)] = a.min(b);
+            }
+        }
+    }
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let mut group_of = vec![usize::MAX; n];
+    for i in 0..n {
+        let g = find(&mut root, i);
+        if group_of[g] == usize::MAX {
+            group_of[g] = groups.len();
+            groups.push(Vec::new());
+        }
+        groups[group_of[g]].push(i);
+    }
+    groups
 }
 
 impl Whitened {
@@ -533,6 +594,27 @@ impl Whitened {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Parameters no entry links are decomposed apart, with the eigenpairs of the whole.
+    #[test]
+    fn unlinked_blocks_are_decomposed_apart_with_the_same_eigenpairs() {
+        assert_eq!(linked_groups(5, |r, c| (r, c) == (0, 3) || (r, c) == (3, 4)), [vec![0, 3, 4], vec![1], vec![2]]);
+        // x and z linked, y alone: the 3 × 3 of one axis per parameter.
+        let w = DMatrix::from_row_slice(3, 3, &[4.0, 0.0, 1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 3.0]);
+        let (values, vectors) = block_eigen(&w);
+        let whole = w.clone().symmetric_eigen();
+        let mut got: Vec<f64> = values.iter().copied().collect();
+        let mut want: Vec<f64> = whole.eigenvalues.iter().copied().collect();
+        got.sort_by(f64::total_cmp);
+        want.sort_by(f64::total_cmp);
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-12, "{got:?} against {want:?}");
+        }
+        // W = V·diag(λ)·Vᵀ with V orthonormal.
+        let back = &vectors * DMatrix::from_diagonal(&values) * vectors.transpose();
+        assert!((back - &w).abs().max() < 1e-12);
+        assert!((vectors.transpose() * &vectors - DMatrix::identity(3, 3)).abs().max() < 1e-12);
+    }
 
     /// A direction the data do not see keeps its prior; one they see well is left to the tests.
     #[test]
