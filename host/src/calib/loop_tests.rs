@@ -122,6 +122,16 @@ fn clean_captures_add_nothing_and_pass() {
         assert_eq!(r.effects(), [Effect::EarthRotationAtLatitude], "seed {}\n{}", truth.seed, r.summary());
         assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "seed {}\n{}", truth.seed, r.summary());
         assert!(r.initial.findings.is_empty(), "seed {}: {:?}", truth.seed, r.initial.findings);
+        // Two speeds without gravity in the model: the runs' agreement checks a change of M
+        // with speed.
+        assert!(
+            !r.notes
+                .iter()
+                .any(|n| matches!(n, Note::SpeedChangeUnchecked { .. } | Note::SpeedChangeHeldByGravity { .. })),
+            "seed {}: {:?}",
+            truth.seed,
+            r.notes
+        );
     }
 }
 
@@ -216,6 +226,12 @@ fn one_speed_fits_a_combined_phase_and_asks_for_a_second_speed() {
     assert_eq!(r.steps.get(1).and_then(|s| s.effect), Some(Effect::Phase), "{}", r.summary());
     let asks = crate::present::loop_text::asks(&r);
     assert!(asks.iter().any(|a| a.contains("--rates-dps 180,90")), "{asks:?}");
+    // At one speed a change of M with speed is part of M: the notes say no run checked it.
+    let unchecked = r.notes.iter().find_map(|n| match n {
+        Note::SpeedChangeUnchecked { rate_dps } => Some(*rate_dps),
+        _ => None,
+    });
+    assert!(unchecked.is_some_and(|v| (v - 180.0).abs() < 1.0), "{:?}", r.notes);
     // The combined phase corrects these runs: the calibration is right for them.
     let t = TruthErrors::of(&r.final_report().axes, &truth.sensor());
     assert_within_3_sigma(&t, "one speed");
@@ -556,6 +572,13 @@ fn undeclared_g_sensitivity_is_found_named_and_corrected() {
     assert!(r.effects().contains(&Effect::GSensitivity), "{}", r.summary());
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "g_sensitivity");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    // Gravity and M together fit any θ2'³ shape at two speeds: the notes say so.
+    let held = r.notes.iter().find_map(|n| match n {
+        Note::SpeedChangeHeldByGravity { rates_dps } => Some(rates_dps.clone()),
+        _ => None,
+    });
+    assert!(held.is_some_and(|v| v.len() == 2), "{:?}", r.notes);
+    assert!(!r.notes.iter().any(|n| matches!(n, Note::SpeedChangeUnchecked { .. })), "{:?}", r.notes);
 }
 
 /// A sensor-table axis 0.3° off perpendicular, not declared: its θ1'·sin ε along z2 biases the

@@ -25,6 +25,16 @@ pub fn note(n: &Note) -> String {
             "Delay and index offset are separable here: the runs turn at more than one θ2' (speed or direction)."
                 .into()
         }
+        Note::SpeedChangeUnchecked { rate_dps } => format!(
+            "Not checked: whether M changes with speed. Every run turns at {rate_dps:.0} °/s, where a sensitivity or direction that changes with speed (a non-linearity in the rate vector's magnitude, a package turning on a compliant mount) is part of M, and no σ carries it: no datasheet bounds it. Runs at a second speed check it (--rates-dps 180,90,-180)."
+        ),
+        Note::SpeedChangeHeldByGravity { rates_dps } => {
+            let rates: Vec<String> = rates_dps.iter().map(|r| format!("{r:+.0}")).collect();
+            format!(
+                "Checked only in part: whether M changes with speed. At {} °/s the g-sensitivity (∝ 1) and M (∝ θ2') together take up any change of M that grows with the square of the speed (a non-linearity in the rate vector's magnitude, a package turning on a compliant mount), so the runs' agreement does not rule it out, and no σ carries it. Runs in the other direction tell them apart (--rates-dps 180,90,-180).",
+                rates.join(", ")
+            )
+        }
         Note::OffsetReference { drift, run_label, t_s, at_start_counts } => {
             let at_start: Vec<String> = at_start_counts.iter().map(|v| format!("{v:+.2}")).collect();
             format!(

@@ -9,13 +9,13 @@ use crate::calib::analysis::consistency::{consistency, Consistency};
 use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
 use crate::calib::analysis::paper::paper_check;
 use crate::calib::analysis::selection::{
-    both_directions, held_out, least_needed, not_converged, separates_delay_and_index, start_without, step,
-    DriftChoice, Dropped, Score, Skipped,
+    both_directions, distinct_rates_dps, held_out, least_needed, not_converged, separates_delay_and_index,
+    start_without, step, two_distinct, DriftChoice, Dropped, Score, Skipped,
 };
 use crate::calib::data::kinematics;
 use crate::calib::data::kinematics::KinOptions;
 use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
-use crate::calib::effects::terms::ConsiderCtx;
+use crate::calib::effects::terms::{separates_rate_powers, ConsiderCtx};
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
     apply_step, fit, full_selection, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
@@ -197,6 +197,19 @@ pub enum Ask {
 pub enum Note {
     /// The runs turn at more than one θ2', so a delay and an index offset are told apart.
     DelayAndIndexSeparable,
+    /// Every run turns at one |θ2'|, where a change of M with speed is part of M: no run
+    /// checks it, and no σ carries it (nothing bounds it).
+    SpeedChangeUnchecked {
+        /// The runs' |θ2'|, °/s.
+        rate_dps: f64,
+    },
+    /// The g-sensitivity is in and the runs' rates do not tell θ2'⁰, θ2' and θ2'³ apart: a
+    /// change of M growing with speed² is taken up by gravity and M together, and the runs'
+    /// agreement does not rule it out.
+    SpeedChangeHeldByGravity {
+        /// The runs' distinct signed θ2', °/s.
+        rates_dps: Vec<f64>,
+    },
     /// With a drift model the offsets are those of a reference time or temperature; what the
     /// model gives at the first used sample of the first run.
     OffsetReference {
@@ -1149,7 +1162,22 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
     if let Some(note) = earth_note(fitted, latitude_deg) {
         notes.push(note);
     }
+    notes.extend(speed_change_note(data, effects));
     (asks, notes)
+}
+
+/// What the runs leave unchecked of a change of M with speed (`mount_compliance` on the
+/// simulator: at 0.03° it ends 80σ off at exit 0 at ±180 °/s and 24σ at 180, 90 °/s with the
+/// g-sensitivity in, where the default design flags it; docs/trust.md). Nothing bounds its size,
+/// so no σ carries it; the note says which runs would check it.
+fn speed_change_note(data: &LoopData, effects: &[Effect]) -> Option<Note> {
+    let rates_dps = distinct_rates_dps(data);
+    let speeds: Vec<f64> = rates_dps.iter().map(|r| r.abs()).collect();
+    if !speeds.is_empty() && !two_distinct(&speeds) {
+        return Some(Note::SpeedChangeUnchecked { rate_dps: speeds[0] });
+    }
+    (effects.contains(&Effect::GSensitivity) && !separates_rate_powers(&rates_dps, &[0, 1, 3]))
+        .then_some(Note::SpeedChangeHeldByGravity { rates_dps })
 }
 
 // The JSON layouts of this module's report types (see [`crate::calib::result::estimate::values`] for why).

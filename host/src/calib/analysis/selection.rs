@@ -74,7 +74,7 @@ fn table_rates_dps(data: &LoopData) -> Vec<f64> {
 }
 
 /// Whether two of `rates` differ by more than [`DISTINCT_RATE_FRACTION`] of the larger.
-fn two_distinct(rates: &[f64]) -> bool {
+pub fn two_distinct(rates: &[f64]) -> bool {
     rates.iter().any(|a| rates.iter().any(|b| (a - b).abs() > DISTINCT_RATE_FRACTION * a.abs().max(b.abs())))
 }
 

@@ -440,24 +440,9 @@ impl Situation<'_> {
         self.current.contains(&e)
     }
 
-    /// Whether the runs tell apart effects whose part turning with θ2 grows as these powers of
-    /// θ2' (M's signal: 1; a vector fixed to the base, gravity's or Earth's vertical rate: 0;
-    /// the filter's droop κθ2'²·θ1': 3): the distinct rates' powers, a row per rate, have full
-    /// column rank. At one speed in both directions r³ is r times a constant; at two speeds in
-    /// one direction 1, r and r³ are three shapes over two values.
+    /// [`separates_rate_powers`] of the runs' rates.
     pub fn separates_rate_powers(&self, powers: &[i32]) -> bool {
-        let top = self.distinct_rates_dps.iter().fold(0.0f64, |m, r| m.max(r.abs()));
-        if self.distinct_rates_dps.len() < powers.len() || top <= 0.0 {
-            return false;
-        }
-        let m = nalgebra::DMatrix::from_fn(self.distinct_rates_dps.len(), powers.len(), |i, j| {
-            (self.distinct_rates_dps[i] / top).powi(powers[j])
-        });
-        let sv = m.singular_values();
-        let largest = sv.max();
-        // Rank to 1e-6 of the largest singular value: the rates are known to better than 1e-4
-        // (the encoder's count over a run), and a shape that close to the others is no shape.
-        sv.iter().all(|&v| v > 1e-6 * largest)
+        separates_rate_powers(self.distinct_rates_dps, powers)
     }
 
     /// Whether a vector fixed to the base turns in the model: the g-sensitivity's gravity, or
@@ -521,6 +506,24 @@ pub struct ConsiderBound {
     pub sigma: f64,
     /// Its source: a datasheet table, physics, or a stated engineering judgement.
     pub source: &'static str,
+}
+
+/// Whether the runs tell apart effects whose part turning with θ2 grows as these powers of
+/// θ2' (M's signal: 1; a vector fixed to the base, gravity's or Earth's vertical rate: 0;
+/// the filter's droop κθ2'²·θ1': 3): the distinct rates' powers, a row per rate, have full
+/// column rank (`rates_dps`: the distinct signed θ2', °/s). At one speed in both directions r³ is r times a constant; at two speeds in
+/// one direction 1, r and r³ are three shapes over two values.
+pub fn separates_rate_powers(rates_dps: &[f64], powers: &[i32]) -> bool {
+    let top = rates_dps.iter().fold(0.0f64, |m, r| m.max(r.abs()));
+    if rates_dps.len() < powers.len() || top <= 0.0 {
+        return false;
+    }
+    let m = nalgebra::DMatrix::from_fn(rates_dps.len(), powers.len(), |i, j| (rates_dps[i] / top).powi(powers[j]));
+    let sv = m.singular_values();
+    let largest = sv.max();
+    // Rank to 1e-6 of the largest singular value: the rates are known to better than 1e-4
+    // (the encoder's count over a run), and a shape that close to the others is no shape.
+    sv.iter().all(|&v| v > 1e-6 * largest)
 }
 
 /// What an effect's [`super::Behaviour::consider`] may look at.
