@@ -523,6 +523,7 @@ impl<'a> Context<'a> {
             cutoff_hz: self.cutoff_hz,
             full_scale_dps: self.full_scale_dps,
             delay_s: f.model.theta_of(SharedPar { effect: Effect::Delay, k: 0 }),
+            temp_moved: self.data.temp_moved,
         }
     }
 

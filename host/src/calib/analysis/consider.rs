@@ -116,7 +116,7 @@ impl ConsiderOverrides {
 
 /// Keys of the effects that may be considered (those with a plausible size in some model).
 pub fn considered_keys() -> Vec<String> {
-    let cx = ConsiderCtx { current: &[], cutoff_hz: 30.0, full_scale_dps: 500.0, delay_s: None };
+    let cx = ConsiderCtx { current: &[], cutoff_hz: 30.0, full_scale_dps: 500.0, delay_s: None, temp_moved: true };
     Effect::catalogue()
         .into_iter()
         .filter(|e| {
@@ -314,12 +314,7 @@ pub fn consider(
         let mut c_mat = DMatrix::from_fn(idx.len(), idx.len(), |i, j| n_mat[(idx[i], idx[j])]);
         let mut b_own = DVector::from_fn(idx.len(), |i, _| b_vec[idx[i]]);
         if !c.walk.is_empty() {
-            // The parameters the prior bounds are a walk's steps: levels = A·steps, A summing
-            // each level's steps back to its stretch's start.
-            let a = walk_sums(&c.walk, idx.len());
-            b *= &a;
-            c_mat = a.transpose() * c_mat * &a;
-            b_own = a.transpose() * b_own;
+            to_steps(&mut b, &mut c_mat, &mut b_own, &c.walk);
         }
         let s_mat = chol.solve(&b);
         let info = &c_mat - b.transpose() * &s_mat;
@@ -338,12 +333,13 @@ pub fn consider(
             source = format!("{source}, times {scale:.2}: as large as the residual's own wander allows (95 % bound)");
             tried = None;
         }
-        let (sigma_c, lambdas) = posterior(&whitened, tried);
+        let (factor, lambdas) = posterior(&whitened, tried);
         if lambdas.is_empty() {
             continue;
         }
         let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
-        let added = &s12 * sigma_c * s12.transpose();
+        let along = &s12 * factor;
+        let added = &along * along.transpose();
         let (axes, _) = derive(params, &added, nominal);
         let term = ConsiderTerm {
             effect: c.effect.key(),
@@ -442,29 +438,41 @@ fn walk_scale(w: &Whitened) -> Option<f64> {
     Some(hi.sqrt())
 }
 
-/// The map from a candidate's prior parameters to its columns' (`n` of them, three per linear
-/// column in axis order): the identity, or for a walk (`walk` each column's predecessor) the
-/// sums that make each level from its own and its predecessors' steps, axis by axis.
-fn walk_sums(walk: &[Option<usize>], n: usize) -> DMatrix<f64> {
-    let mut a = DMatrix::identity(n, n);
-    for (col, &first) in walk.iter().enumerate() {
-        let mut before = first;
-        while let Some(j) = before {
-            for axis in 0..3 {
-                a[(3 * col + axis, 3 * j + axis)] = 1.0;
-            }
-            before = walk[j];
+/// A walk's cross-products with the model (`b`), with itself (`c_mat`) and with the residual
+/// (`b_own`), from its levels' to its steps': the parameters its prior bounds are the steps,
+/// levels = A·steps ([`times_walk`]), so B·A, Aᵀ·C·A and Aᵀ·b.
+fn to_steps(b: &mut DMatrix<f64>, c_mat: &mut DMatrix<f64>, b_own: &mut DVector<f64>, walk: &[Option<usize>]) {
+    times_walk(b, walk);
+    times_walk(c_mat, walk);
+    c_mat.transpose_mut();
+    times_walk(c_mat, walk);
+    let mut row = DMatrix::from_row_slice(1, b_own.len(), b_own.as_slice());
+    times_walk(&mut row, walk);
+    *b_own = DVector::from_row_slice(row.as_slice());
+}
+
+/// `m` times the map from a walk's steps to its levels (`walk` each level's predecessor in its
+/// stretch; three parameters per level, in axis order): each level's column becomes the sum of
+/// its own and its successors' in the stretch, since a step moves every later level. Running
+/// sums from the stretch's end, O(rows·n), where a product with the dense map was O(rows·n²)
+/// and with it the 1-h replay's largest matrix products.
+fn times_walk(m: &mut DMatrix<f64>, walk: &[Option<usize>]) {
+    for (level, &before) in walk.iter().enumerate().rev() {
+        let Some(p) = before else { continue };
+        for axis in 0..3 {
+            let later = m.column(3 * level + axis).clone_owned();
+            let mut earlier = m.column_mut(3 * p + axis);
+            earlier += later;
         }
     }
-    a
 }
 
 fn max3(v: [f64; 3]) -> f64 {
     v.into_iter().fold(0.0, f64::max)
 }
 
-/// The covariance (posterior variance plus the square of the posterior mean) of an effect's
-/// parameters in the directions the runs do not separate, from its partial information and the
+/// A factor F of the covariance F·Fᵀ (posterior variance plus the square of the posterior
+/// mean) of an effect's parameters in the directions the runs do not separate, from its partial information and the
 /// residual's gradient along its columns, whitened by its prior σs (`w`); with those directions'
 /// information λ. An effect the loop did not try (`tried` None) has every
 /// direction counted: no test ruled out what the runs see of it, and its posterior mean is what
@@ -485,15 +493,21 @@ fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64
     let score: f64 = separated.iter().map(|&i| w.projections[i].powi(2) / lambdas[i]).sum();
     let tested = tried.is_some_and(|threshold| separated.is_empty() || score <= threshold(separated.len()));
     let kept: Vec<usize> = (0..n).filter(|&i| !(tested && lambdas[i] >= seen)).collect();
-    // Σ u uᵀ/(1 + λ) and Σ u (u·g)/(1 + λ) over the kept directions, as one product each: a walk
-    // has hundreds of them, and a rank-one update per direction was most of a 1-h replay.
-    let u = w.vectors.select_columns(&kept);
-    let scaled = DMatrix::from_fn(n, kept.len(), |r, c| u[(r, c)] / (1.0 + lambdas[kept[c]]));
-    let along = DVector::from_iterator(kept.len(), kept.iter().map(|&i| w.projections[i]));
-    let mean = &scaled * along;
-    let whitened = &scaled * u.transpose() + &mean * mean.transpose();
-    let cov = DMatrix::from_fn(n, n, |r, c| w.sd[r] * whitened[(r, c)] * w.sd[c]);
-    (cov, kept.iter().map(|&i| lambdas[i]).collect())
+    // F = diag(sd)·[U·diag(1/√(1 + λ)), U·diag(1/(1 + λ))·(Uᵀg)] over the kept directions: the
+    // covariance diag(sd)·(Σ u uᵀ/(1 + λ) + m mᵀ)·diag(sd) with m = Σ u (u·g)/(1 + λ). Only its
+    // product with the estimate's sensitivity is wanted, and a walk has hundreds of directions:
+    // the n × n covariance itself was an n³ product.
+    let mut factor = DMatrix::zeros(n, kept.len() + 1);
+    for (c, &i) in kept.iter().enumerate() {
+        let shrink = 1.0 / (1.0 + lambdas[i]);
+        let (root, along) = (shrink.sqrt(), shrink * w.projections[i]);
+        for r in 0..n {
+            let u = w.vectors[(r, i)] * w.sd[r];
+            factor[(r, c)] = u * root;
+            factor[(r, kept.len())] += u * along;
+        }
+    }
+    (factor, kept.iter().map(|&i| lambdas[i]).collect())
 }
 
 /// An effect's partial information and the residual's gradient in units of its prior σs: the
@@ -595,6 +609,28 @@ impl Whitened {
 mod tests {
     use super::*;
 
+    /// [`posterior`]'s covariance F·Fᵀ.
+    fn posterior_cov(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
+        let (f, n) = posterior(w, tried);
+        (&f * f.transpose(), n)
+    }
+
+    /// The map from a walk's steps to its levels, written out: level i is the sum of its own
+    /// step and its predecessors' in the stretch, axis by axis.
+    fn walk_sums(walk: &[Option<usize>], n: usize) -> DMatrix<f64> {
+        let mut a = DMatrix::identity(n, n);
+        for (col, &first) in walk.iter().enumerate() {
+            let mut before = first;
+            while let Some(j) = before {
+                for axis in 0..3 {
+                    a[(3 * col + axis, 3 * j + axis)] = 1.0;
+                }
+                before = walk[j];
+            }
+        }
+        a
+    }
+
     /// Parameters no entry links are decomposed apart, with the eigenpairs of the whole.
     #[test]
     fn unlinked_blocks_are_decomposed_apart_with_the_same_eigenpairs() {
@@ -620,43 +656,44 @@ mod tests {
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior(&whiten(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), Some(&|_| 16.4));
+        let (c, n) = posterior_cov(&whiten(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), Some(&|_| 16.4));
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Seen at λ = 40 (a 6σ signal at plausible size) but by a test at χ² 35, which would
         // miss it one time in four: counted.
         let info40 = DMatrix::from_row_slice(1, 1, &[40.0]);
-        let (c, n) = posterior(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 35.0));
+        let (c, n) = posterior_cov(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 35.0));
         assert_eq!(n, [40.0]);
         assert!((c[(0, 0)] - 1.0 / 41.0).abs() < 1e-12, "{c}");
-        let (_, n) = posterior(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 16.4));
+        let (_, n) = posterior_cov(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 16.4));
         assert!(n.is_empty(), "{n:?}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
-        let (c, n) = posterior(&whiten(&info, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| f64::INFINITY));
+        let (c, n) =
+            posterior_cov(&whiten(&info, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| f64::INFINITY));
         assert_eq!(n.len(), 1);
         assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
         // A direction seen well (whitened λ = 3²·1e6 ≥ 25) of an effect the loop did not try is
         // counted: its posterior variance is 1/(1 + λ) of the prior's.
         let info2 = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c2, n2) = posterior(&whiten(&info2, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), None);
+        let (c2, n2) = posterior_cov(&whiten(&info2, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), None);
         assert_eq!(n2.len(), 2);
         assert!((c2[(1, 1)] - 9.0 / (1.0 + 9e6)).abs() < 1e-15, "{c2}");
         // A tried effect whose separated direction the residual pulls on past the test's
         // threshold (whitened g = 3·3000, score 9000²/9e6 = 9 > 0.5) was never tested: it is counted, with
         // the posterior mean g_w/(1 + λ) = 9000/(1 + 9e6) of its whitened σ (3).
         let g = DVector::from_column_slice(&[0.0, 3000.0]);
-        let (c3, n3) = posterior(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 0.5));
+        let (c3, n3) = posterior_cov(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 0.5));
         assert_eq!(n3.len(), 2);
         let mean = 3.0 * 9000.0 / (1.0 + 9e6);
         assert!((c3[(1, 1)] - (9.0 / (1.0 + 9e6) + mean * mean)).abs() < 1e-15, "{c3}");
         // Below the threshold (9 ≤ 10) the test speaks for it.
-        let (c4, n4) = posterior(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 10.0));
+        let (c4, n4) = posterior_cov(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 10.0));
         assert_eq!((n4.len(), c4[(1, 1)]), (1, 0.0));
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
-        let (c, _) = posterior(
+        let (c, _) = posterior_cov(
             &whiten(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite"),
             Some(&|_| f64::INFINITY),
         );
@@ -689,6 +726,13 @@ mod tests {
         }
         assert_eq!(a.sum(), 12.0);
         assert_eq!(walk_sums(&[], 4), DMatrix::identity(4, 4));
+        // The running sums are the product with the map: two stretches, of three levels and
+        // of two, twelve rows.
+        let walk = [None, Some(0), Some(1), None, Some(3)];
+        let m = DMatrix::from_fn(12, 15, |r, c| ((r * 15 + c) as f64 * 0.37).sin());
+        let mut fast = m.clone();
+        times_walk(&mut fast, &walk);
+        assert!((fast - &m * walk_sums(&walk, 15)).abs().max() < 1e-12);
     }
 
     /// A hundred steps seen at λ = 4 each: where the scores are what noise alone gives (p² = λ)
@@ -737,8 +781,8 @@ mod tests {
         let info = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0]);
         let grad = DVector::from_column_slice(&[1.0, -2.0, 0.5]);
         let sd = [0.5, 1.5, 2.0];
-        let (c1, l1) = posterior(&whiten(&info, &grad, &sd).expect("finite").scaled(3.0), None);
-        let (c2, l2) = posterior(&whiten(&info, &grad, &sd.map(|v| 3.0 * v)).expect("finite"), None);
+        let (c1, l1) = posterior_cov(&whiten(&info, &grad, &sd).expect("finite").scaled(3.0), None);
+        let (c2, l2) = posterior_cov(&whiten(&info, &grad, &sd.map(|v| 3.0 * v)).expect("finite"), None);
         assert!((c1 - &c2).amax() <= 1e-12 * c2.amax(), "{c2}");
         for (a, b) in l1.iter().zip(&l2) {
             assert!((a - b).abs() <= 1e-12 * b.abs(), "{l1:?} against {l2:?}");

@@ -59,9 +59,11 @@ impl Behaviour for ScaleTemperature {
         cx.axis_rate(p, a) * p.temp_c
     }
 
-    /// The datasheet's average change as one σ: what the runs do not see of it biases M.
+    /// The datasheet's average change as one σ: what the runs do not see of it biases M. None
+    /// when the die read one temperature throughout: its column is then zero at every sample,
+    /// and gathering it cost a tenth of a 1-h replay (the smoothed temperature per sample).
     fn consider(&self, _: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
-        (!cx.has(Effect::ScaleTemperature)).then_some(ConsiderBound {
+        (!cx.has(Effect::ScaleTemperature) && cx.temp_moved).then_some(ConsiderBound {
             sigma: DATASHEET_PPM_PER_C,
             source: "sensitivity change vs temperature ±2 % over −40…85 °C (L3G4200D datasheet Table 4)",
         })

@@ -537,6 +537,9 @@ pub struct ConsiderCtx<'a> {
     pub full_scale_dps: f64,
     /// The model's fitted delay between gyro and encoder, s, if it holds one.
     pub delay_s: Option<f64>,
+    /// Whether the die's temperature readings changed over the capture
+    /// ([`crate::calib::engine::LoopData::temp_moved`]).
+    pub temp_moved: bool,
 }
 
 impl ConsiderCtx<'_> {

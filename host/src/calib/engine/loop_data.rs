@@ -107,6 +107,9 @@ pub struct LoopData {
     /// Mean die temperature over every sample, OUT_TEMP counts: the smoothed temperature is
     /// reckoned from it ([`RunTemperatures`]).
     pub temp_mean_counts: f64,
+    /// Whether the die's temperature readings (OUT_TEMP) changed at all over the capture: if
+    /// not, the smoothed temperature is 0 at every sample, and so is every column made from it.
+    pub temp_moved: bool,
     /// Spread of the smoothed die temperature over every sample, °C, once asked for
     /// ([`LoopData::temp_spread_c`]).
     temp_spread_c: std::sync::OnceLock<f64>,
@@ -176,6 +179,7 @@ impl LoopData {
         let mut runs = Vec::with_capacity(kin.runs.len());
         let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let (mut temp_sum, mut temp_n) = (0.0, 0usize);
+        let (mut temp_lo, mut temp_hi) = (f32::INFINITY, f32::NEG_INFINITY);
         for r in &kin.runs {
             if let (Some(a), Some(b)) = (r.samples.first(), r.samples.last()) {
                 t_lo = t_lo.min(a.t_s());
@@ -185,6 +189,8 @@ impl LoopData {
                 if t.is_finite() {
                     temp_sum += f64::from(t);
                     temp_n += 1;
+                    temp_lo = temp_lo.min(t);
+                    temp_hi = temp_hi.max(t);
                 }
             }
         }
@@ -219,6 +225,7 @@ impl LoopData {
             poses,
             layout,
             temp_mean_counts: temp_mean,
+            temp_moved: temp_hi > temp_lo,
             temp_spread_c: std::sync::OnceLock::new(),
         }
     }
