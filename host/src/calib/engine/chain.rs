@@ -324,6 +324,12 @@ impl<'a> Evaluator<'a> {
         if !self.needs_temperature {
             return;
         }
+        if !self.data.temp_moved {
+            // Every reading the same: the smoothed temperature is the capture mean at every
+            // sample, 0 °C from it.
+            out.fill(0.0);
+            return;
+        }
         let rk = &self.data.kin.runs[r];
         let mut temps = self.temperatures.borrow_mut();
         let temps = match &mut *temps {

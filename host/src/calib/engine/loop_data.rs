@@ -234,6 +234,9 @@ impl LoopData {
     /// sample, made the first time a candidate rule asks (only the temperature drift's does,
     /// and only once the residual drifts), not for every calibration.
     pub fn temp_spread_c(&self) -> f64 {
+        if !self.temp_moved {
+            return 0.0;
+        }
         *self.temp_spread_c.get_or_init(|| {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
             for r in &self.kin.runs {
