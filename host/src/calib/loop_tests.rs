@@ -218,6 +218,21 @@ fn out_of_catalogue_harmonic_is_flagged_untrusted() {
     assert!(r.summary().contains("UNEXPLAINED STRUCTURE"));
 }
 
+/// A package turned 0.03° on its mount at 180 °/s, growing with the square of the speed: M
+/// changes with speed and no catalogued effect says why. Three signed speeds hold it, and the
+/// runs at 90 °/s want another M than those at 180: the result is flagged with the
+/// disagreement, not passed 30σ off (docs/trust.md, "M changing with speed").
+#[test]
+fn a_change_of_m_with_speed_is_flagged_by_the_runs_disagreement() {
+    let (r, _) = run_loop(1, &[180.0, 90.0, -180.0], SHORT_S, &["mount_compliance"]);
+    assert_eq!(r.verdict(), Verdict::UnexplainedStructure, "{}", r.summary());
+    let c = r.consistency.as_ref().unwrap_or_else(|| panic!("no consistency test\n{}", r.summary()));
+    assert!(c.disagrees(), "{c:?}");
+    let slow = c.groups.iter().find(|g| (g.rate_dps - 90.0).abs() < 1.0).expect("the 90 °/s group");
+    assert!(slow.max_z > 4.0, "{slow:?}");
+    assert!(!r.notes.iter().any(|n| matches!(n, Note::SpeedChangeUnchecked { .. })), "{:?}", r.notes);
+}
+
 /// One speed, one direction: a delay is fitted as a combined phase, and the tool asks for the
 /// run that separates it from an index offset.
 #[test]
