@@ -273,22 +273,31 @@ mod tests {
         assert_eq!(quantise(-4e4), i16::MIN);
     }
 
-    #[test]
-    fn nonlinearity_follows_its_formula_and_mystery_hits_one_axis() {
-        let truth = SensorTruth {
+    /// The chain of pose 1 ≡ identity with `effects`, for axes along the package's at the
+    /// nominal sensitivity, and that sensitivity.
+    fn chain_with(effects: &Effects) -> (SenseChain, f64) {
+        let chain = SenseChain::new(&ideal_axes(), &Matrix3::identity(), FullScale::Dps500, effects);
+        (chain, nominal_counts_per_dps(FullScale::Dps500))
+    }
+
+    /// Axes along the package's, at the nominal sensitivity, no offset.
+    fn ideal_axes() -> SensorTruth {
+        SensorTruth {
             s: [Vector3::x(), Vector3::y(), Vector3::z()],
             tilt_deg: [0.0; 3],
             k_rel: [1.0; 3],
             offset_dps: [0.0; 3],
-        };
-        let effects = Effects { nonlinearity: Some(Nonlinearity::default()), ..Effects::default() };
-        let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
-        let k = nominal_counts_per_dps(FullScale::Dps500);
+        }
+    }
+
+    #[test]
+    fn nonlinearity_follows_its_formula_and_mystery_hits_one_axis() {
+        let (chain, k) = chain_with(&Effects { nonlinearity: Some(Nonlinearity::default()), ..Effects::default() });
         let c = chain.counts(&Vector3::new(500.0, -500.0, 0.0), 0.0);
         assert!((c[0] / k - 500.0 * (1.002 + 0.002)).abs() < 1e-9);
         assert!((c[1] / k + 500.0 * (0.998 + 0.002)).abs() < 1e-9);
-        let effects = Effects { mystery_harmonic: Some(MysteryHarmonic::default()), ..Effects::default() };
-        let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
+        let (chain, _) =
+            chain_with(&Effects { mystery_harmonic: Some(MysteryHarmonic::default()), ..Effects::default() });
         let c = chain.counts(&Vector3::zeros(), 0.5);
         assert!((c[0] / k - 0.3 * (1.5f64 + 0.4).sin()).abs() < 1e-12);
         assert_eq!([c[1], c[2]], [0.0, 0.0]);
@@ -298,15 +307,8 @@ mod tests {
     /// quarter of that at half the speed, and not at rest.
     #[test]
     fn a_compliant_mount_turns_the_package_by_its_load() {
-        let truth = SensorTruth {
-            s: [Vector3::x(), Vector3::y(), Vector3::z()],
-            tilt_deg: [0.0; 3],
-            k_rel: [1.0; 3],
-            offset_dps: [0.0; 3],
-        };
-        let effects = Effects { mount_compliance: Some(MountCompliance::default()), ..Effects::default() };
-        let chain = SenseChain::new(&truth, &Matrix3::identity(), FullScale::Dps500, &effects);
-        let k = nominal_counts_per_dps(FullScale::Dps500);
+        let (chain, k) =
+            chain_with(&Effects { mount_compliance: Some(MountCompliance::default()), ..Effects::default() });
         for (rate_dps, turn_deg) in [(180.0, 0.03), (90.0, 0.0075), (-180.0, 0.03)] {
             // ω2 = (0, θ1', θ2') at θ2 = 0 (EXCITER.md eq. 1): |ω2|² = 2·rate².
             let w2 = Vector3::new(0.0, rate_dps, rate_dps);
