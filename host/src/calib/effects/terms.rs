@@ -508,11 +508,11 @@ pub struct ConsiderBound {
     pub source: &'static str,
 }
 
-/// Whether the runs tell apart effects whose part turning with θ2 grows as these powers of
-/// θ2' (M's signal: 1; a vector fixed to the base, gravity's or Earth's vertical rate: 0;
-/// the filter's droop κθ2'²·θ1': 3): the distinct rates' powers, a row per rate, have full
-/// column rank (`rates_dps`: the distinct signed θ2', °/s). At one speed in both directions r³ is r times a constant; at two speeds in
-/// one direction 1, r and r³ are three shapes over two values.
+/// Whether runs at the distinct signed θ2' `rates_dps` (°/s) tell apart effects whose part
+/// turning with θ2 grows as these powers of θ2' (M's signal: 1; a vector fixed to the base,
+/// gravity's or Earth's vertical rate: 0; the filter's droop κθ2'²·θ1': 3): the rates' powers,
+/// a row per rate, have full column rank. At one speed in both directions r³ is r times a
+/// constant; at two speeds in one direction 1, r and r³ are three shapes over two values.
 pub fn separates_rate_powers(rates_dps: &[f64], powers: &[i32]) -> bool {
     let top = rates_dps.iter().fold(0.0f64, |m, r| m.max(r.abs()));
     if rates_dps.len() < powers.len() || top <= 0.0 {
