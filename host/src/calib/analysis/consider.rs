@@ -460,9 +460,10 @@ fn times_walk(m: &mut DMatrix<f64>, walk: &[Option<usize>]) {
     for (level, &before) in walk.iter().enumerate().rev() {
         let Some(p) = before else { continue };
         for axis in 0..3 {
-            let later = m.column(3 * level + axis).clone_owned();
-            let mut earlier = m.column_mut(3 * p + axis);
-            earlier += later;
+            let (from, to) = (3 * level + axis, 3 * p + axis);
+            for r in 0..m.nrows() {
+                m[(r, to)] += m[(r, from)];
+            }
         }
     }
 }
@@ -472,13 +473,13 @@ fn max3(v: [f64; 3]) -> f64 {
 }
 
 /// A factor F of the covariance F·Fᵀ (posterior variance plus the square of the posterior
-/// mean) of an effect's parameters in the directions the runs do not separate, from its partial information and the
-/// residual's gradient along its columns, whitened by its prior σs (`w`); with those directions'
-/// information λ. An effect the loop did not try (`tried` None) has every
-/// direction counted: no test ruled out what the runs see of it, and its posterior mean is what
-/// they say it is. One it tried (`tried` the loop's χ² threshold for a number of degrees of
-/// freedom) has its separated directions left to the test, unless the residual's score along
-/// them passes that threshold.
+/// mean) of an effect's parameters in the directions the runs do not separate, from its
+/// partial information and the residual's gradient along its columns, whitened by its prior
+/// σs (`w`); with those directions' information λ. An effect the loop did not try (`tried`
+/// None) has every direction counted: no test ruled out what the runs see of it, and its
+/// posterior mean is what they say it is. One it tried (`tried` the loop's χ² threshold for a
+/// number of degrees of freedom) has its separated directions left to the test, unless the
+/// residual's score along them passes that threshold.
 fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
     let n = w.sd.len();
     let lambdas: Vec<f64> = w.eigenvalues.iter().map(|l| l.max(0.0)).collect();
@@ -527,7 +528,7 @@ fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whiten
     if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
         return None;
     }
-    let (eigenvalues, vectors) = block_eigen(&w);
+    let (eigenvalues, vectors) = block_eigen(w);
     let g_w = DVector::from_fn(n, |r, _| grad[r] * sd[r]);
     let projections = (0..n).map(|i| vectors.column(i).dot(&g_w)).collect();
     Some(Whitened { sd: sd.to_vec(), eigenvalues, vectors, projections })
@@ -538,11 +539,11 @@ fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whiten
 /// the axes), each decomposed alone. The same eigenpairs as one decomposition, in another
 /// order, at a ninth of its cost for three equal blocks: a 1-h capture's walk has 3 × 360 steps,
 /// and one decomposition of all 1080 was a fifth of its replay.
-fn block_eigen(w: &DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+fn block_eigen(w: DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
     let n = w.nrows();
     let blocks = linked_groups(n, |r, c| w[(r, c)] != 0.0);
     if blocks.len() <= 1 {
-        let eig = w.clone().symmetric_eigen();
+        let eig = w.symmetric_eigen();
         return (eig.eigenvalues, eig.eigenvectors);
     }
     let mut values = DVector::zeros(n);
@@ -637,7 +638,7 @@ mod tests {
         assert_eq!(linked_groups(5, |r, c| (r, c) == (0, 3) || (r, c) == (3, 4)), [vec![0, 3, 4], vec![1], vec![2]]);
         // x and z linked, y alone: the 3 × 3 of one axis per parameter.
         let w = DMatrix::from_row_slice(3, 3, &[4.0, 0.0, 1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 3.0]);
-        let (values, vectors) = block_eigen(&w);
+        let (values, vectors) = block_eigen(w.clone());
         let whole = w.clone().symmetric_eigen();
         let mut got: Vec<f64> = values.iter().copied().collect();
         let mut want: Vec<f64> = whole.eigenvalues.iter().copied().collect();
