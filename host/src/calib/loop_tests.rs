@@ -372,7 +372,8 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
     let cols: Vec<Col> = model.cols().into_iter().chain(cands.iter().flat_map(|c| c.cols.iter().copied())).collect();
     let reach = crate::calib::engine::Reach::blocks(lead, cands.iter().map(|c| c.cols.len()));
     let full = crate::calib::engine::accumulate(&data, &model, &cols);
-    let blocks = crate::calib::engine::accumulate_pairs(&data, &model, &cols, &reach);
+    let blocks =
+        crate::calib::engine::accumulate_pairs(&data, &model, &cols, &reach, crate::calib::engine::Cells::Exact);
     // The block each column is in: the model's (0) or a candidate's (1, 2, ...).
     let block_of: Vec<usize> = std::iter::repeat_n(0, lead)
         .chain(cands.iter().enumerate().flat_map(|(b, c)| std::iter::repeat_n(b + 1, c.cols.len())))
@@ -402,10 +403,89 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
     }
 }
 
-/// The consider covariance reads the candidates' pass in place of its own: the sums read for
-/// some of the gathered groups (a group's columns in another order, a subset of a group) are
-/// those a pass of their own takes (to 1e-12 of each entry's scale, as above), and sums of
-/// another model, or of columns never gathered together, are not read.
+/// A pass in cells sums, within each chunk of the pass, the run's consecutive valid samples in
+/// cells of eight (the last of a chunk shorter): XᵀX and Xᵀe are those of each cell's sums over
+/// the root of its count, eᵀe and the counts the samples' own (to 1e-12 of each entry's scale).
+/// The model's columns alone (every column axis-independent), with the candidates but the free
+/// drift's (dense), and with every candidate (the knots' path).
+#[test]
+fn a_pass_in_cells_sums_the_cells() {
+    use crate::calib::engine::{accumulate::CHUNK, accumulate_pairs, Cells, Reach};
+    let (data, model) = short_capture_and_delay_model();
+    let everything = super::effects::terms::Evidence {
+        phase: true,
+        drift: true,
+        rate_scale: true,
+        orders: [true; crate::calib::analysis::diagnostics::MAX_ORDER + 1],
+    };
+    let cands = crate::calib::analysis::selection::candidates(&data, &model.effects, &everything);
+    let with = |knots: bool| -> Vec<Col> {
+        let extra = cands.iter().filter(|c| knots || !c.effect.is_free_drift()).flat_map(|c| c.cols.iter().copied());
+        model.cols().into_iter().chain(extra).collect()
+    };
+    for cols in [model.cols(), with(false), with(true)] {
+        let l = cols.len();
+        let got = accumulate_pairs(&data, &model, &cols, &Reach::all(l), Cells::Span);
+        let ev = Evaluator::for_columns(&data, &model, &cols);
+        let mut cursor = crate::calib::engine::Cursor::default();
+        let mut row = vec![0.0; 3 * l];
+        for (r, rk) in data.kin.runs.iter().enumerate() {
+            let size = Cells::Span.rows(rk.sample_rate_hz);
+            assert_eq!(size, 8);
+            let (mut xtx, mut xte) = (vec![vec![0.0; l * l]; 3], vec![vec![0.0; l]; 3]);
+            let (mut ete, mut n) = ([0.0; 3], [0u64; 3]);
+            for start in (0..rk.samples.len()).step_by(CHUNK) {
+                let idx: Vec<usize> =
+                    data.runs[r].valid.indices_in(start, (start + CHUNK).min(rk.samples.len())).collect();
+                for cell in idx.chunks(size) {
+                    let (mut sx, mut se) = (vec![0.0; 3 * l], [0.0; 3]);
+                    for &i in cell {
+                        let (s, p) = ev.visit(r, i, &mut cursor);
+                        ev.fill(p, &cols, &mut row);
+                        sx.iter_mut().zip(&row).for_each(|(a, b)| *a += b);
+                        for a in 0..3 {
+                            let e = f64::from(s.rate_counts[a]) - ev.predict(p, a);
+                            (se[a], ete[a], n[a]) = (se[a] + e, ete[a] + e * e, n[a] + 1);
+                        }
+                    }
+                    let m = cell.len() as f64;
+                    for a in 0..3 {
+                        let x = &sx[a * l..(a + 1) * l];
+                        for i in 0..l {
+                            xte[a][i] += x[i] * se[a] / m;
+                            for j in 0..l {
+                                xtx[a][i * l + j] += x[i] * x[j] / m;
+                            }
+                        }
+                    }
+                }
+            }
+            let g = &got[r];
+            assert_eq!(g.n, n, "run {r}: every sample counted once");
+            for a in 0..3 {
+                assert!((g.ete[a] - ete[a]).abs() <= 1e-12 * ete[a], "run {r}, axis {a}: eᵀe");
+                let diag = |i: usize| xtx[a][i * l + i];
+                for i in 0..l {
+                    let scale = (diag(i) * ete[a]).sqrt();
+                    assert!((g.xte[a][i] - xte[a][i]).abs() <= 1e-12 * scale, "run {r}, axis {a}, xᵀe {i} of {l}");
+                    for j in 0..l {
+                        let (got, want) = (g.xtx[a][i * l + j], xtx[a][i * l + j]);
+                        let scale = (diag(i) * diag(j)).sqrt();
+                        assert!(
+                            (got - want).abs() <= 1e-12 * scale,
+                            "run {r}, axis {a}, ({i}, {j}) of {l}: {got} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Earth's fit starts from the last candidates' pass, read in place of a pass of its own: the
+/// sums read for some of the gathered groups (a group's columns in another order, a subset of a
+/// group) are those a pass of their own takes (to 1e-12 of each entry's scale, as above), and
+/// sums of another model, of columns never gathered together, or summed otherwise, are not read.
 #[test]
 fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
     let (data, model) = short_capture_and_delay_model();
@@ -414,11 +494,12 @@ fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
         lin.into_iter().map(Col::Lin).chain(shared.into_iter().map(Col::Shared)).collect()
     };
     let (g, h, t) = (cols_of(Effect::GSensitivity), cols_of(Effect::RateScale), cols_of(Effect::TableTilt));
-    let gathered = crate::calib::engine::CrossSums::gather(&data, &model, &[&g, &h, &t]).expect("runs");
+    use crate::calib::engine::{Cells, CrossSums};
+    let gathered = CrossSums::gather(&data, &model, &[&g, &h, &t], Cells::Span).expect("runs");
     let g_rev: Vec<Col> = g.iter().rev().copied().collect();
     let wanted: [&[Col]; 3] = [&t, &g_rev, &h[..1]];
-    let read = gathered.read(&model, &wanted).expect("every group lies within a gathered one");
-    let own = crate::calib::engine::CrossSums::gather(&data, &model, &wanted).expect("runs");
+    let read = gathered.read(&model, &wanted, Cells::Span).expect("every group lies within a gathered one");
+    let own = CrossSums::gather(&data, &model, &wanted, Cells::Span).expect("runs");
     let own = own.total();
     let l = own.l;
     assert_eq!((read.l, read.n), (l, own.n));
@@ -437,11 +518,12 @@ fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
     }
     // Columns of two gathered groups were never summed against each other.
     let across: Vec<Col> = g.iter().chain(&h).copied().collect();
-    assert!(gathered.read(&model, &[&across]).is_none());
-    // Nor are these sums of a model at other values.
+    assert!(gathered.read(&model, &[&across], Cells::Span).is_none());
+    // Nor are these sums of a model at other values, nor sums of cells read as the samples'.
     let mut moved = model.clone();
     moved.beta[0][0] += 1e-9;
-    assert!(gathered.read(&moved, &[&g]).is_none());
+    assert!(gathered.read(&moved, &[&g], Cells::Span).is_none());
+    assert!(gathered.read(&model, &[&g], Cells::Exact).is_none());
 }
 
 /// The analytic Jacobian of every shared parameter matches a central difference of the model's

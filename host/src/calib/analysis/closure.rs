@@ -18,7 +18,8 @@ use crate::calib::data::runs::{check_runs, nominal_counts_per_dps};
 use crate::calib::effects::terms::{separates_rate_powers, ConsiderCtx};
 use crate::calib::effects::Effect;
 use crate::calib::engine::{
-    apply_step, fit, full_selection, solve_joint, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model, SharedPar,
+    apply_step, fit, full_selection, solve_joint, Cells, Col, CrossSums, Fitted, Gram, LinCol, LoopData, Model,
+    SharedPar,
 };
 use crate::calib::result::axes::AXES;
 use crate::calib::result::consider_term::ConsiderTerm;
@@ -961,16 +962,22 @@ impl Context<'_> {
     /// One step of the loop: the best candidate that passes its test, fitted, then whatever it
     /// made redundant dropped. `None` when no candidate passes.
     fn next_state(&self, state: &State, trail: &mut Trail) -> Result<Option<State>, CalError> {
-        // Where this model may be the final one (nothing is added after the loop), the
-        // candidates' pass also sums the consider covariance's columns: if no candidate passes,
-        // that covariance reads them rather than making a pass of its own. Where Earth is added
-        // after the loop, it sums Earth's, from which Earth's fit starts.
-        let extra = if self.adds_earth(&state.fitted.model) {
-            vec![earth_columns(earth_form(&state.fitted.model), &self.data.layout)]
+        // The candidates' pass sums in cells ([`Cells`]): a score ranks, and the chosen one is
+        // fitted sample by sample. Where Earth is added after the loop, it also sums Earth's
+        // columns, from which Earth's fit starts. Where the diagnostics found nothing in the
+        // residual, this model is most likely the final one (nothing is added after the loop):
+        // the pass then sums sample by sample and carries the consider covariance's columns,
+        // which that covariance reads, if no candidate passes, rather than making a pass of its
+        // own (the clean hour's loop: 3.1 s of CPU with a pass of its own, 2.5 s without).
+        let adds_earth = self.adds_earth(&state.fitted.model);
+        let (extra, cells) = if adds_earth {
+            (vec![earth_columns(earth_form(&state.fitted.model), &self.data.layout)], Cells::Span)
+        } else if !state.diag.has_structure() {
+            (columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider), Cells::Exact)
         } else {
-            columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider)
+            (Vec::new(), Cells::Span)
         };
-        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha, &extra)?;
+        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha, (&extra, cells))?;
         for sk in outcome.skipped {
             trail.skip(sk);
         }
@@ -1044,7 +1051,7 @@ impl Context<'_> {
         if let Some(sol) = trail
             .last_sums
             .as_ref()
-            .and_then(|s| s.read(&state.fitted.model, &[&cols]))
+            .and_then(|s| s.read(&state.fitted.model, &[&cols], Cells::Span))
             .and_then(|g| solve_joint(&g, &sel, weights))
         {
             let held = vec![false; start.shared.len()];

@@ -17,8 +17,8 @@ use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
 use crate::calib::effects::terms::{Evidence, Situation};
 use crate::calib::effects::{Effect, DRIFT_TAU_RANGE_S};
 use crate::calib::engine::{
-    apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Col, CrossSums, Fitted, Gram,
-    LinCol, LoopData, Selection,
+    apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Cells, Col, CrossSums, Fitted,
+    Gram, LinCol, LoopData, Selection,
 };
 use crate::calib::result::error::CalError;
 use crate::geometry::Pose;
@@ -264,13 +264,14 @@ fn start_model_at_zero(state: &Fitted, c: &Candidate) -> crate::calib::engine::M
 
 /// One step from `state` with χ² weights `weights`; `alpha` is the family-wise level. `extra`
 /// are groups of columns summed against the model in the candidates' pass (the consider
-/// covariance's, read from the outcome's `sums` when no candidate passes).
+/// covariance's, read from the outcome's `sums` when no candidate passes), its samples summed
+/// in `cells`.
 pub fn step(
     data: &LoopData,
     state: &Fitted,
     diag: &Diagnostics,
     alpha: f64,
-    extra: &[Vec<Col>],
+    (extra, cells): (&[Vec<Col>], Cells),
 ) -> Result<StepOutcome, CalError> {
     let weights = diag.weights();
     let cands = candidates(data, &state.model.effects, &evidence(diag));
@@ -284,7 +285,7 @@ pub fn step(
     if cands.is_empty() {
         return Ok(nothing());
     }
-    let Some((mut scores, n_total, sums)) = score_all(data, state, &cands, extra, alpha, weights)? else {
+    let Some((mut scores, n_total, sums)) = score_all(data, state, &cands, (extra, cells), alpha, weights)? else {
         // The current model was fitted, so this only happens at the edge of f64: nothing more
         // can be added on top of it.
         return Ok(nothing());
@@ -351,14 +352,14 @@ fn score_all(
     data: &LoopData,
     state: &Fitted,
     cands: &[Candidate],
-    extra: &[Vec<Col>],
+    (extra, cells): (&[Vec<Col>], Cells),
     alpha: f64,
     weights: [f64; 3],
 ) -> Result<Option<(Vec<Scored>, u64, CrossSums)>, CalError> {
     let nl = state.model.lin.len();
     let ns = state.model.shared.len();
     let groups: Vec<&[Col]> = cands.iter().map(|c| c.cols.as_slice()).chain(extra.iter().map(Vec::as_slice)).collect();
-    let sums = CrossSums::gather(data, &state.model, &groups).ok_or(CalError::NoRuns)?;
+    let sums = CrossSums::gather(data, &state.model, &groups, cells).ok_or(CalError::NoRuns)?;
     let total = sums.total();
     let positions: Vec<_> = (0..cands.len()).map(|g| sums.block(g)).collect();
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };

@@ -4,6 +4,7 @@
 
 use crate::calib::result::axes::is_clipped;
 
+use super::cells::{CellRows, Cells};
 use super::chain::{ColPlan, Cursor, Evaluator};
 use super::loop_data::LoopData;
 use super::model::Model;
@@ -11,7 +12,7 @@ use crate::calib::effects::terms::{Col, Point};
 
 /// Samples summed into a local accumulator before it is added to the run total: rounding error
 /// then grows as O(√n) ulp in a long run instead of O(n).
-const CHUNK: usize = 1024;
+pub(crate) const CHUNK: usize = 1024;
 
 /// Sums of one run (or several) for columns `l`: per axis the Gram matrix, Xᵀe, eᵀe and the
 /// count, against the residual e of the model the pass was made at.
@@ -192,15 +193,23 @@ struct RowBlock {
     x: Vec<f64>,
     e: Vec<f64>,
     reach: Vec<usize>,
+    cells: CellRows,
 }
 
 impl RowBlock {
-    /// Rows held before they are summed (32 KiB of a 32-column list: the block stays in cache).
+    /// Rows held before they are summed (32 KiB of a 32-column list: the block stays in cache);
+    /// a multiple of every cell's size up to 16 samples.
     const ROWS: usize = 128;
 
-    fn new(reach: &Reach) -> Self {
+    fn new(reach: &Reach, cell: usize) -> Self {
         let l = reach.0.len();
-        Self { l, x: Vec::with_capacity(l * Self::ROWS), e: Vec::with_capacity(Self::ROWS), reach: reach.0.clone() }
+        Self {
+            l,
+            x: Vec::with_capacity(l * Self::ROWS),
+            e: Vec::with_capacity(Self::ROWS),
+            reach: reach.0.clone(),
+            cells: CellRows::new(cell),
+        }
     }
 
     /// A new row with residual `e`: its `l` column values to fill.
@@ -215,27 +224,44 @@ impl RowBlock {
         self.e.len() == Self::ROWS
     }
 
-    /// Adds the rows to axis `a` of `g` (upper triangle) and empties the block.
+    /// Adds the rows' eᵀe and count to axis `a` of `g`, and their cells (upper triangle of XᵀX,
+    /// and Xᵀe); empties the block.
     fn add_to(&mut self, g: &mut Gram, a: usize) {
-        let l = self.l;
         if self.e.is_empty() {
             return;
         }
-        add_row_products(&mut g.xtx[a], l, &self.reach, self.x.chunks_exact(l));
-        let xte = &mut g.xte[a];
-        for ii in 0..l {
-            let mut s = xte[ii];
-            for (row, &e) in self.x.chunks_exact(l).zip(&self.e) {
-                s += row[ii] * e;
-            }
-            xte[ii] = s;
-        }
-        for &e in &self.e {
-            g.ete[a] += e * e;
-        }
-        g.n[a] += self.e.len() as u64;
+        add_samples(g, a, &self.e);
+        let (x, e) = self.cells.of(&self.x, &self.e, self.l);
+        add_cells(g, a, &self.reach, x, e);
         self.x.clear();
         self.e.clear();
+    }
+}
+
+/// Adds the samples' eᵀe and count to axis `a` of `g`.
+fn add_samples(g: &mut Gram, a: usize, e: &[f64]) {
+    for &e in e {
+        g.ete[a] += e * e;
+    }
+    g.n[a] += e.len() as u64;
+}
+
+/// Adds rows `x` (each `g.l` values) with residuals `e` to axis `a`'s XᵀX (the pairs `reach`
+/// names, upper triangle) and Xᵀe.
+fn add_cells(g: &mut Gram, a: usize, reach: &[usize], x: &[f64], e: &[f64]) {
+    let l = g.l;
+    add_row_products(&mut g.xtx[a], l, reach, x.chunks_exact(l));
+    add_xte(&mut g.xte[a], x.chunks_exact(l), e);
+}
+
+/// Adds Σ row·e to `xte`, each sum taking the rows in order.
+fn add_xte<'r>(xte: &mut [f64], rows: impl Iterator<Item = &'r [f64]> + Clone, e: &[f64]) {
+    for (ii, s) in xte.iter_mut().enumerate() {
+        let mut acc = *s;
+        for (row, &e) in rows.clone().zip(e) {
+            acc += row[ii] * e;
+        }
+        *s = acc;
     }
 }
 
@@ -249,24 +275,29 @@ struct SharedRows {
     l: usize,
     reach: Vec<usize>,
     x: Vec<f64>,
-    e: Vec<[f64; 3]>,
+    /// Per axis, the rows' residuals.
+    e: [Vec<f64>; 3],
     /// Per row, the axes it counts for (a clipped axis leaves it out).
     used: Vec<[bool; 3]>,
     /// Whether a row leaves an axis out.
     clipped: bool,
+    cells: CellRows,
+    cell_e: Vec<f64>,
 }
 
 impl SharedRows {
-    fn new(reach: &Reach) -> Self {
+    fn new(reach: &Reach, cell: usize) -> Self {
         let rows = RowBlock::ROWS;
         let l = reach.0.len();
         Self {
             l,
             reach: reach.0.clone(),
             x: Vec::with_capacity(l * rows),
-            e: Vec::with_capacity(rows),
+            e: std::array::from_fn(|_| Vec::with_capacity(rows)),
             used: Vec::with_capacity(rows),
             clipped: false,
+            cells: CellRows::new(cell),
+            cell_e: Vec::new(),
         }
     }
 
@@ -277,53 +308,53 @@ impl SharedRows {
         for &v in &x[..self.l] {
             self.x.push(v);
         }
-        self.e.push(e);
+        for (s, e) in self.e.iter_mut().zip(e) {
+            s.push(e);
+        }
         self.used.push(used);
         self.clipped |= used.contains(&false);
     }
 
     fn is_full(&self) -> bool {
-        self.e.len() == RowBlock::ROWS
+        self.used.len() == RowBlock::ROWS
     }
 
     /// Adds the rows to `g` (upper triangles) and empties the block. `same`: whether `g`'s
-    /// three XᵀX are equal; it stays so unless a row left an axis out.
+    /// three XᵀX are equal; it stays so unless a row left an axis out. Rows that every axis
+    /// uses are summed in cells; a block with a clipped sample, row by row.
     fn add_to(&mut self, g: &mut Gram, same: &mut bool) {
         let l = self.l;
-        if self.e.is_empty() {
+        if self.used.is_empty() {
             return;
         }
-        *same &= !self.clipped;
-        let axes = if *same { 1 } else { 3 };
-        for a in 0..axes {
-            let rows = self.x.chunks_exact(l).zip(&self.used).filter(move |(_, used)| used[a]).map(|(row, _)| row);
-            add_row_products(&mut g.xtx[a], l, &self.reach, rows);
-        }
-        if *same {
-            let [x0, x1, x2] = &mut g.xtx;
-            x1.copy_from_slice(x0);
-            x2.copy_from_slice(x0);
-        }
-        for a in 0..3 {
-            let xte = &mut g.xte[a];
-            for ii in 0..l {
-                let mut s = xte[ii];
-                for ((row, e), used) in self.x.chunks_exact(l).zip(&self.e).zip(&self.used) {
-                    if used[a] {
-                        s += row[ii] * e[a];
-                    }
-                }
-                xte[ii] = s;
+        if self.clipped {
+            *same = false;
+            for a in 0..3 {
+                let rows = || self.x.chunks_exact(l).zip(&self.used).filter(move |(_, used)| used[a]).map(|(r, _)| r);
+                add_row_products(&mut g.xtx[a], l, &self.reach, rows());
+                let es: Vec<f64> = self.e[a].iter().zip(&self.used).filter(|(_, u)| u[a]).map(|(e, _)| *e).collect();
+                add_xte(&mut g.xte[a], rows(), &es);
+                add_samples(g, a, &es);
             }
-            for (e, used) in self.e.iter().zip(&self.used) {
-                if used[a] {
-                    g.ete[a] += e[a] * e[a];
-                    g.n[a] += 1;
-                }
+        } else {
+            let size = self.cells.size;
+            let x = self.cells.rows_of(&self.x, l);
+            for a in 0..if *same { 1 } else { 3 } {
+                add_row_products(&mut g.xtx[a], l, &self.reach, x.chunks_exact(l));
+            }
+            if *same {
+                let [x0, x1, x2] = &mut g.xtx;
+                x1.copy_from_slice(x0);
+                x2.copy_from_slice(x0);
+            }
+            for a in 0..3 {
+                CellRows::residuals(size, &self.e[a], &mut self.cell_e);
+                add_xte(&mut g.xte[a], x.chunks_exact(l), &self.cell_e);
+                add_samples(g, a, &self.e[a]);
             }
         }
         self.x.clear();
-        self.e.clear();
+        self.e.iter_mut().for_each(Vec::clear);
         self.used.clear();
         self.clipped = false;
     }
@@ -388,18 +419,22 @@ impl Touched {
     }
 }
 
+/// Per position in a pass's list (empty but for knots): the other columns a knot is summed with,
+/// as (index into [`KnotSplit::map`], index of the pair's sum in the upper triangle).
+type KnotPairs = [Vec<(usize, usize)>];
+
 impl Gram {
-    /// One sample of axis `a` with residual `e`: the sums of its non-zero knots `knots`
-    /// (position, value) with themselves and with the other columns (values `row`, paired
-    /// through `split`), for the pairs `reach` names; the other columns' own sums are
-    /// [`KnotSplit`]'s.
+    /// One row (a sample, or a cell) of axis `a` with residual `e`: the sums of its non-zero
+    /// knots `knots` (position, value) with themselves and with the other columns (values
+    /// `row`, paired through `pairs`, [`KnotSplit::pairs`]), for the pairs `reach` names; the
+    /// other columns' own sums are [`KnotSplit`]'s.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn add_knots(
         &mut self,
         a: usize,
         knots: &[(usize, f64)],
-        (split, row): (&KnotSplit, &[f64]),
+        (pairs, row): (&KnotPairs, &[f64]),
         e: f64,
         reach: &Reach,
         touched: &mut Touched,
@@ -409,7 +444,7 @@ impl Gram {
         for (k, &(jk, wk)) in knots.iter().enumerate() {
             touched.mark(jk);
             self.xte[a][jk] += wk * e;
-            for &(p, at) in &split.pairs[jk] {
+            for &(p, at) in &pairs[jk] {
                 g[at] += row[p] * wk;
             }
             for &(jj, wj) in &knots[k..] {
@@ -424,9 +459,10 @@ impl Gram {
 /// The sums of a plan with free-drift knots. Its other columns ([`ColPlan::dense`]) are non-zero
 /// at nearly every sample: they are summed a block of rows at a time, as the plan without knots
 /// is ([`RowBlock`]), into a Gram of their own that a chunk's end adds to the pass's. The knots,
-/// 2 of dozens per sample, are summed sample by sample against the rest. Every sum still takes
-/// the samples in order. Summed together pair by pair through memory, sample by sample, the
-/// two were half of `host calibrate`'s time once the drift had knots.
+/// 2 of dozens per sample, are held beside the rows and summed, cell by cell when the block is
+/// drained, against the rest. Every sum still takes the samples in order. Summed together pair
+/// by pair through memory, sample by sample, the two were half of `host calibrate`'s time once
+/// the drift had knots.
 struct KnotSplit {
     /// Position of each of the plan's other columns in the pass's list (increasing).
     map: Vec<usize>,
@@ -434,14 +470,19 @@ struct KnotSplit {
     /// summed with, as (index into `map`, index of the pair's sum in the upper triangle).
     pairs: Vec<Vec<(usize, usize)>>,
     blocks: [RowBlock; 3],
+    /// Per axis, the non-zero knots of the block's rows, by row: (position, value), and the
+    /// row of each.
+    knots: [Vec<(usize, f64)>; 3],
+    knot_rows: [Vec<usize>; 3],
     /// Their sums since the chunk began.
     sums: Gram,
-    knots: Vec<(usize, f64)>,
+    /// A cell's knots, summed.
+    cell: Vec<(usize, f64)>,
     any: bool,
 }
 
 impl KnotSplit {
-    fn new(plan: &ColPlan, reach: &Reach) -> Self {
+    fn new(plan: &ColPlan, reach: &Reach, cell: usize) -> Self {
         let map: Vec<usize> = plan.dense.iter().map(|d| d.0).collect();
         let own = Reach(map.iter().map(|&c| map.partition_point(|&q| q < reach.0[c])).collect());
         let l = reach.0.len();
@@ -455,11 +496,13 @@ impl KnotSplit {
                 .collect();
         }
         Self {
-            blocks: std::array::from_fn(|_| RowBlock::new(&own)),
+            blocks: std::array::from_fn(|_| RowBlock::new(&own, cell)),
+            knots: std::array::from_fn(|_| Vec::new()),
+            knot_rows: std::array::from_fn(|_| Vec::new()),
             sums: Gram::new(map.len()),
             map,
             pairs,
-            knots: Vec::new(),
+            cell: Vec::new(),
             any: false,
         }
     }
@@ -477,24 +520,64 @@ impl KnotSplit {
         reach: &Reach,
         touched: &mut Touched,
     ) {
-        let mut knots = std::mem::take(&mut self.knots);
-        knots.clear();
+        let knots = &mut self.knots[a];
         ev.for_each_knot(plan, p, |j, w| knots.push((j, w)));
-        let row = self.blocks[a].push(e);
-        ev.fill_dense(p, plan, a, common, row);
-        let row = &self.blocks[a].x[self.blocks[a].x.len() - self.map.len()..];
-        local.add_knots(a, &knots, (self, row), e, reach, touched);
-        self.knots = knots;
+        self.knot_rows[a].resize(knots.len(), self.blocks[a].e.len());
+        ev.fill_dense(p, plan, a, common, self.blocks[a].push(e));
         if self.blocks[a].is_full() {
-            self.blocks[a].add_to(&mut self.sums, a);
+            self.drain(a, local, reach, touched);
         }
         self.any = true;
     }
 
+    /// Axis `a`'s block into the sums: its other columns' into [`KnotSplit::sums`], its knots'
+    /// into `local`, cell by cell (each cell's knots summed and scaled as its row is).
+    fn drain(&mut self, a: usize, local: &mut Gram, reach: &Reach, touched: &mut Touched) {
+        let Self { map, pairs, blocks, knots, knot_rows, sums, cell, .. } = self;
+        let block = &mut blocks[a];
+        if block.e.is_empty() {
+            return;
+        }
+        let (m, size) = (map.len(), block.cells.size);
+        add_samples(sums, a, &block.e);
+        let rows = block.e.len();
+        let (x, e) = block.cells.of(&block.x, &block.e, m);
+        let (kn, kr) = (&knots[a], &knot_rows[a]);
+        let mut lo = 0;
+        for (c, &ec) in e.iter().enumerate() {
+            let end = ((c + 1) * size).min(rows);
+            let mut hi = lo;
+            while hi < kr.len() && kr[hi] < end {
+                hi += 1;
+            }
+            let row = &x[c * m..(c + 1) * m];
+            if size == 1 {
+                local.add_knots(a, &kn[lo..hi], (pairs, row), ec, reach, touched);
+            } else {
+                let scale = ((end - c * size) as f64).sqrt().recip();
+                cell.clear();
+                for &(j, w) in &kn[lo..hi] {
+                    match cell.iter_mut().find(|k| k.0 == j) {
+                        Some(k) => k.1 += w,
+                        None => cell.push((j, w)),
+                    }
+                }
+                cell.iter_mut().for_each(|k| k.1 *= scale);
+                local.add_knots(a, cell, (pairs, row), ec, reach, touched);
+            }
+            lo = hi;
+        }
+        add_cells(sums, a, &block.reach, x, e);
+        block.x.clear();
+        block.e.clear();
+        knots[a].clear();
+        knot_rows[a].clear();
+    }
+
     /// At a chunk's end: the other columns' sums into `local`, their rows marked `touched`.
-    fn flush(&mut self, local: &mut Gram, touched: &mut Touched) {
-        for (a, b) in self.blocks.iter_mut().enumerate() {
-            b.add_to(&mut self.sums, a);
+    fn flush(&mut self, local: &mut Gram, reach: &Reach, touched: &mut Touched) {
+        for a in 0..3 {
+            self.drain(a, local, reach, touched);
         }
         if !std::mem::take(&mut self.any) {
             return;
@@ -519,11 +602,12 @@ impl KnotSplit {
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of
 /// their axis), every column pair.
 pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
-    accumulate_pairs(data, model, cols, &Reach::all(cols.len()))
+    accumulate_pairs(data, model, cols, &Reach::all(cols.len()), Cells::Exact)
 }
 
-/// [`accumulate`] of the pairs `reach` names; every other entry of XᵀX is 0.
-pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Reach) -> Vec<Gram> {
+/// [`accumulate`] of the pairs `reach` names (every other entry of XᵀX is 0), the samples
+/// summed in `cells` ([`Cells`]).
+pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Reach, cells: Cells) -> Vec<Gram> {
     let ev = Evaluator::for_columns(data, model, cols);
     let l = cols.len();
     debug_assert_eq!(reach.0.len(), l);
@@ -532,8 +616,6 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
     // Without knots every column is in `plan.dense`, in column order.
     let dense = plan.knots.is_empty();
     debug_assert!(!dense || plan.dense.iter().enumerate().all(|(k, d)| d.0 == k));
-    let mut block: [RowBlock; 3] = std::array::from_fn(|_| RowBlock::new(reach));
-    let mut shared = SharedRows::new(reach);
     // A fit's pass and a step's lead with the model's own columns: their axis-independent values
     // are then the plan's first ones, computed once per sample rather than twice.
     let model_leads = ev.lin_plan.dense.len() <= plan.dense.len()
@@ -552,7 +634,10 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
             let all_rows: Vec<usize> = (0..l).collect();
             let valid = &data.runs[r].valid;
             let mut cursor = Cursor::default();
-            let mut split = (!dense).then(|| KnotSplit::new(&plan, reach));
+            let cell = cells.rows(rk.sample_rate_hz);
+            let mut block: [RowBlock; 3] = std::array::from_fn(|_| RowBlock::new(reach, cell));
+            let mut shared = SharedRows::new(reach, cell);
+            let mut split = (!dense).then(|| KnotSplit::new(&plan, reach, cell));
             for start in (0..rk.samples.len()).step_by(CHUNK) {
                 let end = (start + CHUNK).min(rk.samples.len());
                 // `local` was drained: its three XᵀX are equal (zero).
@@ -603,7 +688,7 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
                 }
                 shared.add_to(&mut local, &mut same);
                 if let Some(split) = split.as_mut() {
-                    split.flush(&mut local, &mut touched);
+                    split.flush(&mut local, reach, &mut touched);
                 }
                 total.drain_rows(&mut local, if dense { &all_rows } else { &touched.rows });
                 touched.clear();

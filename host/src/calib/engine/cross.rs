@@ -4,7 +4,7 @@
 //! cross-products (issue 25's "one primitive"), so when the model they are wanted for is the one
 //! the sums were taken of, the second reads them rather than making its own pass.
 
-use super::{accumulate_pairs, Col, Gram, LinCol, LoopData, Model, Reach, SharedPar};
+use super::{accumulate_pairs, Cells, Col, Gram, LinCol, LoopData, Model, Reach, SharedPar};
 use nalgebra::Vector3;
 use std::ops::Range;
 
@@ -21,14 +21,16 @@ pub struct CrossSums {
     cols: Vec<Col>,
     /// Each group's place in `cols`.
     blocks: Vec<Range<usize>>,
+    /// How the samples were summed.
+    cells: Cells,
     /// The sums over every run.
     total: Gram,
 }
 
 impl CrossSums {
     /// One pass over `data`: `model`'s columns against its residual and every column of
-    /// `groups`, each group against itself. `None` without runs.
-    pub fn gather(data: &LoopData, model: &Model, groups: &[&[Col]]) -> Option<Self> {
+    /// `groups`, each group against itself, the samples summed in `cells`. `None` without runs.
+    pub fn gather(data: &LoopData, model: &Model, groups: &[&[Col]], cells: Cells) -> Option<Self> {
         let mut cols = model.cols();
         let lead = cols.len();
         let mut blocks = Vec::with_capacity(groups.len());
@@ -38,7 +40,7 @@ impl CrossSums {
             blocks.push(start..cols.len());
         }
         let reach = Reach::blocks(lead, groups.iter().map(|g| g.len()));
-        let total = Gram::sum(&accumulate_pairs(data, model, &cols, &reach))?;
+        let total = Gram::sum(&accumulate_pairs(data, model, &cols, &reach, cells))?;
         Some(Self {
             lin: model.lin.clone(),
             shared: model.shared.clone(),
@@ -47,6 +49,7 @@ impl CrossSums {
             s_hat: model.s_hat,
             cols,
             blocks,
+            cells,
             total,
         })
     }
@@ -70,11 +73,12 @@ impl CrossSums {
             && self.s_hat == model.s_hat
     }
 
-    /// The sums [`CrossSums::gather`] would take of `model` and `groups`, read from these without
-    /// a pass: when they are of the same model at the same values and every group's columns lie
-    /// within one gathered group (so every pair a group needs was summed). `None` otherwise.
-    pub fn read(&self, model: &Model, groups: &[&[Col]]) -> Option<Gram> {
-        if !self.of(model) {
+    /// The sums [`CrossSums::gather`] would take of `model` and `groups` in `cells`, read from
+    /// these without a pass: when they are of the same model at the same values, summed the same
+    /// way, and every group's columns lie within one gathered group (so every pair a group needs
+    /// was summed). `None` otherwise.
+    pub fn read(&self, model: &Model, groups: &[&[Col]], cells: Cells) -> Option<Gram> {
+        if !self.of(model) || self.cells != cells {
             return None;
         }
         let lead = self.lin.len() + self.shared.len();

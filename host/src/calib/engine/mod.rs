@@ -18,11 +18,13 @@
 //! the linear algebra is nalgebra's.
 //!
 //! Files: [`loop_data`] (the cached data), [`model`], [`chain`] (eq. 1-2 and every effect's
-//! inputs), [`accumulate`] (one pass → per-run sums), [`solve`] (normal equations, Gauss-Newton,
-//! covariance), [`cross`] (a model's columns against candidates', read by the score and the
-//! consider covariance alike); [`sincos`] (the recurrences the chain's harmonics use).
+//! inputs), [`accumulate`] (one pass → per-run sums), [`cells`] (a pass's samples summed a few
+//! at a time, for the scores), [`solve`] (normal equations, Gauss-Newton, covariance), [`cross`]
+//! (a model's columns against candidates', read by the score and the consider covariance alike);
+//! [`sincos`] (the recurrences the chain's harmonics use).
 
 pub mod accumulate;
+pub mod cells;
 pub mod chain;
 pub mod cross;
 pub mod loop_data;
@@ -36,6 +38,7 @@ mod tests;
 pub use crate::calib::effects::terms::{Bound, Col, LinCol, Point, Reported, SharedPar};
 pub use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
 pub use accumulate::{accumulate, accumulate_pairs, Gram, Reach};
+pub use cells::Cells;
 pub use chain::{harmonics_of, Cursor, Evaluator};
 pub use cross::CrossSums;
 pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
