@@ -352,6 +352,17 @@ fn short_capture_and_delay_model() -> (LoopData, Model) {
     (data, model)
 }
 
+/// Every catalogued candidate `model` could take on `data`, whatever the evidence.
+fn every_candidate(data: &LoopData, model: &Model) -> Vec<crate::calib::analysis::selection::Candidate> {
+    let everything = super::effects::terms::Evidence {
+        phase: true,
+        drift: true,
+        rate_scale: true,
+        orders: [true; crate::calib::analysis::diagnostics::MAX_ORDER + 1],
+    };
+    crate::calib::analysis::selection::candidates(data, &model.effects, &everything)
+}
+
 /// A candidates' pass sums only the pairs a test needs (the model's columns with every column,
 /// each candidate's with its own): those are the full pass's sums (to 1e-12 of the pair's scale
 /// √(xᵢᵀxᵢ·xⱼᵀxⱼ), a reordered sum's rounding; a score reads differences of χ² far above it),
@@ -360,13 +371,7 @@ fn short_capture_and_delay_model() -> (LoopData, Model) {
 #[test]
 fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
     let (data, model) = short_capture_and_delay_model();
-    let everything = super::effects::terms::Evidence {
-        phase: true,
-        drift: true,
-        rate_scale: true,
-        orders: [true; crate::calib::analysis::diagnostics::MAX_ORDER + 1],
-    };
-    let cands = crate::calib::analysis::selection::candidates(&data, &model.effects, &everything);
+    let cands = every_candidate(&data, &model);
     assert!(cands.len() >= 10 && cands.iter().any(|c| c.effect.is_free_drift()), "{}", cands.len());
     let lead = model.cols().len();
     let cols: Vec<Col> = model.cols().into_iter().chain(cands.iter().flat_map(|c| c.cols.iter().copied())).collect();
@@ -406,27 +411,24 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
 /// A pass in cells sums, within each chunk of the pass, the run's consecutive valid samples in
 /// cells of eight (the last of a chunk shorter): XᵀX and Xᵀe are those of each cell's sums over
 /// the root of its count, eᵀe and the counts the samples' own (to 1e-12 of each entry's scale).
-/// The model's columns alone (every column axis-independent), with the candidates but the free
-/// drift's (dense), and with every candidate (the knots' path).
+/// The base model without the delay (every column axis-independent: one row for the three
+/// axes), the model with it and every candidate but the free drift's (a row per axis), and with
+/// every candidate (the knots' path).
 #[test]
 fn a_pass_in_cells_sums_the_cells() {
     use crate::calib::engine::{accumulate::CHUNK, accumulate_pairs, Cells, Reach};
     let (data, model) = short_capture_and_delay_model();
-    let everything = super::effects::terms::Evidence {
-        phase: true,
-        drift: true,
-        rate_scale: true,
-        orders: [true; crate::calib::analysis::diagnostics::MAX_ORDER + 1],
-    };
-    let cands = crate::calib::analysis::selection::candidates(&data, &model.effects, &everything);
+    let mut base = Model::base_for(&data.poses);
+    base.beta = model.beta.clone();
+    let cands = every_candidate(&data, &model);
     let with = |knots: bool| -> Vec<Col> {
         let extra = cands.iter().filter(|c| knots || !c.effect.is_free_drift()).flat_map(|c| c.cols.iter().copied());
         model.cols().into_iter().chain(extra).collect()
     };
-    for cols in [model.cols(), with(false), with(true)] {
+    for (model, cols) in [(&base, base.cols()), (&model, with(false)), (&model, with(true))] {
         let l = cols.len();
-        let got = accumulate_pairs(&data, &model, &cols, &Reach::all(l), Cells::Span);
-        let ev = Evaluator::for_columns(&data, &model, &cols);
+        let got = accumulate_pairs(&data, model, &cols, &Reach::all(l), Cells::Span);
+        let ev = Evaluator::for_columns(&data, model, &cols);
         let mut cursor = crate::calib::engine::Cursor::default();
         let mut row = vec![0.0; 3 * l];
         for (r, rk) in data.kin.runs.iter().enumerate() {
