@@ -927,8 +927,9 @@ struct Trail {
     steps: Vec<StepReport>,
     skipped: Vec<Skipped>,
     /// The last candidates' pass in which no candidate passed. Where nothing is added after the
-    /// loop it is of the final model, and the consider covariance reads it; where Earth is, it
-    /// holds Earth's columns, and Earth's fit starts from the solution they give.
+    /// loop it is of the final model, and the consider covariance reads it if it was summed
+    /// sample by sample; where Earth is, it holds Earth's columns, and Earth's fit starts from
+    /// the solution they give.
     last_sums: Option<CrossSums>,
 }
 

@@ -197,8 +197,9 @@ struct RowBlock {
 }
 
 impl RowBlock {
-    /// Rows held before they are summed (32 KiB of a 32-column list: the block stays in cache);
-    /// a multiple of every cell's size up to 16 samples.
+    /// Rows held before they are summed (32 KiB of a 32-column list: the block stays in cache).
+    /// Cells are formed within a block: at 800 Hz (8 samples a cell) none is cut short but a
+    /// chunk's or a run's last.
     const ROWS: usize = 128;
 
     fn new(reach: &Reach, cell: usize) -> Self {

@@ -2,7 +2,8 @@
 //! effects the consider covariance weighs): the model's columns with every column, each group's
 //! with its own. A candidate's score and an effect's consider covariance are both read from these
 //! cross-products (issue 25's "one primitive"), so when the model they are wanted for is the one
-//! the sums were taken of, the second reads them rather than making its own pass.
+//! the sums were taken of, and they were summed as it needs ([`Cells`]), the second reads them
+//! rather than making its own pass.
 
 use super::{accumulate_pairs, Cells, Col, Gram, LinCol, LoopData, Model, Reach, SharedPar};
 use nalgebra::Vector3;
