@@ -31,7 +31,7 @@ pub fn note(n: &Note) -> String {
         Note::SpeedChangeHeldByGravity { rates_dps } => {
             let rates: Vec<String> = rates_dps.iter().map(|r| format!("{r:+.0}")).collect();
             format!(
-                "Checked only in part: whether M changes with speed. At {} °/s the g-sensitivity (∝ 1) and M (∝ θ2') together take up any change of M that grows with the square of the speed (a non-linearity in the rate vector's magnitude, a package turning on a compliant mount), so the runs' agreement does not rule it out, and no σ carries it. Runs in the other direction tell them apart (--rates-dps 180,90,-180).",
+                "Not told apart: a g-sensitivity and a change of M with speed. At {} °/s the g-sensitivity (∝ 1) and M (∝ θ2') together take up any change of M that grows with the square of the speed (a non-linearity in the rate vector's magnitude, a package turning on a compliant mount), so the runs' agreement does not rule it out and no σ carries it: the calibration is flagged. Runs in the other direction tell them apart (--rates-dps 180,90,-180).",
                 rates.join(", ")
             )
         }

@@ -2,7 +2,7 @@
 //! changed, the before/after table, the final calibration with σ, and the verdict.
 
 use super::{advice, axis_table, findings, PlusMinus};
-use crate::calib::analysis::closure::{LoopReport, StepReport, Verdict};
+use crate::calib::analysis::closure::{LoopReport, Note, StepReport, Verdict};
 use std::fmt::Write as _;
 
 impl LoopReport {
@@ -229,6 +229,22 @@ pub fn asks(r: &LoopReport) -> Vec<String> {
     r.asks.iter().map(advice::ask).collect()
 }
 
+/// What the data hold that the model does not explain, in words: an Earth rate beyond the
+/// Earth's, the runs' disagreement, the final residual's findings.
+fn structure(r: &LoopReport) -> Vec<String> {
+    r.earth_excess
+        .iter()
+        .map(advice::earth_excess)
+        .chain(r.consistency.iter().filter(|c| c.disagrees()).map(advice::disagreement))
+        .chain(r.final_diagnostics().findings.iter().map(findings::finding))
+        .collect()
+}
+
+/// Whether the runs cannot tell the model's g-sensitivity from a change of M with speed.
+fn held_by_gravity(r: &LoopReport) -> bool {
+    r.notes.iter().any(|n| matches!(n, Note::SpeedChangeHeldByGravity { .. }))
+}
+
 /// The verdict in words: the residual against the floor, or what is left unexplained.
 pub fn verdict(r: &LoopReport) -> String {
     let d = r.final_diagnostics();
@@ -246,14 +262,11 @@ pub fn verdict(r: &LoopReport) -> String {
             "DO NOT TRUST THIS CALIBRATION: nothing vouches for the fit ({}): a figure the verdict rests on is not a number, or the fit is not at its minimum. The numbers below are the model's last values, not a characterisation of the sensor.",
             r.unvouched.as_deref().unwrap_or_default()
         ),
+        Verdict::UnexplainedStructure if held_by_gravity(r) && structure(r).is_empty() => {
+            "DO NOT TRUST THIS CALIBRATION: these runs cannot tell the g-sensitivity the model took from a change of M with speed (see the notes); runs in the other direction can (--rates-dps 180,90,-180). The numbers below are the best fit of the model, not a characterisation of the sensor.".into()
+        }
         Verdict::UnexplainedStructure => {
-            let what: Vec<String> = r
-                .earth_excess
-                .iter()
-                .map(advice::earth_excess)
-                .chain(r.consistency.iter().filter(|c| c.disagrees()).map(advice::disagreement))
-                .chain(d.findings.iter().map(findings::finding))
-                .collect();
+            let what = structure(r);
             format!(
                 "DO NOT TRUST THIS CALIBRATION: the data hold a pattern that is not noise and that no effect this program knows explains. {} The numbers below are the best fit of the model, not a characterisation of the sensor.",
                 what.join(" ")

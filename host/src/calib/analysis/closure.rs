@@ -1124,7 +1124,11 @@ impl Context<'_> {
         let disagree = consistency.as_ref().is_some_and(Consistency::disagrees);
         // A final fit that ran out of passes is not at its minimum: nothing vouches for it.
         let unvouched = (!state.fitted.converged).then(|| format!("final model, {}", not_converged(&state.fitted)));
-        let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree || unvouched.is_some() {
+        // Where the g-sensitivity and M together take up any change of M with speed², nothing
+        // tells the g-sensitivity fitted from such a change, which nothing bounds: not certified.
+        let held = notes.iter().any(|n| matches!(n, Note::SpeedChangeHeldByGravity { .. }));
+        let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree || held || unvouched.is_some()
+        {
             Verdict::UnexplainedStructure
         } else {
             Verdict::AtNoiseFloor
@@ -1176,9 +1180,10 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
 }
 
 /// What the runs leave unchecked of a change of M with speed (`mount_compliance` on the
-/// simulator: at 0.03° it ends 80σ off at exit 0 at ±180 °/s and 24σ at 180, 90 °/s with the
-/// g-sensitivity in, where the default design flags it; docs/trust.md). Nothing bounds its size,
-/// so no σ carries it; the note says which runs would check it.
+/// simulator: at 0.03° it ends 80σ off at exit 0 at ±180 °/s, and at 180, 90 °/s the loop takes
+/// a g-sensitivity that is not there, which left 3 of 10 seeds up to 24σ off at exit 0 until
+/// that case was flagged; the default design flags it by the runs' disagreement; docs/trust.md).
+/// Nothing bounds its size, so no σ carries it; the note says which runs would check it.
 fn speed_change_note(data: &LoopData, effects: &[Effect]) -> Option<Note> {
     let rates_dps = distinct_rates_dps(data);
     let speeds: Vec<f64> = rates_dps.iter().map(|r| r.abs()).collect();
