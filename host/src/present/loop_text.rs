@@ -242,7 +242,7 @@ fn structure(r: &LoopReport) -> Vec<String> {
 
 /// Whether the runs cannot tell the model's g-sensitivity from a change of M with speed.
 fn held_by_gravity(r: &LoopReport) -> bool {
-    r.notes.iter().any(|n| matches!(n, Note::SpeedChangeHeldByGravity { .. }))
+    r.notes.iter().any(Note::flags)
 }
 
 /// The verdict in words: the residual against the floor, or what is left unexplained.

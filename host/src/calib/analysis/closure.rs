@@ -254,6 +254,14 @@ pub enum Note {
     Unseparated(ConsiderTerm),
 }
 
+impl Note {
+    /// Whether the note by itself keeps the calibration from being certified: a g-sensitivity
+    /// the runs cannot tell from a change of M with speed², which nothing bounds.
+    pub fn flags(&self) -> bool {
+        matches!(self, Note::SpeedChangeHeldByGravity { .. })
+    }
+}
+
 /// The loop's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LoopReport {
@@ -1126,7 +1134,7 @@ impl Context<'_> {
         let unvouched = (!state.fitted.converged).then(|| format!("final model, {}", not_converged(&state.fitted)));
         // Where the g-sensitivity and M together take up any change of M with speed², nothing
         // tells the g-sensitivity fitted from such a change, which nothing bounds: not certified.
-        let held = notes.iter().any(|n| matches!(n, Note::SpeedChangeHeldByGravity { .. }));
+        let held = notes.iter().any(Note::flags);
         let verdict = if state.diag.has_structure() || earth_excess.is_some() || disagree || held || unvouched.is_some()
         {
             Verdict::UnexplainedStructure
