@@ -5,7 +5,7 @@ use crate::calib::analysis::closure;
 use crate::calib::analysis::closure::Note;
 use crate::calib::analysis::diagnostics::FindingKind;
 use crate::calib::data::kinematics;
-use crate::calib::engine::{Col, Evaluator, LoopData, Model, SharedPar};
+use crate::calib::engine::{Col, Evaluator, Gram, LinCol, LoopData, Model, SharedPar};
 use crate::calib::result::truth_check::TruthErrors;
 use crate::capture::{decode, Run};
 use crate::geometry::Pose;
@@ -408,15 +408,23 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
     }
 }
 
-/// A pass in cells sums, within each chunk of the pass, the run's consecutive valid samples in
-/// cells of eight (the last of a chunk shorter): XᵀX and Xᵀe are those of each cell's sums over
-/// the root of its count, eᵀe and the counts the samples' own (to 1e-12 of each entry's scale).
-/// The base model without the delay (every column axis-independent: one row for the three
-/// axes), the model with it and every candidate but the free drift's (a row per axis), and with
-/// every candidate (the knots' path).
+/// A pass in cells sums, within each chunk of the pass, each stretch of consecutive valid
+/// samples in cells of eight (the last of a stretch shorter), the chain taken at three nodes per
+/// cell (its first sample, the next cell's first or its own last, and the one midway) and at each
+/// sample from the quadratic through them: XᵀX and Xᵀe are those of each cell's sums over the
+/// root of its count, eᵀe and the counts the samples' own (to 1e-12 of each entry's scale). The
+/// base model without the delay (every column axis-independent: one row for the three axes),
+/// the model with it and every candidate but the free drift's (a row per axis), and with every
+/// candidate (the knots' path, which the pass takes sample by sample: a reference through nodes
+/// gives the same sums, as the hat functions are straight within a cell but at their corners,
+/// which the tolerance below covers). And they are the sums of the same cells of the samples'
+/// own values to 1e-3 of each entry's scale: the quadratic's error on a 32× harmonic at 180 °/s
+/// (16 Hz, 0.5 rad between nodes: 0.06·0.5³ ≈ 8e-3 at a sample, less in a sum; 3e-4 of a 27×
+/// harmonic's sum of squares here), and the encoder's rate noise each sample carries and a
+/// quadratic smooths (3e-5 of ω_s, rms: 2e-4 of eᵀe here).
 #[test]
-fn a_pass_in_cells_sums_the_cells() {
-    use crate::calib::engine::{accumulate::CHUNK, accumulate_pairs, Cells, Reach};
+fn a_pass_in_cells_sums_the_quadratic_through_its_nodes() {
+    use crate::calib::engine::{accumulate_pairs, sums::CHUNK, Cells, Reach};
     let (data, model) = short_capture_and_delay_model();
     let mut base = Model::base_for(&data.poses);
     base.beta = model.beta.clone();
@@ -429,59 +437,105 @@ fn a_pass_in_cells_sums_the_cells() {
         let l = cols.len();
         let got = accumulate_pairs(&data, model, &cols, &Reach::all(l), Cells::Span);
         let ev = Evaluator::for_columns(&data, model, &cols);
-        let mut cursor = crate::calib::engine::Cursor::default();
-        let mut row = vec![0.0; 3 * l];
         for (r, rk) in data.kin.runs.iter().enumerate() {
             let size = Cells::Span.rows(rk.sample_rate_hz);
             assert_eq!(size, 8);
-            let (mut xtx, mut xte) = (vec![vec![0.0; l * l]; 3], vec![vec![0.0; l]; 3]);
-            let (mut ete, mut n) = ([0.0; 3], [0u64; 3]);
-            for start in (0..rk.samples.len()).step_by(CHUNK) {
-                let idx: Vec<usize> =
-                    data.runs[r].valid.indices_in(start, (start + CHUNK).min(rk.samples.len())).collect();
-                for cell in idx.chunks(size) {
-                    let (mut sx, mut se) = (vec![0.0; 3 * l], [0.0; 3]);
-                    for &i in cell {
-                        let (s, p) = ev.visit(r, i, &mut cursor);
-                        ev.fill(p, &cols, &mut row);
-                        sx.iter_mut().zip(&row).for_each(|(a, b)| *a += b);
-                        for a in 0..3 {
-                            let e = f64::from(s.rate_counts[a]) - ev.predict(p, a);
-                            (se[a], ete[a], n[a]) = (se[a] + e, ete[a] + e * e, n[a] + 1);
+            let want = cell_reference(&data, (&ev, &cols), r, (size, CHUNK), true);
+            let samples = cell_reference(&data, (&ev, &cols), r, (size, CHUNK), false);
+            // The knots are not interpolated: where a corner falls inside a cell, the
+            // reference's quadratic bends it; 1e-6 covers that, 1e-12 the rest.
+            let tol = if cols.iter().any(|c| matches!(c, Col::Lin(LinCol::DriftKnot { .. }))) { 1e-6 } else { 1e-12 };
+            for (g, (w, tol)) in [(&got[r], (&want, tol)), (&got[r], (&samples, 1e-3))] {
+                assert_eq!(g.n, w.n, "run {r}: every sample counted once");
+                for a in 0..3 {
+                    let diag = |i: usize| w.xtx[a][i * l + i];
+                    assert!((g.ete[a] - w.ete[a]).abs() <= tol * w.ete[a], "run {r}, axis {a}: eᵀe, tolerance {tol}");
+                    for (i, col) in cols.iter().enumerate() {
+                        let scale = (diag(i) * w.ete[a]).sqrt();
+                        assert!((g.xte[a][i] - w.xte[a][i]).abs() <= tol * scale, "run {r}, axis {a}, xᵀe {i} of {l}");
+                        for j in 0..l {
+                            let (got, want) = (g.xtx[a][i * l + j], w.xtx[a][i * l + j]);
+                            let scale = (diag(i) * diag(j)).sqrt();
+                            assert!(
+                                (got - want).abs() <= tol * scale,
+                                "run {r}, axis {a}, ({i}, {j}) of {l}: {got} vs {want}, tolerance {tol}, {col:?}"
+                            );
                         }
-                    }
-                    let m = cell.len() as f64;
-                    for a in 0..3 {
-                        let x = &sx[a * l..(a + 1) * l];
-                        for i in 0..l {
-                            xte[a][i] += x[i] * se[a] / m;
-                            for j in 0..l {
-                                xtx[a][i * l + j] += x[i] * x[j] / m;
-                            }
-                        }
-                    }
-                }
-            }
-            let g = &got[r];
-            assert_eq!(g.n, n, "run {r}: every sample counted once");
-            for a in 0..3 {
-                assert!((g.ete[a] - ete[a]).abs() <= 1e-12 * ete[a], "run {r}, axis {a}: eᵀe");
-                let diag = |i: usize| xtx[a][i * l + i];
-                for i in 0..l {
-                    let scale = (diag(i) * ete[a]).sqrt();
-                    assert!((g.xte[a][i] - xte[a][i]).abs() <= 1e-12 * scale, "run {r}, axis {a}, xᵀe {i} of {l}");
-                    for j in 0..l {
-                        let (got, want) = (g.xtx[a][i * l + j], xtx[a][i * l + j]);
-                        let scale = (diag(i) * diag(j)).sqrt();
-                        assert!(
-                            (got - want).abs() <= 1e-12 * scale,
-                            "run {r}, axis {a}, ({i}, {j}) of {l}: {got} vs {want}"
-                        );
                     }
                 }
             }
         }
     }
+}
+
+/// The sums of run `r` in cells of `size` samples (within chunks of `chunk`), made directly: each
+/// sample's columns and output from the quadratic through its cell's nodes (see the test above)
+/// if `through_nodes`, else the sample's own.
+fn cell_reference(
+    data: &LoopData,
+    (ev, cols): (&Evaluator, &[Col]),
+    r: usize,
+    (size, chunk): (usize, usize),
+    through_nodes: bool,
+) -> Gram {
+    let (rk, l) = (&data.kin.runs[r], cols.len());
+    let mut g = Gram {
+        l,
+        xtx: std::array::from_fn(|_| vec![0.0; l * l]),
+        xte: std::array::from_fn(|_| vec![0.0; l]),
+        ete: [0.0; 3],
+        n: [0; 3],
+    };
+    let mut row = vec![0.0; 3 * l];
+    for start in (0..rk.samples.len()).step_by(chunk) {
+        for stretch in data.runs[r].valid.ranges_in(start, (start + chunk).min(rk.samples.len())) {
+            let idx: Vec<usize> = stretch.clone().collect();
+            for cell in idx.chunks(size) {
+                let first = cell[0];
+                let last = if cell[cell.len() - 1] + 1 < stretch.end { cell[0] + size } else { cell[cell.len() - 1] };
+                let mut at = |i: usize| -> (Vec<f64>, [f64; 3]) {
+                    let p = ev.point(r, i);
+                    ev.fill(&p, cols, &mut row);
+                    (row.clone(), std::array::from_fn(|a| ev.predict(&p, a)))
+                };
+                let (mut sx, mut se, mut m) = (vec![0.0; 3 * l], [0.0; 3], 0.0);
+                for &i in cell {
+                    let nodes: Vec<usize> = match (through_nodes, last - first) {
+                        (false, _) => vec![i],
+                        (true, 0) => vec![first],
+                        (true, 1) => vec![first, last],
+                        (true, _) => vec![first, (first + last) / 2, last],
+                    };
+                    let t = |i: usize| rk.samples.get(i).t_s();
+                    let weight = |j: usize, x: f64| -> f64 {
+                        let others = (0..nodes.len()).filter(|&q| q != j);
+                        others.map(|q| (x - t(nodes[q])) / (t(nodes[j]) - t(nodes[q]))).product()
+                    };
+                    let at: Vec<(Vec<f64>, [f64; 3])> = nodes.iter().map(|&i| at(i)).collect();
+                    let w: Vec<f64> = (0..nodes.len()).map(|j| weight(j, t(i))).collect();
+                    for (j, (x, _)) in at.iter().enumerate() {
+                        sx.iter_mut().zip(x).for_each(|(s, v)| *s += w[j] * v);
+                    }
+                    let pred: [f64; 3] = std::array::from_fn(|a| (0..nodes.len()).map(|j| w[j] * at[j].1[a]).sum());
+                    for a in 0..3 {
+                        let e = f64::from(rk.samples.get(i).rate_counts[a]) - pred[a];
+                        (se[a], g.ete[a], g.n[a]) = (se[a] + e, g.ete[a] + e * e, g.n[a] + 1);
+                    }
+                    m += 1.0;
+                }
+                for a in 0..3 {
+                    let x = &sx[a * l..(a + 1) * l];
+                    for i in 0..l {
+                        g.xte[a][i] += x[i] * se[a] / m;
+                        for j in 0..l {
+                            g.xtx[a][i * l + j] += x[i] * x[j] / m;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    g
 }
 
 /// Earth's fit starts from the last candidates' pass, read in place of a pass of its own: the

@@ -935,9 +935,8 @@ struct Trail {
     steps: Vec<StepReport>,
     skipped: Vec<Skipped>,
     /// The last candidates' pass in which no candidate passed. Where nothing is added after the
-    /// loop it is of the final model, and the consider covariance reads it if it was summed
-    /// sample by sample; where Earth is, it holds Earth's columns, and Earth's fit starts from
-    /// the solution they give.
+    /// loop it is of the final model, and the consider covariance reads it; where Earth is, it
+    /// holds Earth's columns, and Earth's fit starts from the solution they give.
     last_sums: Option<CrossSums>,
 }
 
@@ -971,22 +970,21 @@ impl Context<'_> {
     /// One step of the loop: the best candidate that passes its test, fitted, then whatever it
     /// made redundant dropped. `None` when no candidate passes.
     fn next_state(&self, state: &State, trail: &mut Trail) -> Result<Option<State>, CalError> {
-        // The candidates' pass sums in cells ([`Cells`]): a score ranks, and the chosen one is
-        // fitted sample by sample. Where Earth is added after the loop, it also sums Earth's
-        // columns, from which Earth's fit starts. Where the diagnostics found nothing in the
-        // residual, this model is most likely the final one (nothing is added after the loop):
-        // the pass then sums sample by sample and carries the consider covariance's columns,
-        // which that covariance reads, if no candidate passes, rather than making a pass of its
-        // own (the clean hour's loop: 3.1 s of CPU with a pass of its own, 2.5 s without).
+        // The candidates' pass sums in cells ([`Cells`]), as the fits do. Where Earth is added
+        // after the loop, it also sums Earth's columns, from which Earth's fit starts. Where the
+        // diagnostics found nothing in the residual, this model is most likely the final one
+        // (nothing is added after the loop): the pass then carries the consider covariance's
+        // columns, which that covariance reads, if no candidate passes, rather than making a pass
+        // of its own (the clean hour's loop: 3.1 s of CPU with a pass of its own, 2.5 s without).
         let adds_earth = self.adds_earth(&state.fitted.model);
-        let (extra, cells) = if adds_earth {
-            (vec![earth_columns(earth_form(&state.fitted.model), &self.data.layout)], Cells::Span)
+        let extra = if adds_earth {
+            vec![earth_columns(earth_form(&state.fitted.model), &self.data.layout)]
         } else if !state.diag.has_structure() {
-            (columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider), Cells::Exact)
+            columns(self.data, &state.fitted, &self.consider_ctx(&state.fitted), &self.opts.consider)
         } else {
-            (Vec::new(), Cells::Span)
+            Vec::new()
         };
-        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha, (&extra, cells))?;
+        let outcome = step(self.data, &state.fitted, &state.diag, self.opts.alpha, (&extra, Cells::Span))?;
         for sk in outcome.skipped {
             trail.skip(sk);
         }

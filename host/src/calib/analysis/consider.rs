@@ -268,11 +268,9 @@ pub fn columns(data: &LoopData, f: &Fitted, cx: &ConsiderCtx, overrides: &Consid
 /// The consider covariance of `f` (fitted with `weights`) for every catalogued effect it lacks.
 /// `base` are the 12 base parameters' indices in `f`'s covariance; `k` the sensitivities.
 /// `alpha` is the loop's family-wise level, which the test of an effect it tried uses. The
-/// cross-products are read from `sums` when those are of `f`'s model, hold every effect's
-/// columns and were summed sample by sample ([`CrossSums::read`]), else summed so in a pass of
-/// their own: the terms are the bias of the fit as it was made, and a weakly seen effect's can
-/// move by a tenth in sums of cells ([`Cells`]; a table tilt's offset term on
-/// `realistic-2speed-s101`: 28 against 31 counts).
+/// cross-products are read from `sums` when those are of `f`'s model and hold every effect's
+/// columns ([`CrossSums::read`]), else summed in a pass of their own, in cells as the fit's
+/// were ([`Cells`]): the terms are the bias of the fit as it was made.
 #[allow(clippy::too_many_arguments)]
 pub fn consider(
     data: &LoopData,
@@ -294,10 +292,10 @@ pub fn consider(
     let (nl, ns) = (f.model.lin.len(), f.model.shared.len());
     let (cols, sel, places) = with_candidates(f, &cands);
     let groups: Vec<&[Col]> = cands.iter().map(|c| c.cols.as_slice()).collect();
-    let read = sums.and_then(|s| s.read(&f.model, &groups, Cells::Exact));
+    let read = sums.and_then(|s| s.read(&f.model, &groups, Cells::Span));
     let Some(total) = read.or_else(|| {
         let reach = Reach::blocks(nl + ns, cands.iter().map(|c| c.cols.len()));
-        Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach, Cells::Exact))
+        Gram::sum(&accumulate_pairs(data, &f.model, &cols, &reach, Cells::Span))
     }) else {
         return Consideration::none();
     };

@@ -719,13 +719,31 @@ impl<'a> Evaluator<'a> {
     /// The knots of `plan` under point `p`, with their hat functions' values (the
     /// [`LinCol::DriftKnot`] arm of [`Evaluator::lin_value`], for the two that can be non-zero).
     #[inline]
-    pub(super) fn for_each_knot(&self, plan: &ColPlan, p: &Point, mut f: impl FnMut(usize, f64)) {
-        for g in plan.knots.iter().filter(|g| g.stretch == p.stretch) {
-            let x = match g.spacing_index {
-                Some(k) => p.knot_x[k],
-                None => {
-                    let (t0, per_s) = self.data.layout.knot_grid(p.stretch, g.spacing_s);
-                    (p.t_s - t0) * per_s
+    pub(super) fn for_each_knot(&self, plan: &ColPlan, p: &Point, f: impl FnMut(usize, f64)) {
+        self.knots_at(plan, p.stretch, p.t_s, Some(&p.knot_x), f);
+    }
+
+    /// [`Evaluator::for_each_knot`] at time `t_s` of stretch `stretch`, whose places on the
+    /// standard grids are `knot_x` if known (a point's), else reckoned here.
+    #[inline]
+    pub(super) fn knots_at(
+        &self,
+        plan: &ColPlan,
+        stretch: usize,
+        t_s: f64,
+        knot_x: Option<&[f64; DRIFT_KNOT_SPACINGS_S.len()]>,
+        mut f: impl FnMut(usize, f64),
+    ) {
+        for g in plan.knots.iter().filter(|g| g.stretch == stretch) {
+            let x = match (g.spacing_index, knot_x) {
+                (Some(k), Some(x)) => x[k],
+                (Some(k), None) => {
+                    let grid = &self.knot_grid[stretch][k];
+                    (t_s - grid.0) * grid.1
+                }
+                (None, _) => {
+                    let (t0, per_s) = self.data.layout.knot_grid(stretch, g.spacing_s);
+                    (t_s - t0) * per_s
                 }
             };
             let below = x.floor();

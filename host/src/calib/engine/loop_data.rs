@@ -34,8 +34,14 @@ impl ValidSamples {
 
     /// The used samples' indices in `lo..hi`, ascending.
     pub fn indices_in(&self, lo: usize, hi: usize) -> impl Iterator<Item = usize> + '_ {
+        self.ranges_in(lo, hi).flatten()
+    }
+
+    /// The used samples in `lo..hi` as ranges of consecutive indices, ascending: each lies
+    /// between two gaps.
+    pub fn ranges_in(&self, lo: usize, hi: usize) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
         let k = self.ranges.partition_point(|r| r.end <= lo);
-        self.ranges[k..].iter().take_while(move |r| r.start < hi).flat_map(move |r| r.start.max(lo)..r.end.min(hi))
+        self.ranges[k..].iter().take_while(move |r| r.start < hi).map(move |r| r.start.max(lo)..r.end.min(hi))
     }
 
     /// The first used sample.

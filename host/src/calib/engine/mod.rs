@@ -18,10 +18,12 @@
 //! the linear algebra is nalgebra's.
 //!
 //! Files: [`loop_data`] (the cached data), [`model`], [`chain`] (eq. 1-2 and every effect's
-//! inputs), [`accumulate`] (one pass → per-run sums), [`cells`] (a pass's samples summed a few
-//! at a time, for the scores), [`solve`] (normal equations, Gauss-Newton, covariance), [`cross`]
-//! (a model's columns against candidates', read by the score and the consider covariance alike);
-//! [`sincos`] (the recurrences the chain's harmonics use).
+//! inputs), `pass` (what a pass fixes before it visits the samples), [`sums`] (the sums a pass
+//! adds its rows to), [`accumulate`] (one pass → per-run sums), [`cells`] (a pass's samples
+//! summed a few at a time, the chain taken at three nodes of each: `nodes`), [`solve`] (normal
+//! equations, Gauss-Newton, covariance), [`cross`] (a model's columns against candidates', read by
+//! the score and the consider covariance alike); [`sincos`] (the recurrences the chain's
+//! harmonics use).
 
 pub mod accumulate;
 pub mod cells;
@@ -29,15 +31,18 @@ pub mod chain;
 pub mod cross;
 pub mod loop_data;
 pub mod model;
+mod nodes;
+mod pass;
 pub mod sincos;
 pub mod solve;
+pub mod sums;
 
 #[cfg(test)]
 mod tests;
 
 pub use crate::calib::effects::terms::{Bound, Col, LinCol, Point, Reported, SharedPar};
 pub use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
-pub use accumulate::{accumulate, accumulate_pairs, Gram, Reach};
+pub use accumulate::{accumulate, accumulate_pairs};
 pub use cells::Cells;
 pub use chain::{harmonics_of, Cursor, Evaluator};
 pub use cross::CrossSums;
@@ -46,3 +51,4 @@ pub use model::Model;
 pub use solve::{
     apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Fitted, JointSolution, Selection,
 };
+pub use sums::{Gram, Reach};

@@ -5,9 +5,11 @@ use crate::calib::result::axes::AXES;
 use crate::calib::result::error::CalError;
 use nalgebra::{DMatrix, DVector};
 
-use super::accumulate::{accumulate, Gram};
+use super::accumulate::accumulate_pairs;
+use super::cells::Cells;
 use super::loop_data::LoopData;
 use super::model::Model;
+use super::sums::{Gram, Reach};
 use crate::calib::effects::terms::{Bound, LinCol, SharedPar};
 
 /// Smallest reciprocal condition number of the diagonally scaled joint normal matrix accepted:
@@ -262,8 +264,13 @@ pub(crate) fn fit_at_most(
     let cols = model.cols();
     let nl = model.lin.len();
     let linear_only = model.shared.is_empty() && model.lin.iter().all(|c| c.is_common());
+    // The linear model's one pass, from zero, sums the samples: its eᵀe is the data's own, which
+    // the sums of cells would not reduce by the signal's variation within a cell, and the
+    // paper's check reads its χ² from them. Every other fit starts next to its optimum, where
+    // cells lose only their share of the columns' information ([`Cells`]).
+    let (reach, cells) = (Reach::all(cols.len()), if linear_only { Cells::Exact } else { Cells::Span });
     for pass in 1..=max_passes.max(1) {
-        let per_run = accumulate(data, &model, &cols);
+        let per_run = accumulate_pairs(data, &model, &cols, &reach, cells);
         let total = Gram::sum(&per_run).ok_or(CalError::NoRuns)?;
         let frozen: Vec<bool> = model.shared.iter().map(|&p| model.shapes_only_zero_columns(p)).collect();
         let sel = Selection {
