@@ -8,7 +8,7 @@ use crate::calib::analysis::binning::Binning;
 use crate::calib::analysis::blocking::Blocking;
 use crate::calib::analysis::spectrum::{AmplitudeSpectrum, Periodogram};
 use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
-use crate::calib::engine::{harmonics_of, Cursor, Evaluator, LoopData, Model};
+use crate::calib::engine::{for_each_interpolated, harmonics_of, Evaluator, LoopData, Model};
 use crate::calib::result::axes::{is_clipped, AXES};
 use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
@@ -813,21 +813,28 @@ impl<'a> Walker<'a> {
         let rate_max = rk.steady_rate_dps.abs() * (2f64.sqrt() + rk.gear_ratio.abs()) * 1.05;
         let rate_binning = Binning::new(rate_max, RATE_BINS);
         let time_binning = Binning::of_width(TIME_BIN_S, n_time);
-        let mut cursor = Cursor::default();
-        for i in rd.valid.indices() {
-            let (s, p) = self.ev.visit(r, i, &mut cursor);
-            let bin = self.theta2_binning.angle_index(p.theta2_rad);
+        // The chain at the nodes of each cell, the sample's values from the quadratic through
+        // them (`engine::for_each_interpolated`): the model's output, θ2, each axis's rate and
+        // the die temperature.
+        let (ev, scratch) = (self.ev, &mut self.scratch);
+        let values = |p: &crate::calib::engine::Point| -> [f64; 8] {
+            let pred = ev.predict3(p, scratch);
+            let rate: [f64; 3] = std::array::from_fn(|a| ev.axis_rate(p, a));
+            [pred[0], pred[1], pred[2], p.theta2_rad, rate[0], rate[1], rate[2], p.temp_c]
+        };
+        let (theta2_binning, angle_binning, centres) = (&self.theta2_binning, &self.angle_binning, &self.centres);
+        for_each_interpolated(ev, data, r, values, |_, s, v| {
+            let (preds, theta2_rad, temp_c) = (&v[..3], v[3], v[7]);
+            let bin = theta2_binning.angle_index(theta2_rad);
             let tb = time_binning.index(s.t_s() - t_first);
             let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
             sums.dev_sq += dev * dev;
             let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
             let mut row = [f64::NAN; 3];
-            let hb = self.angle_binning.angle_index(p.theta2_rad);
+            let hb = angle_binning.angle_index(theta2_rad);
             sums.angle.add_sample(hb, dev_pct);
-            let preds = self.ev.predict3(p, &mut self.scratch);
             for a in 0..3 {
-                let r = self.ev.axis_rate(p, a).abs();
-                let rbin = rate_binning.index(r);
+                let rbin = rate_binning.index(v[4 + a].abs());
                 if is_clipped(s.rate_counts[a]) {
                     sums.clipped[a] += 1;
                     sums.e[a].push(f32::NAN);
@@ -843,8 +850,8 @@ impl<'a> Walker<'a> {
                 sums.angle.add_residual(a, hb, dev_pct, ea);
                 sums.theta_bins[a].add(bin, ea, pred);
                 sums.time_bins[a].add(tb, ea, 0.0);
-                sums.temp[a].add(p.temp_c, ea);
-                sums.rate_sums[a].add(rbin, ea, self.centres[hb]);
+                sums.temp[a].add(temp_c, ea);
+                sums.rate_sums[a].add(rbin, ea, centres[hb]);
             }
             if row.iter().all(|v| !v.is_nan()) {
                 pooled.blocking.push(row);
@@ -854,7 +861,7 @@ impl<'a> Walker<'a> {
                     }
                 }
             }
-        }
+        });
         pooled.blocking.end_segment();
         sums
     }

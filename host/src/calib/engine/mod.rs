@@ -48,6 +48,7 @@ pub use chain::{harmonics_of, Cursor, Evaluator};
 pub use cross::CrossSums;
 pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
 pub use model::Model;
+pub use nodes::for_each_interpolated;
 pub use solve::{
     apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Fitted, JointSolution, Selection,
 };

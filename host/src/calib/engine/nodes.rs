@@ -14,9 +14,13 @@
 
 use std::ops::Range;
 
+use super::cells::Cells;
+use super::chain::Evaluator;
+use super::loop_data::LoopData;
 use super::pass::Pass;
 use super::sums::{Gram, KnotSplit, RowBlock, SharedRows, Touched, CHUNK};
 use crate::calib::data::kinematics::KinSample;
+use crate::calib::effects::terms::Point;
 use crate::calib::result::axes::is_clipped;
 
 /// The polynomial through one to three nodes, as weights on the nodes' values at any time.
@@ -153,15 +157,10 @@ impl<'p, 'a> CellPass<'p, 'a> {
     }
 
     /// The nodes of the cell of samples `cell` in a stretch of consecutive samples ending at
-    /// `stretch_end`: its first sample, the next cell's first (or its own last), and the one
-    /// midway; fewer when it has fewer samples. The first is the last cell's last when they meet.
+    /// `stretch_end` ([`node_samples`]); the first is the last cell's last when they meet.
     fn place_nodes(&mut self, cell: &Range<usize>, stretch_end: usize) {
-        let (first, last) = (cell.start, if cell.end < stretch_end { cell.end } else { cell.end - 1 });
-        let at: &[usize] = match last - first {
-            0 => &[first],
-            1 => &[first, last],
-            _ => &[first, (first + last) / 2, last],
-        };
+        let (idx, k) = node_samples(cell, stretch_end);
+        let (first, at) = (idx[0], &idx[..k]);
         let samples = &self.pass.data.kin.runs[self.r].samples;
         if self.k > 0 && self.nodes[self.k - 1].i == first {
             self.nodes.swap(0, self.k - 1);
@@ -308,6 +307,60 @@ pub(super) fn cell_sums(pass: &Pass, r: usize, size: usize) -> Gram {
     }
     cp.total.symmetrise();
     cp.total
+}
+
+/// Where a cell of samples `cell`, in a stretch of consecutive samples ending at `stretch_end`,
+/// takes its nodes: its first sample, the next cell's first (or its own last), and the one
+/// midway; fewer when it has fewer samples.
+fn node_samples(cell: &Range<usize>, stretch_end: usize) -> ([usize; 3], usize) {
+    let (first, last) = (cell.start, if cell.end < stretch_end { cell.end } else { cell.end - 1 });
+    match last - first {
+        0 => ([first; 3], 1),
+        1 => ([first, last, last], 2),
+        _ => ([first, (first + last) / 2, last], 3),
+    }
+}
+
+/// Visits the valid samples of run `r` in order, each with `values` (a few numbers of the chain
+/// at a point) taken at the nodes of its cell ([`super::cells::CELL_S`]) and at the sample from
+/// the quadratic through them: what a walk of the residual needs, for two evaluations of the
+/// chain per cell where each sample would cost one.
+pub fn for_each_interpolated<const K: usize>(
+    ev: &Evaluator,
+    data: &LoopData,
+    r: usize,
+    mut values: impl FnMut(&Point) -> [f64; K],
+    mut visit: impl FnMut(usize, KinSample, [f64; K]),
+) {
+    let samples = &data.kin.runs[r].samples;
+    let size = Cells::Span.rows(data.kin.runs[r].sample_rate_hz);
+    let mut at = |i: usize| -> (usize, f64, [f64; K]) {
+        let s = samples.get(i);
+        (i, s.t_s(), values(&ev.point_with(r, i, s)))
+    };
+    let mut nodes: [(usize, f64, [f64; K]); 3] = [(usize::MAX, 0.0, [0.0; K]); 3];
+    let mut k = 0;
+    for stretch in data.runs[r].valid.ranges_in(0, samples.len()) {
+        let mut c0 = stretch.start;
+        while c0 < stretch.end {
+            let cell = c0..(c0 + size).min(stretch.end);
+            let (idx, kn) = node_samples(&cell, stretch.end);
+            nodes[0] = if k > 0 && nodes[k - 1].0 == idx[0] { nodes[k - 1] } else { at(idx[0]) };
+            for j in 1..kn {
+                nodes[j] = at(idx[j]);
+            }
+            k = kn;
+            let t0 = nodes[0].1;
+            let times: [f64; 3] = std::array::from_fn(|j| nodes[j].1 - t0);
+            let lagrange = Lagrange::new(&times[..k]);
+            for i in cell.clone() {
+                let s = samples.get(i);
+                let w = lagrange.weights(s.t_s() - t0);
+                visit(i, s, std::array::from_fn(|q| (0..k).map(|j| w[j] * nodes[j].2[q]).sum()));
+            }
+            c0 = cell.end;
+        }
+    }
 }
 
 #[cfg(test)]
