@@ -178,7 +178,8 @@ impl<'p, 'a> CellPass<'p, 'a> {
         self.place_nodes(&cell, stretch_end);
         let (nodes, k) = (&self.nodes, self.k);
         let t0 = nodes[0].t_s;
-        let lagrange = Lagrange::new(&nodes[..k].iter().map(|n| n.t_s - t0).collect::<Vec<_>>());
+        let times: [f64; 3] = std::array::from_fn(|j| nodes[j].t_s - t0);
+        let lagrange = Lagrange::new(&times[..k]);
         let samples = &self.pass.data.kin.runs[self.r].samples;
         let stretch = self.pass.data.layout.run_stretch[self.r];
         let mut axes = [AxisCell::default(); 3];
