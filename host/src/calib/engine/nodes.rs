@@ -132,6 +132,8 @@ struct CellPass<'p, 'a> {
     knots_axis: [Vec<(usize, f64)>; 3],
     row: Vec<f64>,
     scratch: Vec<f64>,
+    /// Every row of the sums, which a chunk of a plan without knots touches.
+    all_rows: Vec<usize>,
 }
 
 impl<'p, 'a> CellPass<'p, 'a> {
@@ -153,6 +155,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
             knots_axis: std::array::from_fn(|_| Vec::new()),
             row: Vec::new(),
             scratch: Vec::new(),
+            all_rows: (0..l).collect(),
         }
     }
 
@@ -276,14 +279,13 @@ impl<'p, 'a> CellPass<'p, 'a> {
             b.add_to(&mut self.local, a);
         }
         self.shared.add_to(&mut self.local, &mut self.same);
-        let l = self.local.l;
         match self.split.as_mut() {
             Some(split) => {
                 split.flush(&mut self.local, self.pass.reach, &mut self.touched);
                 self.total.drain_rows(&mut self.local, &self.touched.rows);
                 self.touched.clear();
             }
-            None => self.total.drain_rows(&mut self.local, &(0..l).collect::<Vec<_>>()),
+            None => self.total.drain_rows(&mut self.local, &self.all_rows),
         }
         // `local` was drained: its three XᵀX are equal (zero).
         self.same = true;
@@ -297,17 +299,20 @@ pub(super) fn cell_sums(pass: &Pass, r: usize, size: usize) -> Gram {
     let mut cp = CellPass::new(pass, r);
     for start in (0..n).step_by(CHUNK) {
         for stretch in pass.data.runs[r].valid.ranges_in(start, (start + CHUNK).min(n)) {
-            let mut c0 = stretch.start;
-            while c0 < stretch.end {
-                let c1 = (c0 + size).min(stretch.end);
-                cp.add_cell(c0..c1, stretch.end);
-                c0 = c1;
+            for cell in cells_of(&stretch, size) {
+                cp.add_cell(cell, stretch.end);
             }
         }
         cp.end_chunk();
     }
     cp.total.symmetrise();
     cp.total
+}
+
+/// A stretch of consecutive samples cut into cells of `size` from its start (the last shorter).
+fn cells_of(stretch: &Range<usize>, size: usize) -> impl Iterator<Item = Range<usize>> {
+    let end = stretch.end;
+    stretch.clone().step_by(size).map(move |c0| c0..(c0 + size).min(end))
 }
 
 /// Where a cell of samples `cell`, in a stretch of consecutive samples ending at `stretch_end`,
@@ -342,9 +347,7 @@ pub fn for_each_interpolated<const K: usize>(
     let mut nodes: [(usize, f64, [f64; K]); 3] = [(usize::MAX, 0.0, [0.0; K]); 3];
     let mut k = 0;
     for stretch in data.runs[r].valid.ranges_in(0, samples.len()) {
-        let mut c0 = stretch.start;
-        while c0 < stretch.end {
-            let cell = c0..(c0 + size).min(stretch.end);
+        for cell in cells_of(&stretch, size) {
             let (idx, kn) = node_samples(&cell, stretch.end);
             nodes[0] = if k > 0 && nodes[k - 1].0 == idx[0] { nodes[k - 1] } else { at(idx[0]) };
             for j in 1..kn {
@@ -359,7 +362,6 @@ pub fn for_each_interpolated<const K: usize>(
                 let w = lagrange.weights(s.t_s() - t0);
                 visit(i, s, std::array::from_fn(|q| (0..k).map(|j| w[j] * nodes[j].2[q]).sum()));
             }
-            c0 = cell.end;
         }
     }
 }
