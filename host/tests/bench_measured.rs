@@ -216,3 +216,128 @@ mod trust {
         assert!(bars([(&flagged, false)]).all_hold(), "a flagged seed off the live design is honest");
     }
 }
+
+mod remix {
+    use crate::measured::remix::*;
+    use nalgebra::{Matrix3, Vector3};
+    use protocol::{Event, RigMsg, StreamDecoder};
+    use serde_json::json;
+
+    fn demo() -> Vec<u8> {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/demo.cap");
+        std::fs::read(path).unwrap_or_else(|e| panic!("{path}: {e}"))
+    }
+
+    /// Every frame of a capture, in order.
+    fn frames(bytes: &[u8]) -> Vec<(u16, RigMsg)> {
+        let mut out = Vec::new();
+        StreamDecoder::new().feed::<RigMsg>(bytes, |ev| match ev {
+            Event::Frame { seq, msg, .. } => out.push((seq, msg)),
+            Event::Error { offset, error, .. } => panic!("no frame at {offset}: {error:?}"),
+        });
+        out
+    }
+
+    /// A = I without noise gives the capture back byte for byte: the frames are re-encoded as
+    /// the rig encoded them.
+    #[test]
+    fn the_identity_gives_the_capture_back() {
+        let bytes = demo();
+        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1 };
+        let (out, held) = id.capture("demo.cap", &bytes).expect("a clean capture");
+        assert_eq!(held, 0);
+        assert!(out == bytes, "{} bytes against {}", out.len(), bytes.len());
+    }
+
+    /// Each sample's counts are round(A·counts), held to the i16 range (a 3× gain clips the demo's
+    /// larger counts); every other frame and every sequence number is unchanged.
+    #[test]
+    fn every_sample_goes_through_a_and_nothing_else_moves() {
+        let bytes = demo();
+        let a = Matrix3::new(3.0, 0.01, -0.02, 0.005, 0.98, 0.0, -0.01, 0.03, 1.02);
+        let (out, held) = Remix { a, noise_counts: 0.0, seed: 1 }.capture("demo.cap", &bytes).expect("clean");
+        let (before, after) = (frames(&bytes), frames(&out));
+        assert_eq!(before.len(), after.len());
+        let (mut samples, mut want_held) = (0, 0);
+        for ((seq0, m0), (seq1, m1)) in before.iter().zip(&after) {
+            assert_eq!(seq0, seq1);
+            match (m0, m1) {
+                (RigMsg::Sample(s0), RigMsg::Sample(s1)) => {
+                    let x = a * Vector3::from(s0.rate_counts.map(f64::from));
+                    for (got, want) in s1.rate_counts.iter().zip(x.iter()) {
+                        let r = want.round();
+                        want_held += u64::from(!(-32768.0..=32767.0).contains(&r));
+                        assert_eq!(f64::from(*got), r.clamp(-32768.0, 32767.0));
+                    }
+                    assert_eq!((s0.t_us, s0.encoder, s0.status), (s1.t_us, s1.encoder, s1.status));
+                    samples += 1;
+                }
+                _ => assert_eq!(m0, m1),
+            }
+        }
+        assert!(samples > 10_000, "{samples} samples");
+        assert_eq!(held, want_held);
+        assert!(held > 0, "a 3× gain holds some counts at the rails");
+    }
+
+    /// The noise is a draw of its σ, and the same draw for the same seed and name.
+    #[test]
+    fn the_noise_has_its_sigma_and_its_seed() {
+        let bytes = demo();
+        let noisy = Remix { a: Matrix3::identity(), noise_counts: 3.0, seed: 7 };
+        let (out, _) = noisy.capture("demo.cap", &bytes).expect("clean");
+        assert!(out == noisy.capture("demo.cap", &bytes).expect("clean").0, "the same seed, the same draw");
+        assert!(out != noisy.capture("other.cap", &bytes).expect("clean").0, "another name, another draw");
+        let (mut sum_sq, mut n) = (0.0, 0.0);
+        for ((_, m0), (_, m1)) in frames(&bytes).iter().zip(&frames(&out)) {
+            if let (RigMsg::Sample(s0), RigMsg::Sample(s1)) = (m0, m1) {
+                for (a, b) in s0.rate_counts.iter().zip(&s1.rate_counts) {
+                    sum_sq += (f64::from(*b) - f64::from(*a)).powi(2);
+                    n += 1.0;
+                }
+            }
+        }
+        // Rounded N(0, 3²) has variance 9 + 1/12; over n ≈ 10⁵ its estimate is within 1 %.
+        let var = sum_sq / n;
+        assert!((var - 9.083).abs() < 0.03 * 9.083, "variance {var} over {n} counts");
+    }
+
+    /// A capture with damaged bytes is refused, saying where.
+    #[test]
+    fn a_damaged_capture_is_refused() {
+        let mut bytes = demo();
+        bytes[1000] ^= 0x5a;
+        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1 };
+        let err = id.capture("demo.cap", &bytes).expect_err("damaged");
+        assert!(err.starts_with("demo.cap: ") && err.contains("bytes at offset"), "{err}");
+    }
+
+    /// The truth moves exactly: M' = A·M, v_off' = A·v_off, k' the rows' norms, S' unit rows.
+    #[test]
+    fn the_truth_is_the_mixed_sensors() {
+        let truth = json!({
+            "sensor": {"M": [[57.0, 0.5, -0.1], [0.3, 56.0, 0.8], [-0.4, -0.7, 58.0]], "v_off": [10.0, -20.0, 5.0],
+                       "k": [0.0, 0.0, 0.0], "S": [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], "fs_dps": 500.0},
+            "units": "counts"
+        });
+        let a = Matrix3::new(1.02, 0.01, 0.0, -0.005, 0.99, 0.002, 0.0, 0.0, 1.0);
+        let got = Remix { a, noise_counts: 3.0, seed: 4 }.truth(&truth).expect("a truth");
+        let m = Matrix3::new(57.0, 0.5, -0.1, 0.3, 56.0, 0.8, -0.4, -0.7, 58.0);
+        let want = a * m;
+        let m2 = m_true(&got).expect("M");
+        for i in 0..3 {
+            let k = got["sensor"]["k"][i].as_f64().expect("k");
+            assert!((k - want.row(i).norm()).abs() < 1e-12, "k {i}");
+            let s: Vec<f64> = (0..3).map(|j| got["sensor"]["S"][i][j].as_f64().expect("S")).collect();
+            for j in 0..3 {
+                assert!((m2[i][j] - want[(i, j)]).abs() < 1e-12, "M {i} {j}");
+                assert!((s[j] * k - want[(i, j)]).abs() < 1e-12, "S {i} {j}");
+            }
+        }
+        let v = a * Vector3::new(10.0, -20.0, 5.0);
+        assert_eq!(got["sensor"]["v_off"], json!([v[0], v[1], v[2]]));
+        assert_eq!((got["sensor"]["fs_dps"].clone(), got["units"].clone()), (json!(500.0), json!("counts")));
+        assert_eq!(got["remix"]["seed"], json!(4));
+        assert!(Remix::drawn(1) == Remix::drawn(1) && Remix::drawn(1) != Remix::drawn(2));
+    }
+}

@@ -1,7 +1,8 @@
 //! What the benchmarks share: where their data lives, and running one child process with the
 //! kernel's accounting of that child alone (`wait4`), so neither the bench itself nor anything
 //! else on the machine counts in its CPU time and peak memory. [`replay`] simulates, calibrates
-//! and reads back (the accuracy benches); [`trust`] is the trust matrix's arithmetic. Their
+//! and reads back (the accuracy benches); [`trust`] is the trust matrix's arithmetic; [`remix`]
+//! makes another sensor of an independent capture (`validation_remix`). Their
 //! unit tests run in the `bench_measured` test target (`cargo test -p host --test
 //! bench_measured`): a `harness = false` bench runs its `main`, never its `#[test]`s.
 
@@ -10,6 +11,8 @@ use std::process::Command;
 use std::time::Instant;
 
 // Each bench uses its own part of these (`throughput` none).
+#[allow(dead_code)]
+pub mod remix;
 #[allow(dead_code)]
 pub mod replay;
 #[allow(dead_code)]

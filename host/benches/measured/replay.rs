@@ -103,7 +103,11 @@ pub fn simulated_with(dir: &Path, plan: &str, seed: u64, options: &[String]) -> 
 /// there, and waits for it with `wait4`, which hands back that child's own CPU time. No effect
 /// is declared and no latitude given: the loop has to find everything from the data.
 pub fn calibrate(cap: &Path) -> Result<Usage, String> {
-    let dir = cap.parent().expect("the capture is in its case directory");
+    calibrate_files(cap.parent().expect("the capture is in its case directory"), &[cap.to_path_buf()])
+}
+
+/// [`calibrate`] of the captures `caps` together, into `dir`.
+pub fn calibrate_files(dir: &Path, caps: &[PathBuf]) -> Result<Usage, String> {
     let out = dir.join("out");
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).map_err(|e| format!("create {}: {e}", out.display()))?;
@@ -113,7 +117,7 @@ pub fn calibrate(cap: &Path) -> Result<Usage, String> {
     let mut cmd = Command::new(HOST);
     cmd.arg("calibrate")
         .arg("--replay")
-        .arg(cap)
+        .args(caps)
         .arg("--out-dir")
         .arg(&out)
         .args(["--db", &db])

@@ -1,0 +1,137 @@
+//! Another sensor seen through a capture we did not write (`validation_remix` bench): every
+//! gyro sample's counts mixed by a 3 × 3 matrix A and given fresh noise, every other frame as it
+//! was. Whatever the independent model put into the counts (M·ω, the offsets, their drift, Earth,
+//! the gears' and the motor's rate errors as the axes see them, the noise) is then A times it, so
+//! the capture is that of a sensor whose M is A·M and whose offsets are A·v_off, on the same rig
+//! in the same runs: the truth moves exactly, and the tool sees a sensor, a noise draw and
+//! cross-axis terms it was never shown. What does not move exactly: a part of the counts that is
+//! not the same linear map of ω on every axis, such as a filter or delay that differs between the
+//! axes (which A then mixes), and the rounding to counts (0.29 counts rms, under the 3 of fresh
+//! noise).
+
+use nalgebra::{Matrix3, Vector3};
+use protocol::decoder::{Event, StreamDecoder};
+use protocol::frame::{encode_frame, MAX_FRAME_LEN};
+use protocol::msg::RigMsg;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde_json::{json, Value};
+
+/// A remix: the matrix A the counts go through, and the σ of the noise added to each, counts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Remix {
+    pub a: Matrix3<f64>,
+    pub noise_counts: f64,
+    /// Seeds the noise (each capture's from it and the capture's name).
+    pub seed: u64,
+}
+
+/// Spread of A's diagonal about 1: ±3 %, the L3G4200D's sensitivity tolerance at 25 °C
+/// (datasheet Table 4, "sensitivity change vs. temperature" aside).
+pub const SCALE_SPREAD: f64 = 0.03;
+
+/// Spread of A's off-diagonal terms, rad: ±1°, the cross-axis sensitivity a MEMS gyro's
+/// datasheet allows (±2 % ≈ 1.1°; engineering judgement, none in the L3G4200D's).
+pub const CROSS_SPREAD_RAD: f64 = 0.0175;
+
+/// Noise added to each count, σ: 3 counts, a quarter of the independent captures' own noise
+/// (12.4 counts rms, 0.22 °/s, on `realistic-2speed-s101`): a fresh draw on top of theirs that
+/// raises the floor by 3 %.
+pub const NOISE_COUNTS: f64 = 3.0;
+
+impl Remix {
+    /// The remix of seed `seed`: A's diagonal uniform within 1 ± [`SCALE_SPREAD`], its other
+    /// terms within ±[`CROSS_SPREAD_RAD`], [`NOISE_COUNTS`] of noise.
+    pub fn drawn(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let a = Matrix3::from_fn(|i, j| {
+            let u: f64 = rng.random_range(-1.0..=1.0);
+            if i == j {
+                1.0 + SCALE_SPREAD * u
+            } else {
+                CROSS_SPREAD_RAD * u
+            }
+        });
+        Self { a, noise_counts: NOISE_COUNTS, seed }
+    }
+
+    /// The capture `bytes` (named `name`, which seeds its noise with [`Remix::seed`]) with every
+    /// sample's counts remixed, rounded and held to the i16 range, and how many counts that held.
+    /// Every other frame is re-encoded as it was, with its sequence number. Bytes that were not a
+    /// valid frame are an error: a remix of a damaged capture would not be one of the sensor.
+    pub fn capture(&self, name: &str, bytes: &[u8]) -> Result<(Vec<u8>, u64), String> {
+        let name_hash =
+            name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ name_hash);
+        let noise = Normal::new(0.0, self.noise_counts).map_err(|e| format!("noise σ {}: {e}", self.noise_counts))?;
+        let (mut out, mut clipped, mut bad) = (Vec::with_capacity(bytes.len() + bytes.len() / 8), 0u64, None);
+        let mut frame = [0u8; MAX_FRAME_LEN + 1];
+        let mut decoder = StreamDecoder::new();
+        decoder.feed::<RigMsg>(bytes, |ev| match ev {
+            Event::Frame { seq, msg, .. } => {
+                let msg = match msg {
+                    RigMsg::Sample(mut s) => {
+                        let x = self.a * Vector3::from(s.rate_counts.map(f64::from));
+                        for (c, v) in s.rate_counts.iter_mut().zip(x.iter()) {
+                            let r = (v + noise.sample(&mut rng)).round();
+                            let held = r.clamp(f64::from(i16::MIN), f64::from(i16::MAX));
+                            clipped += u64::from(held != r);
+                            *c = held as i16;
+                        }
+                        RigMsg::Sample(s)
+                    }
+                    other => other,
+                };
+                match encode_frame(seq, &msg, &mut frame) {
+                    Ok(n) => out.extend_from_slice(&frame[..n]),
+                    Err(e) => {
+                        bad.get_or_insert(format!("re-encoding frame {seq}: {e:?}"));
+                    }
+                }
+            }
+            Event::Error { offset, len, error } => {
+                bad.get_or_insert(format!("{len} bytes at offset {offset} are no frame: {error:?}"));
+            }
+        });
+        if let Some(Event::Error { offset, len, .. }) = decoder.finish::<RigMsg>() {
+            bad.get_or_insert(format!("{len} bytes at offset {offset} end without a delimiter"));
+        }
+        bad.map_or(Ok((out, clipped)), |why| Err(format!("{name}: {why}")))
+    }
+
+    /// The truth (`truth.json` of `../shared/validation`: `sensor.M`, `k`, `S`, `v_off`) of the
+    /// remixed sensor: M' = A·M, v_off' = A·v_off, k' the rows' norms, S' the rows over them.
+    /// The rest is kept, with the remix beside it (`remix.a`, `remix.noise_counts`, `remix.seed`).
+    pub fn truth(&self, truth: &Value) -> Result<Value, String> {
+        let s = &truth["sensor"];
+        let m = Matrix3::from_fn(|i, j| s["M"][i][j].as_f64().unwrap_or(f64::NAN));
+        let v = Vector3::from_fn(|i, _| s["v_off"][i].as_f64().unwrap_or(f64::NAN));
+        if m.iter().chain(v.iter()).any(|x| !x.is_finite()) {
+            return Err("truth: sensor.M is not 3 × 3 numbers or sensor.v_off not 3".into());
+        }
+        let (m2, v2) = (self.a * m, self.a * v);
+        let rows: Vec<Vec<f64>> = m2.row_iter().map(|r| r.iter().copied().collect()).collect();
+        let k: Vec<f64> = m2.row_iter().map(|r| r.norm()).collect();
+        let dirs: Vec<Vec<f64>> = m2.row_iter().map(|r| r.normalize().iter().copied().collect()).collect();
+        let mut out = truth.clone();
+        out["sensor"]["M"] = json!(rows);
+        out["sensor"]["k"] = json!(k);
+        out["sensor"]["S"] = json!(dirs);
+        out["sensor"]["v_off"] = json!(v2.iter().collect::<Vec<_>>());
+        let a: Vec<Vec<f64>> = self.a.row_iter().map(|r| r.iter().copied().collect()).collect();
+        out["remix"] = json!({ "a": a, "noise_counts": self.noise_counts, "seed": self.seed });
+        Ok(out)
+    }
+}
+
+/// M of a truth file, `sensor.M`.
+pub fn m_true(truth: &Value) -> Result<[[f64; 3]; 3], String> {
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = truth["sensor"]["M"][i][j].as_f64().ok_or("truth: sensor.M is not 3 × 3 numbers")?;
+        }
+    }
+    Ok(m)
+}
