@@ -29,7 +29,7 @@ impl Behaviour for FilterGain {
     }
 
     fn identified_by(&self) -> &'static str {
-        "runs at two speeds: the loss grows with the square of the frequency, a sensitivity does not"
+        "runs at three signed speeds (--rates-dps 180,90,-180): its loss grows with θ2'³, M's share with θ2', and Earth's vertical rate and gravity's not at all; two speeds in one direction do only with the lab's latitude given (--latitude-deg) and no g-sensitivity fitted"
     }
 
     fn kind(&self) -> Kind {
