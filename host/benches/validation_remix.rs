@@ -17,8 +17,8 @@
 //! `REMIX_SEEDS=N`, `REMIX_FOLDERS=clean-s101,gsens-1speed-s101` (default: every folder with a
 //! `truth.json`). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
 //!
-//! `cargo bench -p host --bench validation_remix --profile release`: 6 folders × 5 seeds, about
-//! 4 minutes of CPU on 2 cores.
+//! `cargo bench -p host --bench validation_remix --profile release`: 6 folders × 5 seeds, 30
+//! calibrations, about 30 s of their CPU (2.5 s at most each, `realistic-2speed-s101`).
 
 mod measured;
 use measured::remix::{m_true, Remix};
