@@ -29,13 +29,7 @@ struct Case {
 
 fn realistic() -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/validation/realistic-2speed-s101");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| e.expect("a directory entry").path())
-        .filter(|p| p.extension().is_some_and(|x| x == "cap"))
-        .collect();
-    files.sort();
-    files
+    replay::captures_in(&dir).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn cases(only: &[String]) -> Vec<Case> {

@@ -175,14 +175,7 @@ fn main() {
     }
     if wanted("realistic") {
         let dir = realistic_dir();
-        let mut caps: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .map(|d| {
-                d.filter_map(|e| e.ok().map(|e| e.path()))
-                    .filter(|p| p.extension().is_some_and(|x| x == "cap"))
-                    .collect()
-            })
-            .unwrap_or_default();
-        caps.sort();
+        let caps = measured::replay::captures_in(&dir).unwrap_or_default();
         if caps.is_empty() {
             println!("realistic: SKIPPED, no captures in {} (the shared validation folder is absent)", dir.display());
         } else {

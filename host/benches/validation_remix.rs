@@ -35,7 +35,7 @@ fn remixed(folder: &Path, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> 
     let text = serde_json::to_string_pretty(&remix.truth(&truth)?).expect("a JSON value");
     std::fs::write(dir.join("truth.json"), text).map_err(|e| format!("write truth.json: {e}"))?;
     let mut caps = Vec::new();
-    for cap in captures(folder)? {
+    for cap in replay::captures_in(folder)? {
         let file = cap.file_name().and_then(|n| n.to_str()).unwrap_or("x.cap").to_string();
         let out = dir.join(&file);
         if !out.exists() {
@@ -51,18 +51,6 @@ fn remixed(folder: &Path, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> 
         caps.push(out);
     }
     Ok((dir, caps))
-}
-
-/// A folder's captures, in name order.
-fn captures(folder: &Path) -> Result<Vec<PathBuf>, String> {
-    let mut caps: Vec<PathBuf> = std::fs::read_dir(folder)
-        .map_err(|e| format!("{}: {e}", folder.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "cap"))
-        .collect();
-    caps.sort();
-    Ok(caps)
 }
 
 /// One seed's outcome, and its line.

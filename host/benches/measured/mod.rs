@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-// Each bench uses its own part of these (`throughput` none).
+// Each bench uses its own part of these (`throughput` only `replay::captures_in`).
 #[allow(dead_code)]
 pub mod remix;
 #[allow(dead_code)]

@@ -152,6 +152,18 @@ pub fn run_parallel<J: Sync, O: Send>(
     results.into_iter().map(|o| o.expect("every job ran")).collect()
 }
 
+/// The captures (`*.cap`) in `dir`, in name order.
+pub fn captures_in(dir: &Path) -> Result<Vec<PathBuf>, String> {
+    let mut caps: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "cap"))
+        .collect();
+    caps.sort();
+    Ok(caps)
+}
+
 pub fn read_json(path: &Path) -> Result<Value, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("read {}: {e}", path.display()))?;
     serde_json::from_str(&text).map_err(|e| format!("parse {}: {e}", path.display()))
