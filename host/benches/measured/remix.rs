@@ -27,8 +27,9 @@ pub struct Remix {
     pub seed: u64,
 }
 
-/// Spread of A's diagonal about 1: ±3 %, the L3G4200D's sensitivity tolerance at 25 °C
-/// (datasheet Table 4, "sensitivity change vs. temperature" aside).
+/// Spread of A's diagonal about 1: ±3 %, of the order of a MEMS gyro's part-to-part sensitivity
+/// spread (engineering judgement: the L3G4200D's datasheet, Table 4, gives the typical value and
+/// its ±2 % change over temperature, no initial tolerance).
 pub const SCALE_SPREAD: f64 = 0.03;
 
 /// Spread of A's off-diagonal terms, rad: ±1°, the cross-axis sensitivity a MEMS gyro's
