@@ -199,7 +199,7 @@ mod tests {
     #[test]
     fn few_samples_between_gaps_are_refused_not_certified() {
         let runs: Vec<Run> = two_pose_runs(3).into_iter().map(lossy).collect();
-        let expected = "run 1 (pose 1, +180.0 °/s): too few usable samples once the gaps are cut out (74 of 14831 at steady speed lie 50 ms clear of every gap), need at least 1600 (one sensor-table revolution)";
+        let expected = "run 1 (pose 1, +180.0 °/s): too few usable samples once the gaps are cut out (74 of 14823 at steady speed lie 50 ms clear of every gap), need at least 1600 (one sensor-table revolution)";
         match close_loop(&runs, &LoopOptions::default(), None) {
             Ok(r) => {
                 let m: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| typical_sensor().0[(i, j)]));

@@ -5,13 +5,15 @@
 //! shield plate blocking the photo-interrupter) is centred on θ2 = 0, so its centre is the
 //! midpoint of its rising and falling edge, whichever way the table turns. The pulse centres of a
 //! run lie on a line `centre_k = ref + k·period`; fitting it gives the reference and, pooled over
-//! runs, the period, i.e. the actual gear ratio. θ1' is the slope of a local straight-line fit of
-//! encoder count against sample time, θ2' = ratio·θ1'.
+//! runs, the period, i.e. the actual gear ratio. θ1' is the slope of local straight-line fits of
+//! encoder count against sample time, corrected to be exact for cubics ([`super::encoder_rate`]),
+//! θ2' = ratio·θ1'.
 
+use super::encoder_rate::{for_each_rate_cps, noise_gain_per_s, slope_at_cps};
 use crate::calib::result::error::CalError;
 use crate::calib::result::estimate::Estimate;
 use crate::calib::result::gear::{GearEstimate, IndexStats};
-use crate::capture::{Run, RunSample, RunTemperature, Samples};
+use crate::capture::{Run, RunTemperature, Samples};
 use crate::geometry::{omega2, Pose};
 use nalgebra::Matrix3;
 use protocol::{sample_status, Edge};
@@ -38,10 +40,11 @@ const MEDIAN_SUBSAMPLE: usize = 8192;
 /// Settings of the kinematics reconstruction.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct KinOptions {
-    /// Span of the local straight-line fit that gives θ1', s. 20 ms is 17 samples at 800 Hz: the
-    /// encoder's quantisation then puts 0.013 °/s rms on θ1' (324 000 counts/rev), 30× below the
-    /// L3G4200D's ≈0.4 °/s rms noise (0.03 °/s/√Hz, datasheet Table 4, over its 110 Hz
-    /// bandwidth), while speed changes slower than ≈20 Hz pass unattenuated.
+    /// Span of the local straight-line fits that give θ1', s (corrected for their third moment,
+    /// [`super::encoder_rate`]). 20 ms is 17 samples at 800 Hz: the encoder's quantisation then
+    /// puts 0.016 °/s rms on θ1' (324 000 counts/rev), 25× below the L3G4200D's ≈0.4 °/s rms
+    /// noise (0.03 °/s/√Hz, datasheet Table 4, over its 110 Hz bandwidth), while a speed ripple
+    /// loses 1.1e-3 of itself at 8 Hz and 1.6e-2 at 16 Hz.
     pub rate_window_s: f64,
     /// Samples whose θ1' is further than this fraction from the run's median speed are spin-up,
     /// stop or a stall, and excluded. The linear model holds at any speed; the cut removes the
@@ -475,75 +478,6 @@ fn line_fit(points: &[(f64, f64)], fallback_slope: f64) -> (f64, f64) {
     (cbar - p * kbar, p)
 }
 
-/// Local straight-line slopes of encoder count against time, counts/s, over windows of 2h+1
-/// consecutive samples: `f(centre index, centre sample, slope)` for every sample with a full
-/// window. Sliding sums of offsets from the run's first sample, in i128 so that they stay exact
-/// for any run length: O(1) per sample, the samples read in one pass and held while in the
-/// window. The centred combinations n·Σte − Σt·Σe and n·Σtt − (Σt)² are those of the window
-/// alone (≲ 1e13 for any sane window), so they pass through i64 on their way to f64.
-fn for_each_slope_cps(samples: &(impl Samples + ?Sized), h: usize, mut f: impl FnMut(usize, &RunSample, f64)) {
-    let w = 2 * h + 1;
-    let Some(first) = samples.iter_from(0).next() else {
-        return;
-    };
-    if samples.len() < w {
-        return;
-    }
-    let (t0, e0) = (first.t_us, first.encoder);
-    let te = |s: &RunSample| (i128::from(s.t_us - t0), i128::from(s.encoder - e0));
-    let (mut st, mut stt, mut se, mut ste) = (0i128, 0i128, 0i128, 0i128);
-    // The window's samples, each unpacked once as it enters (a cursor each for the entering,
-    // leaving and centre samples unpacked every sample three times, 2 % of a 1-h replay).
-    // `window[oldest]` is its first sample, the others follow it round the ring.
-    let mut entering = samples.iter_from(0);
-    let mut window: Vec<RunSample> = Vec::with_capacity(w);
-    for s in entering.by_ref().take(w) {
-        let (t, e) = te(&s);
-        st += t;
-        stt += t * t;
-        se += e;
-        ste += t * e;
-        window.push(s);
-    }
-    let n = w as i128;
-    let mut oldest = 0;
-    for j in 0..=samples.len() - w {
-        if j > 0 {
-            let Some(new) = entering.next() else {
-                unreachable!("the window stays inside the samples");
-            };
-            let (to, eo) = te(&window[oldest]);
-            let (ti, ei) = te(&new);
-            st += ti - to;
-            stt += ti * ti - to * to;
-            se += ei - eo;
-            ste += ti * ei - to * eo;
-            window[oldest] = new;
-            oldest = if oldest + 1 == w { 0 } else { oldest + 1 };
-        }
-        let centre = &window[if oldest + h < w { oldest + h } else { oldest + h - w }];
-        let num = (n * ste - st * se) as i64 as f64;
-        let den = (n * stt - st * st) as i64 as f64;
-        f(j + h, centre, num / den * 1e6);
-    }
-}
-
-/// The same slope at one centre `i` (h ≤ i < len − h), directly: offsets from sample `i` are
-/// small enough for i64.
-fn slope_at_cps(samples: &(impl Samples + ?Sized), i: usize, h: usize) -> f64 {
-    let c = samples.iter_from(i).next().expect("the centre is a sample");
-    let (mut st, mut stt, mut se, mut ste) = (0i64, 0i64, 0i64, 0i64);
-    for s in samples.iter_from(i - h).take(2 * h + 1) {
-        let (t, e) = (s.t_us - c.t_us, s.encoder - c.encoder);
-        st += t;
-        stt += t * t;
-        se += e;
-        ste += t * e;
-    }
-    let n = (2 * h + 1) as i64;
-    (n * ste - st * se) as f64 / (n * stt - st * st) as f64 * 1e6
-}
-
 /// Median of at most ~`MEDIAN_SUBSAMPLE` evenly strided values of `f(0..len)`: a robust level
 /// needs no more.
 fn strided_median(len: usize, f: impl Fn(usize) -> f64) -> f64 {
@@ -692,29 +626,29 @@ fn sampled_run(run: &Run, s: &(impl Samples + ?Sized), cpr: f64, opts: &KinOptio
     let sample_rate_hz = 1.0 / dt_s;
     let h = ((opts.rate_window_s * sample_rate_hz / 2.0).round() as usize).max(1);
     let deg_per_count = 360.0 / cpr;
-    // Slope σ of a straight line through 2h+1 evenly spaced points: σ_q/√(Σ(t−t̄)²).
-    let stt = dt_s * dt_s * (h * (h + 1) * (2 * h + 1)) as f64 / 3.0;
-    let rate_quantisation_dps = UNIFORM_QUANTISATION_SIGMA * deg_per_count / stt.sqrt();
-    let windows = total.saturating_sub(2 * h);
+    let rate_quantisation_dps = UNIFORM_QUANTISATION_SIGMA * deg_per_count * noise_gain_per_s(h, dt_s);
+    // A rate needs the straight lines centred on it and h samples either side.
+    let windows = total.saturating_sub(4 * h);
 
     // The steady speed is the median of the rates near the commanded one, so that a short run
     // dominated by its ramps still finds its plateau; with none near, the median of all.
     let commanded = run.commanded_rate_dps();
     let near_band = opts.steady_tolerance * commanded.abs();
     let rate_at = |j: usize| slope_at_cps(s, j + h, h) * deg_per_count;
-    let mut near: Vec<f64> = (0..windows)
-        .step_by(windows.div_ceil(MEDIAN_SUBSAMPLE).max(1))
+    let lines = total.saturating_sub(2 * h);
+    let mut near: Vec<f64> = (0..lines)
+        .step_by(lines.div_ceil(MEDIAN_SUBSAMPLE).max(1))
         .map(rate_at)
         .filter(|r| (r - commanded).abs() <= near_band)
         .collect();
-    let steady_rate_dps = if near.is_empty() { strided_median(windows, rate_at) } else { median(&mut near) };
+    let steady_rate_dps = if near.is_empty() { strided_median(lines, rate_at) } else { median(&mut near) };
     let tol = opts.steady_tolerance * steady_rate_dps.abs();
 
     // θ2's reference comes with the index, once every run is in (`run_kinematics`).
     let mut samples = KinSamples::new(0.0, 0.0, dt_s);
     samples.reserve(windows);
     let (mut unsteady, mut stale) = (0, 0);
-    for_each_slope_cps(s, h, |_, smp, slope_cps| {
+    for_each_rate_cps(s, h, dt_s, |_, smp, slope_cps| {
         let rate = slope_cps * deg_per_count;
         if smp.status & sample_status::STALE != 0 {
             stale += 1;

@@ -3,6 +3,7 @@
 //! (which pose, which signed speed, which of them share a parameter). Imports only
 //! [`super::result`].
 
+pub mod encoder_rate;
 pub mod kinematics;
 pub mod layout;
 pub mod runs;
