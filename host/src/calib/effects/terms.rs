@@ -292,6 +292,9 @@ pub struct Point {
     pub theta1_rate_rad_s: f64,
     /// θ1', °/s.
     pub theta1_rate_dps: f64,
+    /// θ1'' (the motor's speed ripple, as the encoder's rates give it), °/s²; NaN in a plain
+    /// point.
+    pub theta1_accel_dps2: f64,
     /// The run's index in the data.
     pub run: usize,
     /// The sample's time on its capture's clock, s.
