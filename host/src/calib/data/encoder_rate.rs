@@ -4,8 +4,9 @@
 //! speed, but over its span T it averages a ripple of frequency f by 1 − (πfT)²/10: with
 //! T = 20 ms, 2.8 % of a ripple at 8 Hz (the 16-pole gears' pole pass at 180 °/s) and 11 % at
 //! 16 Hz. θ1' multiplies every axis's signal, so a ripple at n× θ2 that θ1' misses leaves lines at
-//! (n ± 1)× in the residual, which no effect explains (the trust bench's drawn rig at 3×: 0.019
-//! °/s at 15× and 17×, 11σ, with a 1.8 % pole-pass ripple; `docs/trust.md`).
+//! (n ± 1)× in the residual, which no effect explains: the trust bench's drawn rig at 3× has the
+//! motor's speed ripple at 0.59 % at 16×, of which θ1' missed 0.03 °/s, and was flagged by
+//! lines of 0.015-0.019 °/s (11σ) at 15× and 17× (`docs/trust.md`).
 //!
 //! The straight line's bias is its window's third moment: on θ1 = b·u + d·u³ the slope is
 //! b + d·Σu⁴/Σu², i.e. θ1' + θ1'''·κ with κ = Σu⁴/(6Σu²) = Δt²(3h² + 3h − 1)/30 for even spacing
