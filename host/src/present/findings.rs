@@ -107,11 +107,11 @@ pub fn notes(d: &Diagnostics) -> Vec<String> {
     let rippling = d.runs.iter().any(|r| r.axes.iter().any(|a| a.ripple.significant));
     if rippling {
         out.push(format!(
-            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most, and the residual (table harmonics removed) follows it at {worst:.1}σ on {at}: the kinematics may not track the table, or the rate estimate's own encoder noise echoes in the residual."
+            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most, and the residual (table harmonics removed) follows it {worst:.1}σ beyond the echo of the rate estimate's own noise on {at}: the kinematics may not track the table."
         ));
     } else {
         out.push(format!(
-            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most; the residual does not follow it (largest slope {worst:.1}σ), so the kinematics track it."
+            "Speed ripple check: the encoder-derived speed deviates {dev:.3} % rms from steady at most; the residual does not follow it beyond the echo of the rate estimate's own noise (largest {worst:.1}σ), so the kinematics track it."
         ));
     }
     out
