@@ -35,12 +35,16 @@ const Z_2D: f64 = 3.44;
 const SHORT_S: f64 = 40.0;
 
 /// Simulates pose 1 then pose 2, each at every rate in `rates_dps`, with `effects` switched on.
-fn capture_with(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str], fs: FullScale) -> (Vec<Run>, Truth) {
-    let runs = Pose::ALL
+/// Both poses, each at `rates_dps` in turn, `duration_s` per run.
+fn plan(rates_dps: &[f64], duration_s: f64) -> Vec<RunSpec> {
+    Pose::ALL
         .iter()
         .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunSpec { pose, rate_dps, duration_s }))
-        .collect();
-    let mut cfg = SimConfig::with_runs(seed, runs);
+        .collect()
+}
+
+fn capture_with(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str], fs: FullScale) -> (Vec<Run>, Truth) {
+    let mut cfg = SimConfig::with_runs(seed, plan(rates_dps, duration_s));
     cfg.gyro.full_scale = fs;
     for e in effects {
         cfg.effects.enable(e).expect("known effect");
@@ -1005,10 +1009,7 @@ fn one_speed_carries_an_inseparable_g_sensitivity_in_sigma() {
 /// 0.008° (measured over seeds 1-7: 0.0003-0.0028° with it; 0.011° on seeds 2, 3 and 6 without).
 #[test]
 fn the_transmission_error_at_the_index_pulse_does_not_turn_the_axes() {
-    let runs = Pose::ALL
-        .iter()
-        .flat_map(|&pose| [180.0, 90.0].map(move |rate_dps| RunSpec { pose, rate_dps, duration_s: 30.0 }))
-        .collect();
+    let runs = plan(&[180.0, 90.0], 30.0);
     let mut cfg = SimConfig::with_runs(2, runs);
     cfg.index_plate_width_deg = 12.0;
     cfg.effects.enable("gear_transmission").expect("known effect");
@@ -1041,10 +1042,7 @@ fn the_transmission_error_at_the_index_pulse_does_not_turn_the_axes() {
 #[test]
 fn undeclared_temperature_dependent_sensitivity_is_found_named_and_corrected() {
     let truth_ppm_per_c = [120.0, -90.0, 60.0];
-    let runs = Pose::ALL
-        .iter()
-        .flat_map(|&pose| [180.0, 90.0, -180.0].map(move |rate_dps| RunSpec { pose, rate_dps, duration_s: SHORT_S }))
-        .collect();
+    let runs = plan(&[180.0, 90.0, -180.0], SHORT_S);
     let mut cfg = SimConfig::with_runs(1, runs);
     cfg.effects.enable("offset_drift").expect("known effect");
     cfg.effects.temperature_dependence = Some(crate::sim::thermal::TemperatureDependence {
@@ -1251,11 +1249,7 @@ fn drawn_rig_loop(seed: u64, rates_dps: &[f64]) -> (LoopReport, Truth) {
 /// [`drawn_rig_loop`] with runs of `duration_s` and every size range `scale` times
 /// (`--drawn-rig=SCALE`).
 fn grown_rig_loop(seed: u64, rates_dps: &[f64], duration_s: f64, scale: f64) -> (LoopReport, Truth) {
-    let runs = Pose::ALL
-        .iter()
-        .flat_map(|&pose| rates_dps.iter().map(move |&rate_dps| RunSpec { pose, rate_dps, duration_s }))
-        .collect();
-    let mut cfg = SimConfig::with_runs(seed, runs);
+    let mut cfg = SimConfig::with_runs(seed, plan(rates_dps, duration_s));
     cfg.effects = crate::sim::Effects::drawn_scaled(&mut crate::sim::effects_rng(seed), scale);
     let out = simulate(&cfg).unwrap();
     let cap = decode(&out.bytes);
@@ -1328,10 +1322,7 @@ fn a_filter_gain_the_rates_cannot_tell_from_m_and_gravity_is_not_tried() {
 #[test]
 fn a_delay_between_the_axes_delays_the_motor_speed_ripple_too() {
     use crate::sim::effects::{AxisDelay, RippleHarmonic, SpeedRipple};
-    let runs = Pose::ALL
-        .iter()
-        .flat_map(|&pose| [180.0, -90.0].map(move |rate_dps| RunSpec { pose, rate_dps, duration_s: 20.0 }))
-        .collect();
+    let runs = plan(&[180.0, -90.0], 20.0);
     let mut cfg = SimConfig::with_runs(4, runs);
     cfg.noise_dps_per_sqrt_hz = 0.0;
     let still = RippleHarmonic { order: 1, amplitude: 0.0, phase_rad: 0.0 };
@@ -1366,10 +1357,7 @@ fn a_delay_between_the_axes_delays_the_motor_speed_ripple_too() {
 #[test]
 fn the_motor_ripple_at_the_pole_pass_is_in_the_rates_the_model_uses() {
     use crate::sim::effects::{RippleHarmonic, SpeedRipple};
-    let runs = Pose::ALL
-        .iter()
-        .flat_map(|&pose| [180.0, 90.0].map(move |rate_dps| RunSpec { pose, rate_dps, duration_s: 30.0 }))
-        .collect();
+    let runs = plan(&[180.0, 90.0], 30.0);
     let mut cfg = SimConfig::with_runs(6, runs);
     cfg.effects.speed_ripple = Some(SpeedRipple {
         harmonics: [
