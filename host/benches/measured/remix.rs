@@ -105,11 +105,11 @@ impl Remix {
     /// remixed sensor: M' = A·M, v_off' = A·v_off, k' the rows' norms, S' the rows over them.
     /// The rest is kept, with the remix beside it (`remix.a`, `remix.noise_counts`, `remix.seed`).
     pub fn truth(&self, truth: &Value) -> Result<Value, String> {
-        let s = &truth["sensor"];
-        let m = Matrix3::from_fn(|i, j| s["M"][i][j].as_f64().unwrap_or(f64::NAN));
-        let v = Vector3::from_fn(|i, _| s["v_off"][i].as_f64().unwrap_or(f64::NAN));
-        if m.iter().chain(v.iter()).any(|x| !x.is_finite()) {
-            return Err("truth: sensor.M is not 3 × 3 numbers or sensor.v_off not 3".into());
+        let rows = m_true(truth)?;
+        let m = Matrix3::from_fn(|i, j| rows[i][j]);
+        let v = Vector3::from_fn(|i, _| truth["sensor"]["v_off"][i].as_f64().unwrap_or(f64::NAN));
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err("truth: sensor.v_off is not 3 numbers".into());
         }
         let (m2, v2) = (self.a * m, self.a * v);
         let rows: Vec<Vec<f64>> = m2.row_iter().map(|r| r.iter().copied().collect()).collect();
