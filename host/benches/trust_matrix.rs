@@ -118,6 +118,7 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "bias_random_walk" => e.bias_random_walk.map(|b| b.k_dps_per_sqrt_s),
         "axis_delay" => e.axis_delay.map(|d| d.delay_ms[1]),
         "rig_clock" => e.rig_clock.map(|c| c.error_ppm),
+        "encoder_eccentricity" => e.encoder_eccentricity.map(|c| c.amplitude_deg),
         _ => None,
     }
 }

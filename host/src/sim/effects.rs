@@ -45,6 +45,9 @@ pub struct Effects {
     /// The rig's time base (the MCU's crystal) off its nominal frequency.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig_clock: Option<RigClock>,
+    /// The base encoder's scale off its shaft's axis: its reading errs once a turn.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder_eccentricity: Option<EncoderEccentricity>,
     /// The sensor package turned on its mount by the load of its own rotation (no model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mount_compliance: Option<MountCompliance>,
@@ -373,6 +376,34 @@ impl Default for RigClock {
     }
 }
 
+/// Physical source: an encoder's scale (disc or ring) mounted e off its shaft's axis reads the
+/// angle with an error of (e/r)·sin(θ1 + φ) at scale radius r, the error a single read head
+/// cannot see and that dual-head encoders exist to cancel. Default 0.01° (36 arcsec): 3.5 µm
+/// off a 20-mm radius, a careful mount (engineering judgement; the Canon R-ISO's own accuracy,
+/// a few arcsec, is the scale's alone). The reading errs, not the table: the tables turn as
+/// the motor drives them.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EncoderEccentricity {
+    /// Amplitude of the reading's error, degrees.
+    pub amplitude_deg: f64,
+    /// Its phase against θ1 = 0, rad.
+    pub phase_rad: f64,
+}
+
+impl Default for EncoderEccentricity {
+    fn default() -> Self {
+        Self { amplitude_deg: 0.01, phase_rad: 0.3 }
+    }
+}
+
+impl EncoderEccentricity {
+    /// The angle the encoder reads at the base's true `theta1_deg`, degrees.
+    pub fn read_deg(&self, theta1_deg: f64) -> f64 {
+        theta1_deg + self.amplitude_deg * (theta1_deg.to_radians() + self.phase_rad).sin()
+    }
+}
+
 /// Out-of-catalogue structure for "unexplained residual" tests: a rate of
 /// `amplitude·sin(order·θ2 + phase)` added to one axis, as a sensor-table wobble or a magnetic
 /// disturbance from the gears might produce. No calibration model explains it.
@@ -460,7 +491,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 17] = [
+    pub const NAMES: [(&'static str, &'static str); 18] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -478,6 +509,7 @@ impl Effects {
         ("bias_random_walk", "rate random walk of the offset, °/s/√s (default 0.002)"),
         ("axis_delay", "per-axis delay beyond the common one, y's in ms (default 0.1; x 0, z −y/2)"),
         ("rig_clock", "rig time base's frequency error, ppm (default 20)"),
+        ("encoder_eccentricity", "base encoder's reading error once a turn, degrees (default 0.01)"),
     ];
 
     /// True when no effect is on.
@@ -601,6 +633,11 @@ impl Effects {
             }
             "rig_clock" => {
                 self.rig_clock = Some(RigClock { error_ppm: value.unwrap_or(RigClock::default().error_ppm) })
+            }
+            "encoder_eccentricity" => {
+                let mut e = EncoderEccentricity::default();
+                e.amplitude_deg = value.unwrap_or(e.amplitude_deg);
+                self.encoder_eccentricity = Some(e);
             }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();

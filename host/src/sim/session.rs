@@ -202,7 +202,11 @@ impl Session {
                 chamber: cfg.chamber,
             },
             motor: Motor::new(cfg.effects.speed_ripple),
-            encoder: Encoder { counts_per_rev: ENCODER_COUNTS_PER_REV, start_counts: cfg.start_encoder },
+            encoder: Encoder {
+                counts_per_rev: ENCODER_COUNTS_PER_REV,
+                start_counts: cfg.start_encoder,
+                eccentricity: cfg.effects.encoder_eccentricity,
+            },
             plate: IndexPlate {
                 centre_rad: cfg.effects.index_offset_rad(),
                 width_rad: cfg.index_plate_width_deg.to_radians(),

@@ -21,6 +21,7 @@ mod drift_polynomial;
 mod drift_temperature;
 mod drift_warm_up;
 mod earth;
+mod encoder_eccentricity;
 mod filter_gain;
 mod g_sensitivity;
 mod gear_lag;
@@ -211,6 +212,8 @@ registry! {
     ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`rig_clock::RigClock`].
     RigClock => rig_clock::RigClock,
+    /// [`encoder_eccentricity::EncoderEccentricity`].
+    EncoderEccentricity => encoder_eccentricity::EncoderEccentricity,
     /// [`table_harmonic::TableHarmonic`] at this multiple of θ2.
     TableHarmonic(order: u32 in HARMONIC_ORDERS) => table_harmonic::TableHarmonic(order),
     /// [`earth::Earth`], all three components fitted.
@@ -313,7 +316,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 15 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 16 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();

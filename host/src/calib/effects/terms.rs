@@ -223,6 +223,8 @@ pub struct Shifts {
     pub fixture_rad: [f64; 3],
     /// (n, pose, a, b) of each ripple harmonic.
     pub ripple: Vec<(u32, Pose, f64, f64)>,
+    /// The base encoder's angle error at 1× of θ1, (a, b) of δ = a·sin θ1 − b·(cos θ1 − 1), rad.
+    pub encoder_rad: [f64; 2],
 }
 
 impl Shifts {
@@ -239,6 +241,7 @@ impl Shifts {
             tilt_sin_cos: 0.0f64.sin_cos(),
             fixture_rad: [0.0; 3],
             ripple: Vec::new(),
+            encoder_rad: [0.0; 2],
         }
     }
 }

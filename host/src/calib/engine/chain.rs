@@ -42,6 +42,18 @@ fn interpolate(s: &KinSamples, i: usize, delay_s: f64) -> (f64, f64) {
     )
 }
 
+/// θ2 and θ1' as the tables turned, from the encoder's (`theta2`, `rate1_dps`) and its angle
+/// error at 1× of θ1, δ = a·sin θ1 − b·(cos θ1 − 1) with θ1 = θ2/ratio
+/// ([`crate::calib::effects::terms::Shifts::encoder_rad`]): θ2 less ratio·δ, θ1' less θ1'·δ'.
+#[inline]
+fn encoder_corrected([a, b]: [f64; 2], ratio: f64, theta2: f64, rate1_dps: f64) -> (f64, f64) {
+    if a == 0.0 && b == 0.0 {
+        return (theta2, rate1_dps);
+    }
+    let (s, c) = (theta2 / ratio).sin_cos();
+    (theta2 - ratio * (a * s - b * (c - 1.0)), rate1_dps * (1.0 - (a * c + b * s)))
+}
+
 /// θ1'' at sample `i`, °/s²: the rates' central difference over the span of their own windows
 /// (`window` samples), so that it is as smooth as they are. Consecutive samples' rates differ by
 /// the encoder's quantisation through their weights' change: 7.5 °/s² rms over 1.25 ms at
@@ -382,7 +394,8 @@ impl<'a> Evaluator<'a> {
         let rk = &self.data.kin.runs[r];
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
-        let th = theta2 + sh.theta2_offset_rad;
+        let (th, rate1) = encoder_corrected(sh.encoder_rad, rk.gear_ratio, theta2 + sh.theta2_offset_rad, rate1);
+        let theta2 = th - sh.theta2_offset_rad;
         // The transmission error is periodic in the mesh angle, which moves with the table
         // against the index (1:1 gears): the index-referenced θ2, lagging by the gear lag. The
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
