@@ -1312,6 +1312,18 @@ fn a_filter_gain_the_rates_cannot_tell_from_m_and_gravity_is_not_tried() {
     );
 }
 
+/// The linear model fitted to a simulated session, then `effect` (its shared parameters from 0)
+/// fitted on top of it: an effect's own fit, without the loop.
+fn linear_and(cfg: &SimConfig, effect: Effect) -> crate::calib::engine::Fitted {
+    let out = simulate(cfg).unwrap();
+    let data =
+        LoopData::new(kinematics::reconstruct(&decode(&out.bytes).runs, &KinOptions::default()).expect("kinematics"));
+    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
+    let n_shared = effect.params(&data.layout).1.len();
+    let model = linear.model.with(effect, Default::default(), vec![0.0; n_shared]);
+    crate::calib::engine::fit(&data, model, [1.0; 3]).expect("fits")
+}
+
 /// A delay between the axes delays the motor's own speed ripple too, which the encoder's rates
 /// carry: with a 2 % ripple at 16× (the 16-pole gears' pole pass) and y 0.3 ms, z −0.15 ms
 /// behind x, a model that turned each axis by θ2'·δ only left the ripple's θ1''·δ in the
@@ -1330,12 +1342,7 @@ fn a_delay_between_the_axes_delays_the_motor_speed_ripple_too() {
         Some(SpeedRipple { harmonics: [RippleHarmonic { order: 16, amplitude: 0.02, phase_rad: 0.4 }, still, still] });
     let truth_ms = [0.3, -0.15];
     cfg.effects.axis_delay = Some(AxisDelay { delay_ms: [0.0, truth_ms[0], truth_ms[1]] });
-    let out = simulate(&cfg).unwrap();
-    let data =
-        LoopData::new(kinematics::reconstruct(&decode(&out.bytes).runs, &KinOptions::default()).expect("kinematics"));
-    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
-    let model = linear.model.with(Effect::AxisDelay, Default::default(), vec![0.0; 2]);
-    let fitted = crate::calib::engine::fit(&data, model, [1.0; 3]).expect("fits");
+    let fitted = linear_and(&cfg, Effect::AxisDelay);
     let sol = &fitted.solution;
     let rms_counts: [f64; 3] = std::array::from_fn(|a| (sol.rss[a] / sol.n[a] as f64).sqrt());
     for (a, rms) in rms_counts.iter().enumerate() {
@@ -1439,12 +1446,7 @@ fn an_eccentric_encoder_is_found_not_taken_up_by_the_directions() {
     let mut quiet = SimConfig::with_runs(5, plan(&[180.0, -90.0], 20.0));
     quiet.noise_dps_per_sqrt_hz = 0.0;
     quiet.effects.encoder_eccentricity = Some(truth);
-    let out = simulate(&quiet).unwrap();
-    let data =
-        LoopData::new(kinematics::reconstruct(&decode(&out.bytes).runs, &KinOptions::default()).expect("kinematics"));
-    let linear = crate::calib::engine::fit(&data, Model::for_data(&data), [1.0; 3]).expect("the linear model fits");
-    let model = linear.model.with(Effect::EncoderEccentricity, Default::default(), vec![0.0; 2]);
-    let fitted = crate::calib::engine::fit(&data, model, [1.0; 3]).expect("fits");
+    let fitted = linear_and(&quiet, Effect::EncoderEccentricity);
     let [a, b] =
         [0, 1].map(|k| fitted.model.theta_of(SharedPar { effect: Effect::EncoderEccentricity, k }).expect("fitted"));
     let amplitude_deg = a.hypot(b).to_degrees();
