@@ -59,18 +59,12 @@ impl Behaviour for AxisDelay {
 
     /// Delaying axis a by δ moves its output by −δ·dv_a/dt: its θ2 by −θ2'·δ, and its θ1' by
     /// −θ1''·δ. The second is the motor's own speed ripple (the encoder's rates carry it), which
-    /// the output follows as ∂v_a/∂θ1' = u·ω_s/θ1' (every table term is in proportion to θ1';
-    /// Earth's 1e-5 of it is left out). Without it a 0.6 % ripple at the 16-pole gears' pole pass
+    /// the output follows as ∂v_a/∂θ1' ([`AxisTerms::per_theta1_rate`]). Without it a 0.6 % ripple at the 16-pole gears' pole pass
     /// and a 0.24-ms delay left a 6σ line at 16× on one axis (`docs/trust.md`, drawn rig at 3×).
     fn value(&self, own: Own, p: &Point, a: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         match own {
             Own::Shared(k) if usize::from(k) + 1 == a => {
-                let along_rate = if p.theta1_rate_dps != 0.0 {
-                    p.theta1_accel_dps2 * super::terms::dot(&t.u, &p.omega) / p.theta1_rate_dps
-                } else {
-                    0.0
-                };
-                -p.rate2_dps.to_radians() * t.d_shift - along_rate
+                -p.rate2_dps.to_radians() * t.d_shift - p.theta1_accel_dps2 * t.per_theta1_rate(p)
             }
             _ => 0.0,
         }

@@ -1,8 +1,7 @@
 //! A once-per-turn error of the base encoder's angle.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
-    Situation,
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -69,8 +68,8 @@ impl Behaviour for EncoderEccentricity {
     }
 
     /// θ2 moves by −ratio·∂δ/∂(a, b), as a shift of the index-referenced angle does
-    /// (`t.d_shift`); θ1' by −θ1'_read·∂δ'/∂(a, b), and the output follows θ1' as u·ω_s/θ1'
-    /// (every table term is in proportion to θ1'; Earth's 1e-5 of it is left out). δ is taken at
+    /// (`t.d_shift`); θ1' by −θ1'_read·∂δ'/∂(a, b), which the output follows as
+    /// [`AxisTerms::per_theta1_rate`]. δ is taken at
     /// the angle the encoder read, as the chain takes it: the point holds the corrected angle, and
     /// the two terms nearly cancel (450 and 360 counts/rad for a sum of 93 on the trust bench's
     /// rig), so the 1e-5 rad between the angles was 3.5e-4 of the sum.
@@ -84,8 +83,8 @@ impl Behaviour for EncoderEccentricity {
         // The angle read, from the corrected one: δ at the corrected angle is O(δ²) off.
         let (s0, c0) = (p.theta2_rad / ratio).sin_cos();
         let (s, c) = (p.theta2_rad / ratio + a * s0 - b * (c0 - 1.0)).sin_cos();
-        let read_over_true = 1.0 / (1.0 - (a * c + b * s));
-        let along_rate = dot(&t.u, &p.omega) * read_over_true;
+        let rate_read_dps = p.theta1_rate_dps / (1.0 - (a * c + b * s));
+        let along_rate = t.per_theta1_rate(p) * rate_read_dps;
         if k == 0 {
             -t.d_shift * ratio * s - along_rate * c
         } else {

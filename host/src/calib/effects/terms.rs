@@ -327,6 +327,15 @@ pub struct AxisTerms {
 impl AxisTerms {
     /// For a pass with no shared column, which reads none of them.
     pub const UNUSED: AxisTerms = AxisTerms { u: [f64::NAN; 3], e2: f64::NAN, ez: f64::NAN, d_shift: f64::NAN };
+
+    /// ∂(output)/∂θ1' at `p`, counts per °/s: u·ω_s/θ1', every table term being in proportion
+    /// to θ1' (Earth's 1e-5 of it is left out); 0 at rest.
+    pub fn per_theta1_rate(&self, p: &Point) -> f64 {
+        if p.theta1_rate_dps == 0.0 {
+            return 0.0;
+        }
+        dot(&self.u, &p.omega) / p.theta1_rate_dps
+    }
 }
 
 /// What of the model an effect's column reads besides the point: the kinematic chain's inputs,
