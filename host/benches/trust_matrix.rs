@@ -108,6 +108,8 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "offset_drift" => e.offset_drift.map(|d| d.rise_c),
         "speed_ripple" => e.speed_ripple.map(|r| r.harmonics[0].amplitude),
         "nonlinearity" => e.nonlinearity.map(|n| n.quadratic_fs),
+        "nonlinearity_cubic" => e.nonlinearity.map(|n| n.cubic_fs),
+        "nonlinearity_square" => e.nonlinearity.map(|n| n.square_fs),
         "gear_ratio_error" => e.gear_ratio_error.map(|g| g.ppm),
         "mystery_harmonic" => e.mystery_harmonic.map(|m| m.amplitude_dps),
         "mount_compliance" => e.mount_compliance.map(|m| m.deg_at_180),

@@ -266,9 +266,9 @@ struct SimulateArgs {
     full_scale: u16,
     /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
     /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
-    /// gear_ratio_error, mystery_harmonic, mount_compliance, earth_rotation, gear_transmission,
-    /// g_sensitivity, table_tilt, pose_fixture, bias_random_walk, axis_delay, rig_clock,
-    /// encoder_eccentricity.
+    /// nonlinearity_cubic, nonlinearity_square, gear_ratio_error, mystery_harmonic,
+    /// mount_compliance, earth_rotation, gear_transmission, g_sensitivity, table_tilt,
+    /// pose_fixture, bias_random_walk, axis_delay, rig_clock, encoder_eccentricity.
     #[arg(long = "effect")]
     effects: Vec<String>,
     /// Every effect of a real rig (the realistic set, the delays between the gyro's axes and the

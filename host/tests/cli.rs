@@ -498,6 +498,19 @@ fn an_unknown_effect_is_refused_with_the_list() {
     );
 }
 
+/// `host simulate --help` names every effect `--effect` takes (the list is written out in
+/// `cli.rs`'s doc comment; this keeps it whole).
+#[test]
+fn simulate_help_lists_every_effect() {
+    let o = host(&["simulate", "--help"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let help = String::from_utf8_lossy(&o.stdout).into_owned();
+    let words: Vec<&str> = help.split(|c: char| c.is_whitespace() || c == ',' || c == '.').collect();
+    for (name, _) in host::sim::Effects::NAMES {
+        assert!(words.contains(&name), "{name} missing: {help}");
+    }
+}
+
 /// A simulation config that cannot be read or simulated is a usage error (exit 2) with one
 /// `error:` line naming the file or the field, never a panic; nothing is written.
 #[test]

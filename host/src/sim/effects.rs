@@ -307,7 +307,10 @@ impl Default for SpeedRipple {
 /// Physical source: the sense element and ADC are not perfectly linear (datasheet Table 4,
 /// "non-linearity", 0.2 % of full scale typ.) and the drive/sense loop gains differ slightly with
 /// the sign of the Coriolis force. Applied per axis to the rate along the axis, `x` in °/s:
-/// `y = x·(1 ± asymmetry/2) + quadratic_fs·x·|x|/FS`, `+` for x > 0.
+/// `y = x·(1 ± asymmetry/2) + quadratic_fs·x·|x|/FS + cubic_fs·x³/FS² + square_fs·x²/FS`, `+`
+/// for x > 0. The datasheet gives the size of the bend, not its shape: a chain whose gain grows
+/// with the rate's size bends as x·|x|, one that saturates softly as x³; IEEE Std 952's power
+/// series has an even x² too.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Nonlinearity {
@@ -317,12 +320,30 @@ pub struct Nonlinearity {
     /// Difference between the positive and negative scale factors, fraction (default 0.004,
     /// assumed).
     pub asymmetry: f64,
+    /// Added output at full scale by an odd cubic, as a fraction of full scale (default 0;
+    /// `nonlinearity_cubic` switches on 0.002 alone: datasheet Table 4's size in the other
+    /// shape).
+    #[serde(default)]
+    pub cubic_fs: f64,
+    /// Added output at full scale by an even square law, as a fraction of full scale (default
+    /// 0; `nonlinearity_square` switches on 0.002 alone).
+    #[serde(default)]
+    pub square_fs: f64,
 }
 
 impl Default for Nonlinearity {
     fn default() -> Self {
-        Self { quadratic_fs: 0.002, asymmetry: 0.004 }
+        Self { quadratic_fs: 0.002, asymmetry: 0.004, cubic_fs: 0.0, square_fs: 0.0 }
     }
+}
+
+impl Nonlinearity {
+    /// `nonlinearity_cubic`'s and `nonlinearity_square`'s default: that term alone at datasheet
+    /// Table 4's 0.2 % of full scale.
+    pub const SHAPE_FS: f64 = 0.002;
+
+    /// No bend at all: what `nonlinearity_cubic` and `nonlinearity_square` add their term to.
+    const NONE: Self = Self { quadratic_fs: 0.0, asymmetry: 0.0, cubic_fs: 0.0, square_fs: 0.0 };
 }
 
 /// Physical source: a magnetic gear slips by whole poles under overload, and a rig built with a
@@ -491,13 +512,15 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 18] = [
+    pub const NAMES: [(&'static str, &'static str); 20] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
         ("offset_drift", "warm-up temperature rise, °C (default 10)"),
         ("speed_ripple", "1× speed ripple, fraction (default 0.005)"),
         ("nonlinearity", "quadratic term at full scale, fraction (default 0.002)"),
+        ("nonlinearity_cubic", "cubic term alone at full scale, fraction (default 0.002)"),
+        ("nonlinearity_square", "even square term alone at full scale, fraction (default 0.002)"),
         ("gear_ratio_error", "gear ratio error, ppm (default 200)"),
         ("mystery_harmonic", "3×θ2 harmonic on x, °/s (default 0.3)"),
         ("mount_compliance", "package turned on its mount ∝ |ω2|², degrees at 180 °/s (default 0.03)"),
@@ -567,6 +590,16 @@ impl Effects {
                 if let Some(v) = value {
                     n.quadratic_fs = v;
                 }
+                self.nonlinearity = Some(n);
+            }
+            "nonlinearity_cubic" => {
+                let mut n = self.nonlinearity.unwrap_or(Nonlinearity::NONE);
+                n.cubic_fs = value.unwrap_or(Nonlinearity::SHAPE_FS);
+                self.nonlinearity = Some(n);
+            }
+            "nonlinearity_square" => {
+                let mut n = self.nonlinearity.unwrap_or(Nonlinearity::NONE);
+                n.square_fs = value.unwrap_or(Nonlinearity::SHAPE_FS);
                 self.nonlinearity = Some(n);
             }
             "gear_ratio_error" => {

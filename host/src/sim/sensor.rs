@@ -197,7 +197,11 @@ impl SenseChain {
         if let Some(n) = &self.nonlinearity {
             for v in &mut y {
                 let sign = if *v >= 0.0 { 1.0 } else { -1.0 };
-                *v = *v * (1.0 + 0.5 * sign * n.asymmetry) + n.quadratic_fs * *v * v.abs() / self.full_scale_dps;
+                let fs = self.full_scale_dps;
+                *v = *v * (1.0 + 0.5 * sign * n.asymmetry)
+                    + n.quadratic_fs * *v * v.abs() / fs
+                    + n.cubic_fs * v.powi(3) / (fs * fs)
+                    + n.square_fs * v.powi(2) / fs;
             }
         }
         if let Some(g) = &self.g_sensitivity {
@@ -296,6 +300,21 @@ mod tests {
         let c = chain.counts(&Vector3::new(500.0, -500.0, 0.0), 0.0);
         assert!((c[0] / k - 500.0 * (1.002 + 0.002)).abs() < 1e-9);
         assert!((c[1] / k + 500.0 * (0.998 + 0.002)).abs() < 1e-9);
+        // The cubic alone (`nonlinearity_cubic`): 0.2 % of the rate at ±500 °/s (full scale),
+        // (250/500)² of that share at 250 °/s, odd.
+        let mut cubic = Effects::default();
+        cubic.enable("nonlinearity_cubic").unwrap();
+        let (chain, _) = chain_with(&cubic);
+        let c = chain.counts(&Vector3::new(500.0, -250.0, 0.0), 0.0);
+        assert!((c[0] / k - 500.0 * 1.002).abs() < 1e-9, "{c:?}");
+        assert!((c[1] / k + 250.0 * (1.0 + 0.002 * 0.25)).abs() < 1e-9, "{c:?}");
+        // The square law alone (`nonlinearity_square`): 0.2 % of full scale at ±500 °/s, even.
+        let mut square = Effects::default();
+        square.enable("nonlinearity_square").unwrap();
+        let (chain, _) = chain_with(&square);
+        let c = chain.counts(&Vector3::new(500.0, -500.0, 0.0), 0.0);
+        assert!((c[0] / k - 500.0 * 1.002).abs() < 1e-9, "{c:?}");
+        assert!((c[1] / k + 500.0 * 0.998).abs() < 1e-9, "{c:?}");
         let (chain, _) =
             chain_with(&Effects { mystery_harmonic: Some(MysteryHarmonic::default()), ..Effects::default() });
         let c = chain.counts(&Vector3::zeros(), 0.5);

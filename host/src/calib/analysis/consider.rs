@@ -773,7 +773,9 @@ mod tests {
             "the size of g_sensitivity must be a finite number ≥ 0, not -1"
         );
         let keys = considered_keys();
-        for k in ["g_sensitivity", "earth_rotation", "rate_scale", "filter_gain", "table_tilt", "pose_fixture"] {
+        for k in
+            ["g_sensitivity", "earth_rotation", "rate_scale", "rate_cubic", "filter_gain", "table_tilt", "pose_fixture"]
+        {
             assert!(keys.iter().any(|x| x == k), "{k} in {keys:?}");
         }
     }

@@ -28,7 +28,9 @@ mod gear_lag;
 mod index_offset;
 mod phase;
 mod pose_fixture;
+mod rate_cubic;
 mod rate_scale;
+mod rate_square;
 mod rig_clock;
 mod scale_temperature;
 mod table_harmonic;
@@ -208,6 +210,10 @@ registry! {
     GSensitivity => g_sensitivity::GSensitivity,
     /// [`rate_scale::RateScale`].
     RateScale => rate_scale::RateScale,
+    /// [`rate_cubic::RateCubic`].
+    RateCubic => rate_cubic::RateCubic,
+    /// [`rate_square::RateSquare`].
+    RateSquare => rate_square::RateSquare,
     /// [`scale_temperature::ScaleTemperature`].
     ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`rig_clock::RigClock`].
@@ -316,7 +322,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 16 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 18 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();
