@@ -220,7 +220,7 @@ fn undeclared_cubic_nonlinearity_is_found_named_and_corrected() {
     assert_single_effect_gains(
         "nonlinearity_cubic",
         10.0,
-        |e| e == Effect::RateCubic,
+        |e| e == Effect::RatePower(3),
         |k| matches!(k, FindingKind::Harmonic(n) if n >= 2),
         |t| t.max_sensitivity_ppm(),
     );
@@ -232,7 +232,7 @@ fn undeclared_cubic_nonlinearity_is_found_named_and_corrected() {
 fn undeclared_square_law_nonlinearity_is_found_named_and_corrected() {
     assert_single_effect(
         "nonlinearity_square",
-        |e| e == Effect::RateSquare,
+        |e| e == Effect::RatePower(2),
         |k| matches!(k, FindingKind::Harmonic(n) if n >= 2),
         |t| t.max_sensitivity_ppm(),
     );
@@ -675,8 +675,8 @@ fn shared_parameter_jacobians_match_finite_differences() {
         .with(Effect::Delay, Default::default(), vec![0.004])
         .with(Effect::DriftWarmUp, [vec![30.0], vec![-20.0], vec![10.0]], vec![40.0])
         .with(Effect::RateScale, [vec![0.01, 2e-5], vec![-0.01, 1e-5], vec![0.0, -2e-5]], vec![])
-        .with(Effect::RateCubic, [vec![5e-8], vec![-3e-8], vec![4e-8]], vec![])
-        .with(Effect::RateSquare, [vec![2e-6], vec![-1e-6], vec![3e-6]], vec![])
+        .with(Effect::RatePower(3), [vec![5e-8], vec![-3e-8], vec![4e-8]], vec![])
+        .with(Effect::RatePower(2), [vec![2e-6], vec![-1e-6], vec![3e-6]], vec![])
         .with(Effect::TableHarmonic(2), Default::default(), vec![0.003, -0.002, 0.001, 0.002])
         .with(Effect::TableHarmonic(12), Default::default(), vec![0.004, 0.001, -0.002, 0.003])
         .with(Effect::EarthRotation, Default::default(), vec![0.003, -0.002, 0.001])

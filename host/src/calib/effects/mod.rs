@@ -28,9 +28,8 @@ mod gear_lag;
 mod index_offset;
 mod phase;
 mod pose_fixture;
-mod rate_cubic;
+mod rate_power;
 mod rate_scale;
-mod rate_square;
 mod rig_clock;
 mod scale_temperature;
 mod table_harmonic;
@@ -38,6 +37,7 @@ mod table_tilt;
 
 pub use delay::MAX_DELAY_S;
 pub use drift_warm_up::DRIFT_TAU_RANGE_S;
+pub use rate_power::RATE_POWERS;
 pub use table_harmonic::{GEAR_POLE_PASS_ORDER, HARMONIC_ORDERS};
 pub use terms::DRIFT_KNOT_SPACINGS_S;
 
@@ -210,10 +210,8 @@ registry! {
     GSensitivity => g_sensitivity::GSensitivity,
     /// [`rate_scale::RateScale`].
     RateScale => rate_scale::RateScale,
-    /// [`rate_cubic::RateCubic`].
-    RateCubic => rate_cubic::RateCubic,
-    /// [`rate_square::RateSquare`].
-    RateSquare => rate_square::RateSquare,
+    /// [`rate_power::RatePower`], the rate to this power.
+    RatePower(power: u8 in RATE_POWERS) => rate_power::RatePower(power),
     /// [`scale_temperature::ScaleTemperature`].
     ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`rig_clock::RigClock`].
@@ -322,7 +320,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 18 + earth.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 16 + earth.len() + RATE_POWERS.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();

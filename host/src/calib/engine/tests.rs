@@ -47,9 +47,9 @@ fn effect_parameters_are_reported_in_their_units() {
     let r = LinCol::Of(Effect::RateScale, 1).reported(500.0).unwrap();
     assert_eq!((r.scale, r.unit), (5e4, "% of full scale"));
     // r³ per (°/s)³ at 500 °/s full scale is 2.5e7 % of full scale per unit.
-    let r = LinCol::Of(Effect::RateCubic, 0).reported(500.0).unwrap();
+    let r = LinCol::Of(Effect::RatePower(3), 0).reported(500.0).unwrap();
     assert_eq!((r.name.as_str(), r.scale, r.unit), ("odd cubic (r³) at full scale", 2.5e7, "% of full scale"));
-    let r = LinCol::Of(Effect::RateSquare, 0).reported(500.0).unwrap();
+    let r = LinCol::Of(Effect::RatePower(2), 0).reported(500.0).unwrap();
     assert_eq!((r.name.as_str(), r.scale, r.unit), ("even quadratic (r²) at full scale", 5e4, "% of full scale"));
     let r = LinCol::Of(Effect::GSensitivity, 1).reported(500.0).unwrap();
     assert_eq!(r.name, "g-sensitivity along package y");
