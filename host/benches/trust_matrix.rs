@@ -121,6 +121,7 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "axis_delay" => e.axis_delay.map(|d| d.delay_ms[1]),
         "rig_clock" => e.rig_clock.map(|c| c.error_ppm),
         "encoder_eccentricity" => e.encoder_eccentricity.map(|c| c.amplitude_deg),
+        "encoder_ellipticity" => e.encoder_ellipticity.map(|c| c.amplitude_deg),
         _ => None,
     }
 }

@@ -48,6 +48,9 @@ pub struct Effects {
     /// The base encoder's scale off its shaft's axis: its reading errs once a turn.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub encoder_eccentricity: Option<EncoderEccentricity>,
+    /// The base encoder's scale out of round: its reading errs twice a turn.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder_ellipticity: Option<EncoderEccentricity>,
     /// The sensor package turned on its mount by the load of its own rotation (no model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mount_compliance: Option<MountCompliance>,
@@ -403,6 +406,11 @@ impl Default for RigClock {
 /// off a 20-mm radius, a careful mount (engineering judgement; the Canon R-ISO's own accuracy,
 /// a few arcsec, is the scale's alone). The reading errs, not the table: the tables turn as
 /// the motor drives them.
+///
+/// The same struct holds the error twice a turn (`order` 2, `encoder_ellipticity`): a scale
+/// ring clamped out of round, or a disc whose lines were ruled on an oval, errs as
+/// (ε/2)·sin(2θ1 + φ) at an ellipticity ε of its radius, which a single head sees as well.
+/// Default 0.01° as for the eccentricity (engineering judgement).
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct EncoderEccentricity {
@@ -410,18 +418,28 @@ pub struct EncoderEccentricity {
     pub amplitude_deg: f64,
     /// Its phase against θ1 = 0, rad.
     pub phase_rad: f64,
+    /// Its cycles per turn of θ1: 1 (eccentric) or 2 (elliptical).
+    #[serde(default = "EncoderEccentricity::once")]
+    pub order: u32,
 }
 
 impl Default for EncoderEccentricity {
     fn default() -> Self {
-        Self { amplitude_deg: 0.01, phase_rad: 0.3 }
+        Self { amplitude_deg: 0.01, phase_rad: 0.3, order: 1 }
     }
 }
 
 impl EncoderEccentricity {
-    /// The angle the encoder reads at the base's true `theta1_deg`, degrees.
-    pub fn read_deg(&self, theta1_deg: f64) -> f64 {
-        theta1_deg + self.amplitude_deg * (theta1_deg.to_radians() + self.phase_rad).sin()
+    /// `encoder_ellipticity`'s default: 0.01° twice a turn.
+    pub const ELLIPTIC: Self = Self { amplitude_deg: 0.01, phase_rad: 1.1, order: 2 };
+
+    fn once() -> u32 {
+        1
+    }
+
+    /// The reading's error at the base's true `theta1_deg`, degrees.
+    pub fn error_deg(&self, theta1_deg: f64) -> f64 {
+        self.amplitude_deg * (f64::from(self.order) * theta1_deg.to_radians() + self.phase_rad).sin()
     }
 }
 
@@ -512,7 +530,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 20] = [
+    pub const NAMES: [(&'static str, &'static str); 21] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -533,6 +551,7 @@ impl Effects {
         ("axis_delay", "per-axis delay beyond the common one, y's in ms (default 0.1; x 0, z −y/2)"),
         ("rig_clock", "rig time base's frequency error, ppm (default 20)"),
         ("encoder_eccentricity", "base encoder's reading error once a turn, degrees (default 0.01)"),
+        ("encoder_ellipticity", "base encoder's reading error twice a turn, degrees (default 0.01)"),
     ];
 
     /// True when no effect is on.
@@ -671,6 +690,11 @@ impl Effects {
                 let mut e = EncoderEccentricity::default();
                 e.amplitude_deg = value.unwrap_or(e.amplitude_deg);
                 self.encoder_eccentricity = Some(e);
+            }
+            "encoder_ellipticity" => {
+                let mut e = EncoderEccentricity::ELLIPTIC;
+                e.amplitude_deg = value.unwrap_or(e.amplitude_deg);
+                self.encoder_ellipticity = Some(e);
             }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();

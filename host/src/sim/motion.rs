@@ -117,15 +117,15 @@ pub struct Encoder {
     pub counts_per_rev: u32,
     /// Counter value at θ1 = 0.
     pub start_counts: u32,
-    /// Its scale's eccentricity, if any: the reading errs once a turn.
-    pub eccentricity: Option<super::effects::EncoderEccentricity>,
+    /// Its scale's errors, if any: eccentric (once a turn), elliptical (twice).
+    pub errors: [Option<super::effects::EncoderEccentricity>; 2],
 }
 
 impl Encoder {
     /// Unwrapped count at `theta1_deg` (the counter changes on each quadrature edge, so the count
     /// is the floor of the angle in counts).
     pub fn counts(&self, theta1_deg: f64) -> i64 {
-        let read_deg = self.eccentricity.map_or(theta1_deg, |e| e.read_deg(theta1_deg));
+        let read_deg = theta1_deg + self.errors.iter().flatten().map(|e| e.error_deg(theta1_deg)).sum::<f64>();
         protocol::units::counts_from_deg(read_deg, self.counts_per_rev).floor() as i64
     }
 
@@ -248,7 +248,7 @@ mod tests {
 
     #[test]
     fn encoder_floors_and_wraps() {
-        let e = Encoder { counts_per_rev: 324_000, start_counts: u32::MAX - 1, eccentricity: None };
+        let e = Encoder { counts_per_rev: 324_000, start_counts: u32::MAX - 1, errors: [None; 2] };
         assert_eq!(e.counts(1.0), 900);
         assert_eq!(e.counts(-1e-9), -1);
         assert_eq!(e.register(0.0), u32::MAX - 1);
@@ -260,12 +260,19 @@ mod tests {
     #[test]
     fn an_eccentric_encoder_errs_once_a_turn() {
         use crate::sim::effects::EncoderEccentricity;
-        let ecc = EncoderEccentricity { amplitude_deg: 0.05, phase_rad: 0.0 };
-        let plain = Encoder { counts_per_rev: 324_000, start_counts: 0, eccentricity: None };
-        let off = Encoder { eccentricity: Some(ecc), ..plain };
+        let ecc = EncoderEccentricity { amplitude_deg: 0.05, phase_rad: 0.0, order: 1 };
+        let plain = Encoder { counts_per_rev: 324_000, start_counts: 0, errors: [None; 2] };
+        let off = Encoder { errors: [Some(ecc), None], ..plain };
         for (theta1_deg, err_counts) in [(0.0, 0i64), (90.0, 45), (180.0, 0), (270.0, -45), (450.0, 45)] {
             // Within the count either reading floors to.
             let diff = off.counts(theta1_deg) - plain.counts(theta1_deg);
+            assert!((diff - err_counts).abs() <= 1, "at {theta1_deg}°: {diff} counts");
+        }
+        // Elliptical: twice a turn, and the two add.
+        let ell = EncoderEccentricity { order: 2, ..ecc };
+        let both = Encoder { errors: [Some(ecc), Some(ell)], ..plain };
+        for (theta1_deg, err_counts) in [(45.0, 32i64 + 45), (90.0, 45), (135.0, 32 - 45), (180.0, 0)] {
+            let diff = both.counts(theta1_deg) - plain.counts(theta1_deg);
             assert!((diff - err_counts).abs() <= 1, "at {theta1_deg}°: {diff} counts");
         }
     }

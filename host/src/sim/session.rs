@@ -205,7 +205,7 @@ impl Session {
             encoder: Encoder {
                 counts_per_rev: ENCODER_COUNTS_PER_REV,
                 start_counts: cfg.start_encoder,
-                eccentricity: cfg.effects.encoder_eccentricity,
+                errors: [cfg.effects.encoder_eccentricity, cfg.effects.encoder_ellipticity],
             },
             plate: IndexPlate {
                 centre_rad: cfg.effects.index_offset_rad(),

@@ -37,6 +37,7 @@ mod table_tilt;
 
 pub use delay::MAX_DELAY_S;
 pub use drift_warm_up::DRIFT_TAU_RANGE_S;
+pub use encoder_eccentricity::encoder_error;
 pub use rate_power::RATE_POWERS;
 pub use table_harmonic::{GEAR_POLE_PASS_ORDER, HARMONIC_ORDERS};
 pub use terms::DRIFT_KNOT_SPACINGS_S;
@@ -216,8 +217,10 @@ registry! {
     ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`rig_clock::RigClock`].
     RigClock => rig_clock::RigClock,
-    /// [`encoder_eccentricity::EncoderEccentricity`].
-    EncoderEccentricity => encoder_eccentricity::EncoderEccentricity,
+    /// [`encoder_eccentricity::EncoderError`] once a turn.
+    EncoderEccentricity => encoder_eccentricity::EncoderError(1),
+    /// [`encoder_eccentricity::EncoderError`] twice a turn.
+    EncoderEllipticity => encoder_eccentricity::EncoderError(2),
     /// [`table_harmonic::TableHarmonic`] at this multiple of θ2.
     TableHarmonic(order: u32 in HARMONIC_ORDERS) => table_harmonic::TableHarmonic(order),
     /// [`earth::Earth`], all three components fitted.
@@ -320,7 +323,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 16 + earth.len() + RATE_POWERS.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 17 + earth.len() + RATE_POWERS.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();

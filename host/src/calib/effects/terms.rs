@@ -223,8 +223,9 @@ pub struct Shifts {
     pub fixture_rad: [f64; 3],
     /// (n, pose, a, b) of each ripple harmonic.
     pub ripple: Vec<(u32, Pose, f64, f64)>,
-    /// The base encoder's angle error at 1× of θ1, (a, b) of δ = a·sin θ1 − b·(cos θ1 − 1), rad.
-    pub encoder_rad: [f64; 2],
+    /// The base encoder's angle error at 1× and 2× of θ1, (a, b) of each order n's part of
+    /// δ = Σ a·sin nθ1 − b·(cos nθ1 − 1), rad.
+    pub encoder_rad: [[f64; 2]; 2],
 }
 
 impl Shifts {
@@ -241,7 +242,7 @@ impl Shifts {
             tilt_sin_cos: 0.0f64.sin_cos(),
             fixture_rad: [0.0; 3],
             ripple: Vec::new(),
-            encoder_rad: [0.0; 2],
+            encoder_rad: [[0.0; 2]; 2],
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use crate::calib::data::kinematics::{KinSample, KinSamples};
 use crate::calib::effects::terms::{decay, dot, AxisTerms, Ctx, IndexEdge, Needs, Own, Shifts};
-use crate::calib::effects::{Effect, MAX_HARMONIC_ORDER};
+use crate::calib::effects::{encoder_error, Effect, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
 
 use super::loop_data::{LoopData, RunTemperatures};
@@ -43,15 +43,14 @@ fn interpolate(s: &KinSamples, i: usize, delay_s: f64) -> (f64, f64) {
 }
 
 /// θ2 and θ1' as the tables turned, from the encoder's (`theta2`, `rate1_dps`) and its angle
-/// error at 1× of θ1, δ = a·sin θ1 − b·(cos θ1 − 1) with θ1 = θ2/ratio
-/// ([`crate::calib::effects::terms::Shifts::encoder_rad`]): θ2 less ratio·δ, θ1' less θ1'·δ'.
+/// error δ(θ1) with θ1 = θ2/ratio ([`encoder_error`], the effect's own): θ2 less ratio·δ, θ1' less θ1'·δ'.
 #[inline]
-fn encoder_corrected([a, b]: [f64; 2], ratio: f64, theta2: f64, rate1_dps: f64) -> (f64, f64) {
-    if a == 0.0 && b == 0.0 {
+fn encoder_corrected(orders: [[f64; 2]; 2], ratio: f64, theta2: f64, rate1_dps: f64) -> (f64, f64) {
+    if orders == [[0.0; 2]; 2] {
         return (theta2, rate1_dps);
     }
-    let (s, c) = (theta2 / ratio).sin_cos();
-    (theta2 - ratio * (a * s - b * (c - 1.0)), rate1_dps * (1.0 - (a * c + b * s)))
+    let (d, d_slope) = encoder_error(orders, theta2 / ratio);
+    (theta2 - ratio * d, rate1_dps * (1.0 - d_slope))
 }
 
 /// θ1'' at sample `i`, °/s²: the rates' central difference over the span of their own windows
