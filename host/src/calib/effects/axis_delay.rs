@@ -59,8 +59,9 @@ impl Behaviour for AxisDelay {
 
     /// Delaying axis a by δ moves its output by −δ·dv_a/dt: its θ2 by −θ2'·δ, and its θ1' by
     /// −θ1''·δ. The second is the motor's own speed ripple (the encoder's rates carry it), which
-    /// the output follows as ∂v_a/∂θ1' ([`AxisTerms::per_theta1_rate`]). Without it a 0.6 % ripple at the 16-pole gears' pole pass
-    /// and a 0.24-ms delay left a 6σ line at 16× on one axis (`docs/trust.md`, drawn rig at 3×).
+    /// the output follows as ∂v_a/∂θ1' ([`AxisTerms::per_theta1_rate`]). Without it a 0.6 %
+    /// ripple at the 16-pole gears' pole pass and a 0.24-ms delay left a 6σ line at 16× on one
+    /// axis (`docs/trust.md`, drawn rig at 3×).
     fn value(&self, own: Own, p: &Point, a: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         match own {
             Own::Shared(k) if usize::from(k) + 1 == a => {

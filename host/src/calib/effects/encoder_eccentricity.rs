@@ -100,10 +100,10 @@ impl Behaviour for EncoderError {
 
     /// θ2 moves by −ratio·∂δ/∂(a, b), as a shift of the index-referenced angle does
     /// (`t.d_shift`); θ1' by −θ1'_read·∂δ'/∂(a, b), which the output follows as
-    /// [`AxisTerms::per_theta1_rate`]. δ is taken at
-    /// the angle the encoder read, as the chain takes it: the point holds the corrected angle, and
-    /// the two terms nearly cancel (450 and 360 counts/rad for a sum of 93 on the trust bench's
-    /// rig), so the 1e-5 rad between the angles was 3.5e-4 of the sum.
+    /// [`AxisTerms::per_theta1_rate`]. δ is taken at the angle the encoder read, as the chain
+    /// takes it: the point holds the corrected angle, and the two terms nearly cancel (450 and
+    /// 360 counts/rad for a sum of 93 on the trust bench's rig), so the 1e-5 rad between the
+    /// angles was 3.5e-4 of the sum.
     fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
         let Own::Shared(k) = own else { return 0.0 };
         if p.theta1_rate_dps == 0.0 {

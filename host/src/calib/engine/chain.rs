@@ -43,7 +43,8 @@ fn interpolate(s: &KinSamples, i: usize, delay_s: f64) -> (f64, f64) {
 }
 
 /// θ2 and θ1' as the tables turned, from the encoder's (`theta2`, `rate1_dps`) and its angle
-/// error δ(θ1) with θ1 = θ2/ratio ([`encoder_error`], the effect's own): θ2 less ratio·δ, θ1' less θ1'·δ'.
+/// error δ(θ1) with θ1 = θ2/ratio ([`encoder_error`], the effect's own): θ2 less ratio·δ, θ1'
+/// less θ1'·δ'.
 #[inline]
 fn encoder_corrected(orders: [[f64; 2]; 2], ratio: f64, theta2: f64, rate1_dps: f64) -> (f64, f64) {
     if orders == [[0.0; 2]; 2] {
