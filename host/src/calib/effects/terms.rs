@@ -221,8 +221,8 @@ pub struct Shifts {
     pub tilt_sin_cos: (f64, f64),
     /// Pose-2 fixture rotation about x2, y2, z2, rad.
     pub fixture_rad: [f64; 3],
-    /// (n, pose, a, b) of each ripple harmonic.
-    pub ripple: Vec<(u32, Pose, f64, f64)>,
+    /// (n, runs it applies to, a, b) of each ripple harmonic's pair.
+    pub ripple: Vec<(u32, RippleScope, f64, f64)>,
     /// The base encoder's angle error at 1× and 2× of θ1, (a, b) of each order n's part of
     /// δ = Σ a·sin nθ1 − b·(cos nθ1 − 1), rad.
     pub encoder_rad: [[f64; 2]; 2],
@@ -243,6 +243,26 @@ impl Shifts {
             fixture_rad: [0.0; 3],
             ripple: Vec::new(),
             encoder_rad: [[0.0; 2]; 2],
+        }
+    }
+}
+
+/// The runs one pair (a, b) of a table harmonic applies to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RippleScope {
+    /// Every run of a pose.
+    Pose(Pose),
+    /// One run.
+    Run(usize),
+}
+
+impl RippleScope {
+    /// Whether it applies to run `run`, in pose `pose`.
+    #[inline]
+    pub fn applies(self, run: usize, pose: Pose) -> bool {
+        match self {
+            RippleScope::Pose(q) => q == pose,
+            RippleScope::Run(r) => r == run,
         }
     }
 }

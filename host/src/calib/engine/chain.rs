@@ -169,14 +169,20 @@ impl ColPlan {
 /// sin and cos of n× the gear mesh's angle, index n (`Point::mesh_sin_cos`).
 type MeshHarmonics = [(f64, f64); MAX_HARMONIC_ORDER + 1];
 
-/// The sensor table's transmission error in pose `pose` at the mesh angle's harmonics `mesh`: the effective
+/// The sensor table's transmission error in run `run`, of pose `pose`, at the mesh angle's harmonics `mesh`: the effective
 /// θ2 from the index-referenced `theta2_rad`, the factor on θ2' and its derivative in the mesh
 /// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ),
 /// the angle less the error the run's index pulse saw (`edge`).
 #[inline]
-fn transmission(sh: &Shifts, pose: Pose, theta2_rad: f64, mesh: &MeshHarmonics, edge: &IndexEdge) -> (f64, f64, f64) {
+fn transmission(
+    sh: &Shifts,
+    (run, pose): (usize, Pose),
+    theta2_rad: f64,
+    mesh: &MeshHarmonics,
+    edge: &IndexEdge,
+) -> (f64, f64, f64) {
     let (mut th_eff, mut ripple, mut dripple) = (theta2_rad - edge.shift_rad, 1.0, 0.0);
-    for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1 == pose) {
+    for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1.applies(run, pose)) {
         let nf = f64::from(n);
         let (sn, cn) = mesh[n as usize];
         th_eff += (a * sn - b * cn) / nf;
@@ -285,8 +291,9 @@ impl<'a> Evaluator<'a> {
             .kin
             .runs
             .iter()
-            .map(|rk| {
-                let ripple = shifts.ripple.iter().filter(|h| h.1 == rk.pose).map(|&(n, _, a, b)| (n, a, b));
+            .enumerate()
+            .map(|(r, rk)| {
+                let ripple = shifts.ripple.iter().filter(|h| h.1.applies(r, rk.pose)).map(|&(n, _, a, b)| (n, a, b));
                 IndexEdge::new(rk.plate_half_width_rad, rk.steady_rate_dps.to_radians(), shifts.gear_lag_s, ripple)
             })
             .collect();
@@ -401,7 +408,7 @@ impl<'a> Evaluator<'a> {
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
         let mesh_sin_cos = self.mesh_harmonics(theta2 + sh.gear_lag_s * theta1_rate_rad_s);
-        let (th_eff, ripple, dripple) = transmission(sh, rk.pose, th, &mesh_sin_cos, &self.index_edge[r]);
+        let (th_eff, ripple, dripple) = transmission(sh, (r, rk.pose), th, &mesh_sin_cos, &self.index_edge[r]);
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];

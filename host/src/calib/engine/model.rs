@@ -81,6 +81,7 @@ impl Model {
     /// `init_lin` (per axis, one per new linear column) and `init_shared`.
     pub fn with(&self, effect: Effect, init_lin: [Vec<f64>; 3], init_shared: Vec<f64>) -> Self {
         let (lin, shared) = effect.params(&self.layout);
+        debug_assert_eq!(shared.len(), init_shared.len(), "{effect:?}: a value for each shared parameter");
         let mut m = self.clone();
         m.effects.push(effect);
         m.lin.extend(lin);

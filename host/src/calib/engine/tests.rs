@@ -40,9 +40,11 @@ fn a_step_past_a_bound_stops_at_it() {
 fn effect_parameters_are_reported_in_their_units() {
     let r = SharedPar { effect: Effect::Delay, k: 0 }.reported();
     assert_eq!((r.name.as_str(), r.scale, r.unit), ("delay τ", 1e3, "ms"));
-    // Parameter 3 of a harmonic is pose 2's sine.
+    // Parameter 3 of the first harmonic is pose 2's sine; of a higher one, run 2's.
+    let r = SharedPar { effect: Effect::TableHarmonic(1), k: 3 }.reported();
+    assert_eq!(r.name, "table-speed ripple 1× sin, pose 2");
     let r = SharedPar { effect: Effect::TableHarmonic(12), k: 3 }.reported();
-    assert_eq!(r.name, "table-speed ripple 12× sin, pose 2");
+    assert_eq!(r.name, "table-speed ripple 12× sin, run 2");
     // r·|r| per (°/s)² at 500 °/s full scale is 5e4 % of full scale per unit.
     let r = LinCol::Of(Effect::RateScale, 1).reported(500.0).unwrap();
     assert_eq!((r.scale, r.unit), (5e4, "% of full scale"));
