@@ -458,10 +458,10 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
 /// candidate (the knots' path, which the pass takes sample by sample: a reference through nodes
 /// gives the same sums, as the hat functions are straight within a cell but at their corners,
 /// which the tolerance below covers). And they are the sums of the same cells of the samples'
-/// own values to 1e-3 of each entry's scale: the quadratic's error on a 32× harmonic at 180 °/s
-/// (16 Hz, 0.5 rad between nodes: 0.06·0.5³ ≈ 8e-3 at a sample, less in a sum; 3e-4 of a 27×
-/// harmonic's sum of squares here), and the encoder's rate noise each sample carries and a
-/// quadratic smooths (3e-5 of ω_s, rms: 2e-4 of eᵀe here).
+/// own values to 5e-3 of each entry's scale: the quadratic's error on the catalogue's highest
+/// harmonic, 48× at 180 °/s (24 Hz, 0.75 rad between nodes: 0.06·0.75³ ≈ 2.5e-2 at a sample, less
+/// in a sum; 3.6e-3 of its sum of squares here, 1.1e-3 at 36×), and the encoder's rate noise each
+/// sample carries and a quadratic smooths (3e-5 of ω_s, rms: 2e-4 of eᵀe here).
 #[test]
 fn a_pass_in_cells_sums_the_quadratic_through_its_nodes() {
     use crate::calib::engine::{accumulate_pairs, sums::CHUNK, Cells, Reach};
@@ -485,7 +485,7 @@ fn a_pass_in_cells_sums_the_quadratic_through_its_nodes() {
             // The knots are not interpolated: where a corner falls inside a cell, the
             // reference's quadratic bends it; 1e-6 covers that, 1e-12 the rest.
             let tol = if cols.iter().any(|c| matches!(c, Col::Lin(LinCol::DriftKnot { .. }))) { 1e-6 } else { 1e-12 };
-            for (g, (w, tol)) in [(&got[r], (&want, tol)), (&got[r], (&samples, 1e-3))] {
+            for (g, (w, tol)) in [(&got[r], (&want, tol)), (&got[r], (&samples, 5e-3))] {
                 assert_eq!(g.n, w.n, "run {r}: every sample counted once");
                 for a in 0..3 {
                     let diag = |i: usize| w.xtx[a][i * l + i];
@@ -771,7 +771,7 @@ fn every_registered_effects_jacobian_matches_finite_differences() {
         assert_jacobians_match(&data, &model, &at, |_, value| (1e-3 * value.abs()).max(1e-6));
         checked += 1;
     }
-    // Every effect with a shared parameter: 15 besides the 32 harmonics.
+    // Every effect with a shared parameter: 15 besides the harmonics.
     assert_eq!(checked, 15 + crate::calib::effects::MAX_HARMONIC_ORDER);
 }
 
@@ -825,6 +825,26 @@ fn gear_lines_through_a_low_cut_off_are_fitted_in_each_run() {
         "{effects:?}"
     );
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "16-pole gear behind a 30-Hz low-pass");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+}
+
+/// A 20-pole gear (0.03° at 20×, 0.01° at 40× of the base's turn, 1.3 °/s of rate at 40× and 180
+/// °/s): both lines are in the catalogue, and the calibration ends at the floor, right to 3σ.
+#[test]
+fn a_twenty_pole_gears_overtone_is_fitted() {
+    let mut cfg = SimConfig::with_runs(2, plan(&[180.0, 90.0, -180.0], SHORT_S));
+    cfg.effects.gear_transmission =
+        Some(crate::sim::GearTransmission { harmonics: [(20, 0.03, 0.7), (40, 0.01, -1.2)] });
+    cfg.effects.enable(&format!("earth_rotation={LAB_LATITUDE_DEG}")).expect("known effect");
+    let out = simulate(&cfg).unwrap();
+    let opts = LoopOptions { latitude_deg: Some(LAB_LATITUDE_DEG), ..LoopOptions::default() };
+    let r = close_loop(&decode(&out.bytes).runs, &opts, Some(out.truth.sensor())).expect("the loop runs");
+    let effects = r.effects();
+    assert!(
+        effects.contains(&Effect::TableHarmonic(20)) && effects.contains(&Effect::TableHarmonic(40)),
+        "{effects:?}"
+    );
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "20-pole gear");
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 

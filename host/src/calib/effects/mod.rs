@@ -52,11 +52,15 @@ use terms::{
 
 /// Highest harmonic of the sensor-table rate fitted sample by sample (diagnostics and the
 /// transmission-error model): the 12-pole magnetic gears (EXCITER.md, "Mechanism") pass a pole
-/// pair 12 times a turn, so their transmission error sits at 12× and its overtone at 24×; 32
-/// leaves margin above both. 32× at 0.5 Hz is 16 Hz, inside every L3G4200D bandwidth (≥ 12.5 Hz
-/// only at 100 Hz ODR). Harmonics above it are searched in the residual spectrum up to what the
-/// sample rate resolves (`diagnostics`).
-pub const MAX_HARMONIC_ORDER: usize = 32;
+/// pair 12 times a turn, so their transmission error sits at 12× and its overtone at 24×. Gears
+/// of other pole counts put them elsewhere (16 poles: 16× and 32×; 20: 40×); 48 holds a 24-pole
+/// gear's overtone (engineering judgement: more poles than that make the error too fine to
+/// matter). 48× at 0.5 Hz is 24 Hz, below every L3G4200D cut-off at 800 Hz ODR (Table 21: 30 Hz
+/// and up). A 20-pole gear's 40× line, beyond the 32 this was, flagged every capture of it
+/// (`a_twenty_pole_gears_overtone_is_fitted`); the passes cost the same (CPU ratio 0.997 on
+/// `realistic-2speed-s101`). Harmonics above it are searched in the residual spectrum up to
+/// what the sample rate resolves (`diagnostics`).
+pub const MAX_HARMONIC_ORDER: usize = 48;
 
 /// One effect's physics and maths.
 pub trait Behaviour {

@@ -630,7 +630,12 @@ mod tests {
         }
         Situation {
             current,
-            evidence: Evidence { phase: false, drift: false, rate_scale: false, orders: [false; 33] },
+            evidence: Evidence {
+                phase: false,
+                drift: false,
+                rate_scale: false,
+                orders: [false; super::super::MAX_HARMONIC_ORDER + 1],
+            },
             separates_delay_and_index: true,
             distinct_rates_dps: rates,
             free_drift_keeps_constant_rates: true,
