@@ -448,6 +448,52 @@ fn a_candidates_pass_sums_the_pairs_a_test_needs_and_no_others() {
     }
 }
 
+/// A run's sums leave out the columns that are zero in it (a table harmonic's pairs of other
+/// runs): they are the sums of every column, sample by sample, to 1e-12 of each entry's scale,
+/// and those columns' entries are exactly 0.
+#[test]
+fn a_runs_sums_leave_out_the_columns_of_other_runs() {
+    use crate::calib::engine::{accumulate, sums::CHUNK};
+    let (data, model) = short_capture_and_delay_model();
+    let harmonics = [Effect::TableHarmonic(1), Effect::TableHarmonic(12), Effect::TableHarmonic(24)];
+    let cols: Vec<Col> = model
+        .cols()
+        .into_iter()
+        .chain(harmonics.iter().flat_map(|e| e.params(&data.layout).1).map(Col::Shared))
+        .collect();
+    let l = cols.len();
+    let got = accumulate(&data, &model, &cols);
+    let ev = Evaluator::for_columns(&data, &model, &cols);
+    assert!(data.kin.runs.len() >= 2);
+    for (r, rk) in data.kin.runs.iter().enumerate() {
+        let want = cell_reference(&data, (&ev, &cols), r, (1, CHUNK), false);
+        let g = &got[r];
+        assert_eq!(g.n, want.n);
+        let outside: Vec<usize> = (0..l).filter(|&i| !cols[i].in_run(r, rk.pose)).collect();
+        let other_runs_and_pose = 2 * 2 * (data.kin.runs.len() - 1) + 2 * (data.poses.len() - 1);
+        assert_eq!(outside.len(), other_runs_and_pose, "run {r}: 12× and 24× of each other run, 1× of the other pose");
+        for a in 0..3 {
+            assert!((g.ete[a] - want.ete[a]).abs() <= 1e-12 * want.ete[a]);
+            let diag = |i: usize| want.xtx[a][i * l + i];
+            for i in 0..l {
+                let scale = (diag(i) * want.ete[a]).sqrt();
+                assert!((g.xte[a][i] - want.xte[a][i]).abs() <= 1e-12 * scale, "run {r}, axis {a}, xᵀe {i}");
+                for j in 0..l {
+                    let (got, want) = (g.xtx[a][i * l + j], want.xtx[a][i * l + j]);
+                    if outside.contains(&i) || outside.contains(&j) {
+                        assert_eq!((got, want), (0.0, 0.0), "run {r}, axis {a}, ({i}, {j})");
+                    } else {
+                        assert!(
+                            (got - want).abs() <= 1e-12 * (diag(i) * diag(j)).sqrt(),
+                            "run {r}, axis {a}, ({i}, {j})"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// A pass in cells sums, within each chunk of the pass, each stretch of consecutive valid
 /// samples in cells of eight (the last of a stretch shorter), the chain taken at three nodes per
 /// cell (its first sample, the next cell's first or its own last, and the one midway) and at each

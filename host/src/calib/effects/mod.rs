@@ -89,6 +89,13 @@ pub trait Behaviour {
     /// The range shared parameter `k` is held in, if any.
     fn bound(&self, k: u8) -> Option<Bound>;
 
+    /// The runs shared parameter `k` can move the output in, when not all (None, the default):
+    /// a pass leaves its column out of the sums of every other run, where it is zero.
+    fn scope(&self, k: u8) -> Option<terms::RunScope> {
+        let _ = k;
+        None
+    }
+
     /// Sets the kinematic chain's input that shared parameter `k` is, at `value` (nothing for an
     /// effect that acts on the output, [`Behaviour::on_output`]).
     fn shift(&self, k: u8, value: f64, s: &mut Shifts);

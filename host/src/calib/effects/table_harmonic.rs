@@ -1,8 +1,8 @@
 //! A periodic angle error of the sensor table.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, RippleScope, SharedPar,
-    Shifts, Situation,
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, RunScope, SharedPar, Shifts,
+    Situation,
 };
 use super::{Behaviour, Effect, Layout, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
@@ -40,9 +40,9 @@ pub const MAX_RUNS_OWN_PAIR: usize = 128;
 
 impl TableHarmonic {
     /// The runs parameter `k` applies to and whether it is b (the sine in speed).
-    fn of(&self, k: u8) -> (RippleScope, bool) {
+    fn of(&self, k: u8) -> (RunScope, bool) {
         let i = usize::from(k / 2);
-        let scope = if self.0 == 1 { RippleScope::Pose(Pose::ALL[i]) } else { RippleScope::Run(i) };
+        let scope = if self.0 == 1 { RunScope::Pose(Pose::ALL[i]) } else { RunScope::Run(i) };
         (scope, k % 2 == 1)
     }
 }
@@ -88,8 +88,8 @@ impl Behaviour for TableHarmonic {
         let (scope, quadrature) = self.of(k);
         let n = self.0;
         let which = match scope {
-            RippleScope::Pose(pose) => format!("{pose}"),
-            RippleScope::Run(r) => format!("run {}", r + 1),
+            RunScope::Pose(pose) => format!("{pose}"),
+            RunScope::Run(r) => format!("run {}", r + 1),
         };
         Some(Reported::new(
             format!("table-speed ripple {n}× {}, {which}", if quadrature { "sin" } else { "cos" }),
@@ -100,6 +100,10 @@ impl Behaviour for TableHarmonic {
 
     fn bound(&self, _: u8) -> Option<Bound> {
         None
+    }
+
+    fn scope(&self, k: u8) -> Option<RunScope> {
+        Some(self.of(k).0)
     }
 
     fn shift(&self, k: u8, value: f64, s: &mut Shifts) {

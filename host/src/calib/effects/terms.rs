@@ -86,6 +86,11 @@ impl SharedPar {
         self.effect.behaviour(|b| b.bound(self.k))
     }
 
+    /// The runs it can move the output in, when not all ([`super::Behaviour::scope`]).
+    pub fn scope(self) -> Option<RunScope> {
+        self.effect.behaviour(|b| b.scope(self.k))
+    }
+
     /// Its name and reported unit.
     pub fn reported(self) -> Reported {
         self.effect
@@ -104,6 +109,14 @@ pub enum Col {
 }
 
 impl Col {
+    /// Whether it can be non-zero in run `run`, of pose `pose`.
+    pub fn in_run(self, run: usize, pose: Pose) -> bool {
+        match self {
+            Col::Shared(p) => p.scope().is_none_or(|s| s.applies(run, pose)),
+            Col::Lin(_) => true,
+        }
+    }
+
     /// What of a point it needs beyond eq. 1-2.
     pub fn needs(self) -> Needs {
         match self {
@@ -222,7 +235,7 @@ pub struct Shifts {
     /// Pose-2 fixture rotation about x2, y2, z2, rad.
     pub fixture_rad: [f64; 3],
     /// (n, runs it applies to, a, b) of each ripple harmonic's pair.
-    pub ripple: Vec<(u32, RippleScope, f64, f64)>,
+    pub ripple: Vec<(u32, RunScope, f64, f64)>,
     /// The base encoder's angle error at 1× and 2× of θ1, (a, b) of each order n's part of
     /// δ = Σ a·sin nθ1 − b·(cos nθ1 − 1), rad.
     pub encoder_rad: [[f64; 2]; 2],
@@ -247,22 +260,23 @@ impl Shifts {
     }
 }
 
-/// The runs one pair (a, b) of a table harmonic applies to.
+/// The runs a parameter can move the output in (a table harmonic's pair: one pose's runs, or one
+/// run): its column is zero in every other run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RippleScope {
+pub enum RunScope {
     /// Every run of a pose.
     Pose(Pose),
     /// One run.
     Run(usize),
 }
 
-impl RippleScope {
+impl RunScope {
     /// Whether it applies to run `run`, in pose `pose`.
     #[inline]
     pub fn applies(self, run: usize, pose: Pose) -> bool {
         match self {
-            RippleScope::Pose(q) => q == pose,
-            RippleScope::Run(r) => r == run,
+            RunScope::Pose(q) => q == pose,
+            RunScope::Run(r) => r == run,
         }
     }
 }

@@ -20,15 +20,31 @@ pub fn accumulate(data: &LoopData, model: &Model, cols: &[Col]) -> Vec<Gram> {
 }
 
 /// [`accumulate`] of the pairs `reach` names (every other entry of XᵀX is 0), the samples
-/// summed in `cells` ([`Cells`]).
+/// summed in `cells` ([`Cells`]). A run's sums leave out the columns that are zero in it (a
+/// table harmonic's pair of another run: [`Col::in_run`]), whose entries stay 0: on six runs a
+/// harmonic has twelve columns, of which a run sees two.
 pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Reach, cells: Cells) -> Vec<Gram> {
     let pass = Pass::new(data, model, cols, reach);
     (0..data.kin.runs.len())
-        .map(|r| match cells.rows(data.kin.runs[r].sample_rate_hz) {
-            1 => sample_sums(&pass, r),
-            size => super::nodes::cell_sums(&pass, r, size),
+        .map(|r| {
+            let pose = data.kin.runs[r].pose;
+            let keep: Vec<usize> = (0..cols.len()).filter(|&i| cols[i].in_run(r, pose)).collect();
+            if keep.len() == cols.len() {
+                return run_sums(&pass, r, cells);
+            }
+            let own: Vec<Col> = keep.iter().map(|&i| cols[i]).collect();
+            let own_reach = reach.restricted(&keep);
+            run_sums(&Pass::new(data, model, &own, &own_reach), r, cells).scattered(&keep, cols.len())
         })
         .collect()
+}
+
+/// The sums of run `r` of `pass`, sample by sample or in `cells`.
+fn run_sums(pass: &Pass, r: usize, cells: Cells) -> Gram {
+    match cells.rows(pass.data.kin.runs[r].sample_rate_hz) {
+        1 => sample_sums(pass, r),
+        size => super::nodes::cell_sums(pass, r, size),
+    }
 }
 
 /// The sums of run `r`, sample by sample.

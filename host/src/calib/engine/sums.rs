@@ -27,6 +27,22 @@ pub struct Gram {
 }
 
 impl Gram {
+    /// The sums of columns `keep` (ascending) of `l` columns, from these sums of those columns
+    /// alone; every entry of another column is 0.
+    pub(super) fn scattered(&self, keep: &[usize], l: usize) -> Self {
+        debug_assert_eq!(keep.len(), self.l);
+        let mut g = Self { ete: self.ete, n: self.n, ..Self::new(l) };
+        for a in 0..3 {
+            for (i2, &i) in keep.iter().enumerate() {
+                g.xte[a][i] = self.xte[a][i2];
+                for (j2, &j) in keep.iter().enumerate() {
+                    g.xtx[a][i * l + j] = self.xtx[a][i2 * self.l + j2];
+                }
+            }
+        }
+        g
+    }
+
     pub(super) fn new(l: usize) -> Self {
         Self {
             l,
@@ -360,6 +376,11 @@ impl Reach {
         }
         let l = end;
         Self(std::iter::repeat_n(l, lead).chain(reach).collect())
+    }
+
+    /// The reach of columns `keep` (ascending) alone: a pair of them is summed where it was.
+    pub(super) fn restricted(&self, keep: &[usize]) -> Self {
+        Self(keep.iter().map(|&i| keep.partition_point(|&j| j < self.0[i])).collect())
     }
 
     /// Whether the pair (i, j) is summed.
