@@ -855,42 +855,35 @@ fn undeclared_gear_transmission_error_is_found_named_and_corrected() {
 /// right to 1.5σ, was flagged on three seeds of three. Each run's own pair takes them.
 #[test]
 fn gear_lines_through_a_low_cut_off_are_fitted_in_each_run() {
-    let mut cfg = SimConfig::with_runs(1, plan(&[180.0, 90.0, -180.0], BAR_DURATION_S));
-    cfg.gyro.bandwidth = protocol::Bandwidth::Bw0;
-    cfg.effects.gear_transmission =
-        Some(crate::sim::GearTransmission { harmonics: [(16, 0.03, 0.7), (32, 0.01, -1.2)] });
-    for e in ["filter_delay", &format!("earth_rotation={LAB_LATITUDE_DEG}")] {
-        cfg.effects.enable(e).expect("known effect");
-    }
-    let out = simulate(&cfg).unwrap();
-    let opts = LoopOptions { latitude_deg: Some(LAB_LATITUDE_DEG), ..LoopOptions::default() };
-    let r = close_loop(&decode(&out.bytes).runs, &opts, Some(out.truth.sensor())).expect("the loop runs");
-    let effects = r.effects();
-    assert!(
-        effects.contains(&Effect::TableHarmonic(16)) && effects.contains(&Effect::TableHarmonic(32)),
-        "{effects:?}"
-    );
-    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "16-pole gear behind a 30-Hz low-pass");
-    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    assert_gear_lines_fitted((1, BAR_DURATION_S), 16, Some(protocol::Bandwidth::Bw0));
 }
 
 /// A 20-pole gear (0.03° at 20×, 0.01° at 40× of the base's turn, 1.3 °/s of rate at 40× and 180
 /// °/s): both lines are in the catalogue, and the calibration ends at the floor, right to 3σ.
 #[test]
 fn a_twenty_pole_gears_overtone_is_fitted() {
-    let mut cfg = SimConfig::with_runs(2, plan(&[180.0, 90.0, -180.0], SHORT_S));
+    assert_gear_lines_fitted((2, SHORT_S), 20, None);
+}
+
+/// A `poles`-pole gear's lines (0.03° at poles×, 0.01° at 2·poles×) on the default design, seed
+/// and run length `(seed, duration_s)`, behind the gyro's low-pass at `bandwidth` (none without):
+/// both lines fitted and the calibration at the floor, within 3σ.
+fn assert_gear_lines_fitted((seed, duration_s): (u64, f64), poles: u32, bandwidth: Option<protocol::Bandwidth>) {
+    let mut cfg = SimConfig::with_runs(seed, plan(&[180.0, 90.0, -180.0], duration_s));
     cfg.effects.gear_transmission =
-        Some(crate::sim::GearTransmission { harmonics: [(20, 0.03, 0.7), (40, 0.01, -1.2)] });
+        Some(crate::sim::GearTransmission { harmonics: [(poles, 0.03, 0.7), (2 * poles, 0.01, -1.2)] });
     cfg.effects.enable(&format!("earth_rotation={LAB_LATITUDE_DEG}")).expect("known effect");
+    if let Some(bw) = bandwidth {
+        cfg.gyro.bandwidth = bw;
+        cfg.effects.enable("filter_delay").expect("known effect");
+    }
     let out = simulate(&cfg).unwrap();
     let opts = LoopOptions { latitude_deg: Some(LAB_LATITUDE_DEG), ..LoopOptions::default() };
     let r = close_loop(&decode(&out.bytes).runs, &opts, Some(out.truth.sensor())).expect("the loop runs");
     let effects = r.effects();
-    assert!(
-        effects.contains(&Effect::TableHarmonic(20)) && effects.contains(&Effect::TableHarmonic(40)),
-        "{effects:?}"
-    );
-    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "20-pole gear");
+    let lines = [Effect::TableHarmonic(poles), Effect::TableHarmonic(2 * poles)];
+    assert!(lines.iter().all(|l| effects.contains(l)), "{effects:?}");
+    assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), &format!("{poles}-pole gear"));
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
