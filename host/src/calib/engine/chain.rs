@@ -169,10 +169,10 @@ impl ColPlan {
 /// sin and cos of n× the gear mesh's angle, index n (`Point::mesh_sin_cos`).
 type MeshHarmonics = [(f64, f64); MAX_HARMONIC_ORDER + 1];
 
-/// The sensor table's transmission error in run `run`, of pose `pose`, at the mesh angle's harmonics `mesh`: the effective
-/// θ2 from the index-referenced `theta2_rad`, the factor on θ2' and its derivative in the mesh
-/// angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ),
-/// the angle less the error the run's index pulse saw (`edge`).
+/// The sensor table's transmission error in run `run`, of pose `pose`, at the mesh angle's
+/// harmonics `mesh`: the effective θ2 from the index-referenced `theta2_rad`, the factor on θ2'
+/// and its derivative in the mesh angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate
+/// factor 1 + a cos nθ + b sin nθ), the angle less the error the run's index pulse saw (`edge`).
 #[inline]
 fn transmission(
     sh: &Shifts,
