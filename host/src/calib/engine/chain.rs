@@ -169,27 +169,27 @@ impl ColPlan {
 /// sin and cos of n× the gear mesh's angle, index n (`Point::mesh_sin_cos`).
 type MeshHarmonics = [(f64, f64); MAX_HARMONIC_ORDER + 1];
 
-/// The sensor table's transmission error in run `run`, of pose `pose`, at the mesh angle's
-/// harmonics `mesh`: the effective θ2 from the index-referenced `theta2_rad`, the factor on θ2'
-/// and its derivative in the mesh angle (each harmonic n: angle (a sin nθ − b cos nθ)/n, rate
-/// factor 1 + a cos nθ + b sin nθ), the angle less the error the run's index pulse saw (`edge`).
+/// The sensor table's transmission error of a run whose ripple harmonics are `ripple` (n, a, b),
+/// at the mesh angle's harmonics `mesh`: the effective θ2 from the index-referenced
+/// `theta2_rad`, the factor on θ2' and its derivative in the mesh angle (each harmonic n: angle
+/// (a sin nθ − b cos nθ)/n, rate factor 1 + a cos nθ + b sin nθ), the angle less the error the
+/// run's index pulse saw (`edge`).
 #[inline]
 fn transmission(
-    sh: &Shifts,
-    (run, pose): (usize, Pose),
+    ripple: &[(u32, f64, f64)],
     theta2_rad: f64,
     mesh: &MeshHarmonics,
     edge: &IndexEdge,
 ) -> (f64, f64, f64) {
-    let (mut th_eff, mut ripple, mut dripple) = (theta2_rad - edge.shift_rad, 1.0, 0.0);
-    for &(n, _, a, b) in sh.ripple.iter().filter(|h| h.1.applies(run, pose)) {
+    let (mut th_eff, mut factor, mut dfactor) = (theta2_rad - edge.shift_rad, 1.0, 0.0);
+    for &(n, a, b) in ripple {
         let nf = f64::from(n);
         let (sn, cn) = mesh[n as usize];
         th_eff += (a * sn - b * cn) / nf;
-        ripple += a * cn + b * sn;
-        dripple += nf * (b * cn - a * sn);
+        factor += a * cn + b * sn;
+        dfactor += nf * (b * cn - a * sn);
     }
-    (th_eff, ripple, dripple)
+    (th_eff, factor, dfactor)
 }
 
 /// ∂ω_s/∂e_k of the pose-2 fixture's turn e, ω_s = R2ᵀ·exp(−[e]×)·v with `v` = ω2 + κ·ω̈2 in
@@ -230,6 +230,9 @@ pub struct Evaluator<'a> {
     knot_grid: Vec<[(f64, f64); DRIFT_KNOT_SPACINGS_S.len()]>,
     /// Per run, the transmission error where its index pulse ties θ2 to 0.
     index_edge: Vec<IndexEdge>,
+    /// Per run, the ripple harmonics (n, a, b) that apply to it (`Shifts::ripple`, taken apart
+    /// once rather than filtered at every point).
+    run_ripple: Vec<Vec<(u32, f64, f64)>>,
     /// The harmonic orders of the gear mesh's angle the model and the pass use.
     mesh_orders: Vec<usize>,
     /// sin θ/θ and (1 − cos θ)/θ² of the pose-2 fixture's turn θ = |e| (Rodrigues' formula).
@@ -287,14 +290,16 @@ impl<'a> Evaluator<'a> {
         let lin_plan = ColPlan::of(model.lin.iter().map(|&c| Col::Lin(c)));
         let lin_beta = lin_plan.dense.iter().map(|&(j, _)| model.beta.each_ref().map(|b| b[j])).collect();
         let shifts = shifts_of(model);
-        let index_edge = data
-            .kin
-            .runs
-            .iter()
-            .enumerate()
+        let run_ripple: Vec<Vec<(u32, f64, f64)>> = (data.kin.runs.iter().enumerate())
             .map(|(r, rk)| {
-                let ripple = shifts.ripple.iter().filter(|h| h.1.applies(r, rk.pose)).map(|&(n, _, a, b)| (n, a, b));
-                IndexEdge::new(rk.plate_half_width_rad, rk.steady_rate_dps.to_radians(), shifts.gear_lag_s, ripple)
+                let of_run = shifts.ripple.iter().filter(|h| h.1.applies(r, rk.pose));
+                of_run.map(|&(n, _, a, b)| (n, a, b)).collect()
+            })
+            .collect();
+        let index_edge = (data.kin.runs.iter().zip(&run_ripple))
+            .map(|(rk, ripple)| {
+                let (half_width, rate) = (rk.plate_half_width_rad, rk.steady_rate_dps.to_radians());
+                IndexEdge::new(half_width, rate, shifts.gear_lag_s, ripple.iter().copied())
             })
             .collect();
         let mut mesh_orders: Vec<usize> = shifts.ripple.iter().map(|h| h.0 as usize).collect();
@@ -310,6 +315,7 @@ impl<'a> Evaluator<'a> {
             fixture_turn: rodrigues(&shifts.fixture_rad),
             shifts,
             index_edge,
+            run_ripple,
             mesh_orders,
 
             rot_t: data
@@ -408,7 +414,7 @@ impl<'a> Evaluator<'a> {
         // index offset does not move it (the error is tied to the gear, not to where θ2 = 0 is).
         let theta1_rate_rad_s = rate1.to_radians();
         let mesh_sin_cos = self.mesh_harmonics(theta2 + sh.gear_lag_s * theta1_rate_rad_s);
-        let (th_eff, ripple, dripple) = transmission(sh, (r, rk.pose), th, &mesh_sin_cos, &self.index_edge[r]);
+        let (th_eff, ripple, dripple) = transmission(&self.run_ripple[r], th, &mesh_sin_cos, &self.index_edge[r]);
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
