@@ -1336,7 +1336,11 @@ fn a_rig_clock_off_its_frequency_moves_every_sensitivity_alike_and_sigma_carries
 /// A random walk at 180 and 90 °/s in one direction (the trust bench's seed 5): the quadratic
 /// drift wins on BIC, but it leaves wander that M takes up (0.006° and 42 ppm, 5.6σ, at exit 0).
 /// Tested against the free drift on M (Hausman), the curve gives way: the free drift is kept, the
-/// curve's skip says why, and the answer is within 3σ at the floor.
+/// curve's skip says why, the residual is white and the answer within 3σ. The runs' elements
+/// of M agree; the turn's test between the speeds flags this seed (χ² 18.8 for 3 degrees of
+/// freedom against 17.7): it compares the runs' levels, which the walk moves between runs and
+/// which only the consider covariance carries (`consistency::turn_test`; one seed in ten of
+/// this cell, none of the default design's).
 #[test]
 fn a_drift_curve_that_biases_m_gives_way_to_the_free_drift() {
     let (runs, truth) = capture_with(5, &BAR_RATES_DPS, BAR_DURATION_S, &["bias_random_walk"], FullScale::Dps500);
@@ -1345,7 +1349,9 @@ fn a_drift_curve_that_biases_m_gives_way_to_the_free_drift() {
     assert!(matches!(drifts[..], [Effect::DriftKnots(_)]), "{}", r.summary());
     assert!(r.skipped.iter().any(|s| s.why.contains("Hausman")), "the curve's skip must say why\n{}", r.summary());
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), "random walk at 180, 90");
-    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    assert!(!r.final_diagnostics().has_structure(), "{}", r.summary());
+    let c = r.consistency.as_ref().expect("two speeds are compared");
+    assert!(c.chi2 < c.threshold, "{c:?}");
 }
 
 /// Both directions at one speed with every realistic effect (the trust bench's seed 5): the

@@ -112,7 +112,8 @@ fn unseparated(t: &ConsiderTerm) -> String {
     )
 }
 
-/// Runs at different speeds that want different M, in words.
+/// Runs at different speeds that want different M, in words: all their elements together,
+/// and each group whose axes turned together.
 pub fn disagreement(c: &Consistency) -> String {
     let groups: Vec<String> = c
         .groups
@@ -124,12 +125,30 @@ pub fn disagreement(c: &Consistency) -> String {
             )
         })
         .collect();
+    let turns: Vec<String> = c
+        .turns
+        .iter()
+        .filter(|t| t.significant())
+        .map(|t| {
+            let [x, y, z] = t.turn_deg;
+            format!(
+                " The runs at {:+.0} °/s see the sensor turned by {:.4}° against those at {:+.0} °/s (about the table's x, y, z: {x:+.4}°, {y:+.4}°, {z:+.4}°; χ² = {:.1} for {} degrees of freedom against {:.1}): a mount, fixture or bearing that gives with speed; the turn at rest is not known.",
+                t.rate_dps,
+                (x * x + y * y + z * z).sqrt(),
+                t.reference_rate_dps,
+                t.chi2,
+                t.dof,
+                t.threshold
+            )
+        })
+        .collect();
     format!(
-        "The runs disagree about M (χ² = {:.1} for {} degrees of freedom against {:.1}, {:.1}σ): {}. An effect that changes with speed and that no catalogued effect explains is in M.",
+        "The runs disagree about M (χ² = {:.1} for {} degrees of freedom against {:.1}, {:.1}σ): {}. An effect that changes with speed and that no catalogued effect explains is in M.{}",
         c.chi2,
         c.dof,
         c.threshold,
         c.significance_sigma,
-        groups.join("; ")
+        groups.join("; "),
+        turns.concat()
     )
 }
