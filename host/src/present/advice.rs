@@ -142,13 +142,61 @@ pub fn disagreement(c: &Consistency) -> String {
             )
         })
         .collect();
+    let within = if c.chi2 > c.threshold { "" } else { ", within chance" };
     format!(
-        "The runs disagree about M (χ² = {:.1} for {} degrees of freedom against {:.1}, {:.1}σ): {}. An effect that changes with speed and that no catalogued effect explains is in M.{}",
+        "The runs disagree about M.{} M's elements between the groups: χ² = {:.1} for {} degrees of freedom against {:.1} ({:.1}σ{within}); {}. An effect that changes with speed and that no catalogued effect explains is in M.",
+        turns.concat(),
         c.chi2,
         c.dof,
         c.threshold,
         c.significance_sigma,
-        groups.join("; "),
-        turns.concat()
+        groups.join("; ")
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::disagreement;
+    use crate::calib::analysis::consistency::{Consistency, GroupDifference, GroupTurn};
+
+    /// A turn past its threshold with the elements within chance: the turn first, then the
+    /// elements' test, said to be within chance, in exactly these words.
+    #[test]
+    fn a_turn_is_said_before_the_elements_test() {
+        let c = Consistency {
+            chi2: 42.1,
+            dof: 18,
+            threshold: 45.7,
+            significance_sigma: 3.1,
+            groups: vec![GroupDifference {
+                rate_dps: 90.0,
+                reference_rate_dps: 180.0,
+                delta_m: [[0.0; 3]; 3],
+                delta_m_sigma: [[1.0; 3]; 3],
+                max_z: 3.8,
+                max_ppm: 82.1,
+                element: "m_z.omega_x".into(),
+            }],
+            turns: vec![GroupTurn {
+                rate_dps: 90.0,
+                reference_rate_dps: 180.0,
+                turn_deg: [-0.0058, 0.0003, 0.0004],
+                turn_sigma_deg: [0.001; 3],
+                chi2: 42.4,
+                dof: 3,
+                threshold: 18.6,
+            }],
+        };
+        assert!(c.disagrees());
+        assert_eq!(
+            disagreement(&c),
+            "The runs disagree about M. The runs at +90 °/s see the sensor turned by 0.0058° against \
+             those at +180 °/s (about the table's x, y, z: -0.0058°, +0.0003°, +0.0004°; χ² = 42.4 for 3 \
+             degrees of freedom against 18.6): a mount, fixture or bearing that gives with speed; the \
+             turn at rest is not known. M's elements between the groups: χ² = 42.1 for 18 degrees of \
+             freedom against 45.7 (3.1σ, within chance); the runs at +90 °/s against those at +180 °/s: \
+             m_z.omega_x differs by +82.1 ppm of the sensitivity (3.8σ). An effect that changes with \
+             speed and that no catalogued effect explains is in M."
+        );
+    }
 }
