@@ -1337,10 +1337,10 @@ fn a_rig_clock_off_its_frequency_moves_every_sensitivity_alike_and_sigma_carries
 /// drift wins on BIC, but it leaves wander that M takes up (0.006° and 42 ppm, 5.6σ, at exit 0).
 /// Tested against the free drift on M (Hausman), the curve gives way: the free drift is kept, the
 /// curve's skip says why, the residual is white and the answer within 3σ. The runs' elements
-/// of M agree; the turn's test between the speeds flags this seed (χ² 18.8 for 3 degrees of
-/// freedom against 17.7): it compares the runs' levels, which the walk moves between runs and
-/// which only the consider covariance carries (`consistency::turn_test`; one seed in ten of
-/// this cell, none of the default design's).
+/// of M agree (χ² 23.1 for 8 against 27.9); the turn's test between the speeds flags this seed
+/// (18.8 for 3 against 17.7): the walk's wander, which the consider covariance carries, is in
+/// neither test's variance (docs/trust.md, "M changing with speed"; one seed in ten of this
+/// cell, none of the default design's).
 #[test]
 fn a_drift_curve_that_biases_m_gives_way_to_the_free_drift() {
     let (runs, truth) = capture_with(5, &BAR_RATES_DPS, BAR_DURATION_S, &["bias_random_walk"], FullScale::Dps500);
