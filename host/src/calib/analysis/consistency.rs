@@ -16,9 +16,8 @@
 //! numbers where the omnibus test spends nine. So each group is also tested for such a turn
 //! (in a pose with rotation Rᵀ from O2 to the package, M's rows turned by ψ = Rᵀ·φ): the same
 //! score statistic on those three columns, at the family-wise level it shares with the omnibus
-//! test (Bonferroni). A turn too small
-//! for either test still biases M (a turn that is the same at every speed is no different from
-//! M itself; `docs/trust.md`, "What no design can see").
+//! test (Bonferroni). A turn too small for either test still biases M, and a turn that is the
+//! same at every speed is M itself (`docs/trust.md`, "M changing with speed").
 
 use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
 use crate::calib::engine::{full_selection, normal_equations, Fitted, Gram, LinCol, LoopData};
