@@ -154,15 +154,17 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
     for (gi, (_, runs)) in groups.iter().skip(1).enumerate() {
         let mut per_pose = Vec::new();
         for pose in Pose::ALL {
-            let of_pose = runs.iter().filter(|&&r| data.kin.runs[r].pose == pose);
-            let Some(g) = Gram::sum(of_pose.map(|&r| &f.per_run[r])) else { continue };
+            let of_pose: Vec<usize> = runs.iter().copied().filter(|&r| data.kin.runs[r].pose == pose).collect();
+            let Some(&first) = of_pose.first() else { continue };
+            let Some(g) = Gram::sum(of_pose.iter().map(|&r| &f.per_run[r])) else { continue };
             let (ng, bg) = normal_equations(&g, &sel, weights);
             let added = Added::of(&ng, &(bg - &ng * &delta), &m_idx);
             let at = 9 * gi..9 * gi + 9;
             score.rows_mut(at.start, 9).add_assign(&added.score);
             cross.columns_mut(at.start, 9).add_assign(&added.cross);
             own.view_mut((at.start, at.start), (9, 9)).add_assign(&added.own);
-            per_pose.push((added, pose.rotation().transpose()));
+            // The pose's rotation as the runs' kinematics hold it.
+            per_pose.push((added, data.kin.runs[first].rot_t));
         }
         blocks.push(per_pose);
     }
@@ -269,7 +271,8 @@ impl Added {
 /// A turn's change along the table's axis (Rᵀe_z) shows in the run's constant level,
 /// θ2'·r_a·Rᵀe_z, which the offset's wander between runs also moves; the test takes the levels
 /// as the model leaves them (a random walk's share is carried by the consider covariance, not
-/// here; docs/trust.md, "Runs that disagree").
+/// here: the walk's size is read from the residual a turn leaves wander in; docs/trust.md,
+/// "Runs that disagree").
 ///
 /// `per_pose`: the group's block per pose, with its Rᵀ; `chol`: the model's normal matrix.
 /// The rates and the threshold are the caller's to set.
