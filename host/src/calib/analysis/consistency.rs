@@ -272,7 +272,7 @@ impl Added {
 /// θ2'·r_a·Rᵀe_z, which the offset's wander between runs also moves; the test takes the levels
 /// as the model leaves them (a random walk's share is carried by the consider covariance, not
 /// here: the walk's size is read from the residual a turn leaves wander in; docs/trust.md,
-/// "Runs that disagree").
+/// "M changing with speed").
 ///
 /// `per_pose`: the group's block per pose, with its Rᵀ; `chol`: the model's normal matrix.
 /// The rates and the threshold are the caller's to set.
