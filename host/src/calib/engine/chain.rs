@@ -782,14 +782,7 @@ impl<'a> Evaluator<'a> {
         for g in plan.knots.iter().filter(|g| g.stretch == stretch) {
             let x = match (g.spacing_index, knot_x) {
                 (Some(k), Some(x)) => x[k],
-                (Some(k), None) => {
-                    let grid = &self.knot_grid[stretch][k];
-                    (t_s - grid.0) * grid.1
-                }
-                (None, _) => {
-                    let (t0, per_s) = self.data.layout.knot_grid(stretch, g.spacing_s);
-                    (t_s - t0) * per_s
-                }
+                _ => self.knot_place(g, t_s),
             };
             let below = x.floor();
             for k in [below, below + 1.0] {
@@ -802,6 +795,27 @@ impl<'a> Evaluator<'a> {
                 }
             }
         }
+    }
+
+    /// Where time `t_s` sits on group `g`'s grid, in knot spacings from its first knot.
+    #[inline]
+    fn knot_place(&self, g: &KnotGroup, t_s: f64) -> f64 {
+        let (t0, per_s) = match g.spacing_index {
+            Some(k) => self.knot_grid[g.stretch][k],
+            None => self.data.layout.knot_grid(g.stretch, g.spacing_s),
+        };
+        (t_s - t0) * per_s
+    }
+
+    /// Whether every knot of `plan` in stretch `stretch` is a straight line in time from
+    /// `t_first_s` to `t_last_s` (no corner strictly between them): then a sum of n samples'
+    /// knot values there is n times the knots' values at the samples' mean time.
+    #[inline]
+    pub(super) fn knots_straight(&self, plan: &ColPlan, stretch: usize, t_first_s: f64, t_last_s: f64) -> bool {
+        plan.knots
+            .iter()
+            .filter(|g| g.stretch == stretch)
+            .all(|g| self.knot_place(g, t_first_s).floor() == self.knot_place(g, t_last_s).floor())
     }
 
     /// ∂(output of axis a)/∂ω_s, counts per °/s.

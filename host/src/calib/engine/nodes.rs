@@ -3,8 +3,10 @@
 //! one between. Every column but the free drift's knots, and the model's output, is taken at a
 //! sample from the quadratic through the nodes' values (Lagrange's form, in the samples' own
 //! times), so a cell's sums are the quadratic's sums over its samples. The knots, straight
-//! lines in time between their corners, are taken at each sample, as are the residual's eᵀe
-//! and the counts (a clipped sample leaves its axis's cell, as it leaves the samples' sums).
+//! lines in time between their corners, sum over a cell to its count times their values at its
+//! samples' mean time, taken once per cell and axis (sample by sample in the few cells a corner
+//! crosses). The residual's eᵀe and the counts are the samples' own (a clipped sample leaves
+//! its axis's cell, as it leaves the samples' sums).
 //!
 //! The quadratic's error at a sample is about 0.06·(ω·h)³ of a column varying at ω rad/s over
 //! a node spacing of h s (half a cell, 5 ms): 2.5e-7 of the signal at the tables' 0.5 Hz and
@@ -189,9 +191,18 @@ impl<'p, 'a> CellPass<'p, 'a> {
         let mut all_used = true;
         self.knots_all.clear();
         self.knots_axis.iter_mut().for_each(Vec::clear);
+        // Knots are straight lines in time between their corners: where none falls inside the
+        // cell, its samples' knot values sum to their count times the values at their mean
+        // time (per axis, over the samples it uses), so only a cell across a corner takes them
+        // sample by sample.
+        let (ev, plan) = (&self.pass.ev, &self.pass.plan);
+        let knots_per_sample = self.split.is_some()
+            && !ev.knots_straight(plan, stretch, samples.get(cell.start).t_s(), samples.get(cell.end - 1).t_s());
+        let mut t_sum_s = [0.0; 3];
         for i in cell {
             let s = samples.get(i);
-            let w = lagrange.weights(s.t_s() - t0);
+            let dt_s = s.t_s() - t0;
+            let w = lagrange.weights(dt_s);
             let used = s.rate_counts.map(|c| !is_clipped(c));
             all_used &= used == [true; 3];
             for (a, ax) in axes.iter_mut().enumerate().filter(|(a, _)| used[*a]) {
@@ -200,10 +211,11 @@ impl<'p, 'a> CellPass<'p, 'a> {
                 self.local.add_sample(a, e);
                 ax.w.iter_mut().zip(w).for_each(|(s, w)| *s += w);
                 (ax.e, ax.n) = (ax.e + e, ax.n + 1);
+                t_sum_s[a] += dt_s;
             }
-            if self.split.is_some() {
+            if knots_per_sample {
                 let (all, each) = (&mut self.knots_all, &mut self.knots_axis);
-                self.pass.ev.knots_at(&self.pass.plan, stretch, s.t_s(), None, |j, w| {
+                ev.knots_at(plan, stretch, s.t_s(), None, |j, w| {
                     if used == [true; 3] {
                         merge(all, (j, w));
                     } else {
@@ -212,6 +224,12 @@ impl<'p, 'a> CellPass<'p, 'a> {
                         }
                     }
                 });
+            }
+        }
+        if self.split.is_some() && !knots_per_sample {
+            for (a, ax) in axes.iter().enumerate().filter(|(_, ax)| ax.n > 0) {
+                let (n, each) = (f64::from(ax.n), &mut self.knots_axis[a]);
+                ev.knots_at(plan, stretch, t0 + t_sum_s[a] / n, None, |j, w| each.push((j, n * w)));
             }
         }
         self.emit(&axes, all_used);
