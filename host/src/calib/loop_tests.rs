@@ -664,6 +664,47 @@ fn cell_reference(
     g
 }
 
+/// The drift table takes each run's modelled offset at its first valid sample and then at the
+/// first valid sample at least [`DRIFT_TABLE_STEP_S`] after the last it took, each value the
+/// model's offset columns there: 25-s runs give three rows each.
+#[test]
+fn the_drift_table_takes_the_offset_every_step_through_each_run() {
+    use crate::calib::result::report::DRIFT_TABLE_STEP_S;
+    let (runs, _) = capture_with(3, &[180.0], 25.0, &["offset_drift"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    let model =
+        Model::base_for(&data.poses).with(Effect::DriftWarmUp, [vec![30.0], vec![-20.0], vec![10.0]], vec![40.0]);
+    let table = closure::drift_table(&model, &data);
+    let ev = Evaluator::new(&data, &model);
+    assert_eq!(table.len(), data.kin.runs.len());
+    for (r, row) in table.iter().enumerate() {
+        let valid: Vec<usize> = data.runs[r].valid.indices().collect();
+        let t = |i: usize| data.kin.runs[r].samples.get(i).t_s();
+        let mut want = vec![valid[0]];
+        for &i in &valid {
+            if t(i) >= t(*want.last().unwrap()) + DRIFT_TABLE_STEP_S {
+                want.push(i);
+            }
+        }
+        assert_eq!(want.len(), 3, "run {r}");
+        assert_eq!(row.t_s, want.iter().map(|&i| t(i)).collect::<Vec<_>>(), "run {r}");
+        for (k, &i) in want.iter().enumerate() {
+            let p = ev.point(r, i);
+            for a in 0..3 {
+                let offset: f64 = model
+                    .lin
+                    .iter()
+                    .zip(&model.beta[a])
+                    .filter(|(c, _)| c.is_offset())
+                    .map(|(&c, b)| b * ev.lin_value(c, &p, a))
+                    .sum();
+                assert_eq!(row.offset_counts[a][k], offset, "run {r}, axis {a}, row {k}");
+            }
+            assert_eq!(row.temp_c[k], p.temp_c, "run {r}, row {k}");
+        }
+    }
+}
+
 /// Whether `col` is one of the free drift's knots.
 fn is_knot(col: &Col) -> bool {
     matches!(col, Col::Lin(LinCol::DriftKnot { .. }))

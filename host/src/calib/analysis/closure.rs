@@ -695,7 +695,7 @@ impl Context<'_> {
 
 /// The offset the model's drift gives through every run, every [`DRIFT_TABLE_STEP_S`] (empty
 /// without a drift model), for export with the calibration.
-fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
+pub(crate) fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
     if !m.effects.iter().any(|e| e.is_drift()) {
         return Vec::new();
     }
@@ -711,10 +711,11 @@ fn drift_table(m: &Model, data: &LoopData) -> Vec<RunDrift> {
         };
         let mut next_s = f64::NEG_INFINITY;
         for i in data.runs[r].valid.indices() {
-            let p = ev.point(r, i);
-            if p.t_s < next_s {
+            // The chain only at the samples the table keeps: the sample's own time says which.
+            if rk.samples.get(i).t_s() < next_s {
                 continue;
             }
+            let p = ev.point(r, i);
             next_s = p.t_s + DRIFT_TABLE_STEP_S;
             row.t_s.push(p.t_s);
             row.temp_c.push(p.temp_c);
