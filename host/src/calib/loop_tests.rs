@@ -5,7 +5,7 @@ use crate::calib::analysis::closure;
 use crate::calib::analysis::closure::Note;
 use crate::calib::analysis::diagnostics::FindingKind;
 use crate::calib::data::kinematics;
-use crate::calib::engine::{Col, Evaluator, Gram, LinCol, LoopData, Model, SharedPar};
+use crate::calib::engine::{cells::CellForm, Col, Evaluator, Gram, LinCol, LoopData, Model, SharedPar};
 use crate::calib::result::truth_check::TruthErrors;
 use crate::capture::{decode, Run};
 use crate::geometry::Pose;
@@ -466,7 +466,7 @@ fn a_runs_sums_leave_out_the_columns_of_other_runs() {
     let ev = Evaluator::for_columns(&data, &model, &cols);
     assert!(data.kin.runs.len() >= 2);
     for (r, rk) in data.kin.runs.iter().enumerate() {
-        let want = cell_reference(&data, (&ev, &cols), r, (1, CHUNK), false);
+        let want = cell_reference(&data, (&ev, &cols), r, (CellForm { size: 1, intervals: 0 }, CHUNK), false);
         let g = &got[r];
         assert_eq!(g.n, want.n);
         let outside: Vec<usize> = (0..l).filter(|&i| !cols[i].in_run(r, rk.pose)).collect();
@@ -495,9 +495,10 @@ fn a_runs_sums_leave_out_the_columns_of_other_runs() {
 }
 
 /// A pass in cells sums, within each chunk of the pass, each stretch of consecutive valid
-/// samples in cells of eight (the last of a stretch shorter), the chain taken at three nodes per
-/// cell (its first sample, the next cell's first or its own last, and the one midway) and at each
-/// sample from the quadratic through them: XᵀX and Xᵀe are those of each cell's sums over the
+/// samples in cells (the last of a stretch shorter): of 32 samples with the chain taken at five
+/// nodes where every column varies slowly (the base model), else of eight at three nodes (its
+/// first sample, the next cell's first or its own last, and equal parts between), and at each
+/// sample from the polynomial through them: XᵀX and Xᵀe are those of each cell's sums over the
 /// root of its count, eᵀe and the counts the samples' own (to 1e-12 of each entry's scale). The
 /// base model without the delay (every column axis-independent: one row for the three axes),
 /// the model with it and every candidate but the free drift's (a row per axis), and with every
@@ -519,15 +520,18 @@ fn a_pass_in_cells_sums_the_quadratic_through_its_nodes() {
         let extra = cands.iter().filter(|c| knots || !c.effect.is_free_drift()).flat_map(|c| c.cols.iter().copied());
         model.cols().into_iter().chain(extra).collect()
     };
-    for (model, cols) in [(&base, base.cols()), (&model, with(false)), (&model, with(true))] {
+    // The base model varies at the turn rate (0.5 Hz): long cells, 32 samples, five nodes. The
+    // candidates reach 49× (24.5 Hz): short cells, eight samples, three nodes.
+    let long = CellForm { size: 32, intervals: 4 };
+    let short = CellForm { size: 8, intervals: 2 };
+    for (model, cols, form) in [(&base, base.cols(), long), (&model, with(false), short), (&model, with(true), short)] {
         let l = cols.len();
         let got = accumulate_pairs(&data, model, &cols, &Reach::all(l), Cells::Span);
         let ev = Evaluator::for_columns(&data, model, &cols);
         for (r, rk) in data.kin.runs.iter().enumerate() {
-            let size = Cells::Span.rows(rk.sample_rate_hz);
-            assert_eq!(size, 8);
-            let want = cell_reference(&data, (&ev, &cols), r, (size, CHUNK), true);
-            let samples = cell_reference(&data, (&ev, &cols), r, (size, CHUNK), false);
+            assert_eq!(rk.sample_rate_hz, 800.0);
+            let want = cell_reference(&data, (&ev, &cols), r, (form, CHUNK), true);
+            let samples = cell_reference(&data, (&ev, &cols), r, (form, CHUNK), false);
             for (g, (w, tol)) in [(&got[r], (&want, 1e-12)), (&got[r], (&samples, 5e-3))] {
                 assert_eq!(g.n, w.n, "run {r}: every sample counted once");
                 for a in 0..3 {
@@ -596,9 +600,10 @@ fn cell_reference(
     data: &LoopData,
     (ev, cols): (&Evaluator, &[Col]),
     r: usize,
-    (size, chunk): (usize, usize),
+    (form, chunk): (CellForm, usize),
     through_nodes: bool,
 ) -> Gram {
+    let size = form.size;
     let (rk, l) = (&data.kin.runs[r], cols.len());
     let mut g = Gram {
         l,
@@ -621,11 +626,10 @@ fn cell_reference(
                 };
                 let (mut sx, mut se, mut m) = (vec![0.0; 3 * l], [0.0; 3], 0.0);
                 for &i in cell {
-                    let nodes: Vec<usize> = match (through_nodes, last - first) {
-                        (false, _) => vec![i],
-                        (true, 0) => vec![first],
-                        (true, 1) => vec![first, last],
-                        (true, _) => vec![first, (first + last) / 2, last],
+                    let q = form.intervals.min(last - first);
+                    let nodes: Vec<usize> = match through_nodes {
+                        false => vec![i],
+                        true => (0..=q).map(|j| first + (j * (last - first)).checked_div(q).unwrap_or(0)).collect(),
                     };
                     let t = |i: usize| rk.samples.get(i).t_s();
                     let weight = |j: usize, x: f64| -> f64 {

@@ -99,6 +99,11 @@ impl Behaviour for DriftKnots {
     /// drifts (a random walk three times the default left run offsets between 40-s knots,
     /// flagged on both seeds of the trust bench's default-design cell). It replaces what it
     /// holds (`selection::replaced_by_free_drift`).
+    /// An offset drifts over seconds to minutes, not with the turn.
+    fn turn_multiple(&self) -> u32 {
+        0
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.drift && !s.current.iter().any(|e| matches!(e, Effect::DriftKnots(sp) if *sp <= self.0))
     }

@@ -62,6 +62,11 @@ impl Behaviour for DriftPolynomial {
         None
     }
 
+    /// An offset drifts over seconds to minutes, not with the turn.
+    fn turn_multiple(&self) -> u32 {
+        0
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.drift && !s.has_drift()
     }

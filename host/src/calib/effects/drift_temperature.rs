@@ -58,6 +58,11 @@ impl Behaviour for DriftTemperature {
         None
     }
 
+    /// An offset drifts over seconds to minutes, not with the turn.
+    fn turn_multiple(&self) -> u32 {
+        0
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.drift && !s.has_drift() && (s.temp_spread_c)() >= MIN_TEMPERATURE_SPREAD_C
     }

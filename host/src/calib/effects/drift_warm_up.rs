@@ -76,6 +76,11 @@ impl Behaviour for DriftWarmUp {
         None
     }
 
+    /// An offset drifts over seconds to minutes, not with the turn.
+    fn turn_multiple(&self) -> u32 {
+        0
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.drift && !s.has_drift()
     }

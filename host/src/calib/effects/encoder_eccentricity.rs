@@ -132,6 +132,11 @@ impl Behaviour for EncoderError {
     }
 
     /// When the residual shows structure at 1× or at the ripple's line (2×, or 3× for order 2).
+    /// The angle error at n× of θ1 ripples the in-plane sinusoid into lines at (n ± 1)×.
+    fn turn_multiple(&self) -> u32 {
+        u32::from(self.0) + 1
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         let line = usize::from(self.0) + 1;
         (s.evidence.orders[1] || s.evidence.orders[line]) && !s.has(self.effect())

@@ -149,6 +149,14 @@ pub trait Behaviour {
         None
     }
 
+    /// The highest multiple of the turn rate (the faster of the base's and the sensor table's)
+    /// at which its columns and its Jacobians vary appreciably: how long a pass's cells may be
+    /// ([`crate::calib::engine::cells`]). By default 2: a lab-fixed quantity seen through both
+    /// turns varies at the sum of their rates, twice the turn rate on a 1:1 gear.
+    fn turn_multiple(&self) -> u32 {
+        2
+    }
+
     /// The forms it is tried in: by default its own columns, once.
     fn trials(&self, layout: &Layout) -> Vec<Trial> {
         let (lin, shared) = self.params(layout);
@@ -256,6 +264,11 @@ impl Effect {
     /// What it means physically, as the report says it.
     pub fn meaning(self) -> &'static str {
         self.behaviour(|b| b.meaning())
+    }
+
+    /// [`Behaviour::turn_multiple`].
+    pub fn turn_multiple(self) -> u32 {
+        self.behaviour(|b| b.turn_multiple())
     }
 
     /// What separates it from the rest of the model.

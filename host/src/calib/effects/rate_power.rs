@@ -101,6 +101,11 @@ impl Behaviour for RatePower {
         })
     }
 
+    /// rⁿ of the axis's rate, a sinusoid at the turn rate about a constant, has lines up to n×.
+    fn turn_multiple(&self) -> u32 {
+        u32::from(self.0)
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.rate_scale && !s.has(Effect::RatePower(self.0))
     }

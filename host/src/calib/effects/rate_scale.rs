@@ -70,6 +70,11 @@ impl Behaviour for RateScale {
         })
     }
 
+    /// r·|r| of a sinusoid about a constant has a 3× line, |r| lines at 2× and 4× falling as 1/n².
+    fn turn_multiple(&self) -> u32 {
+        3
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.rate_scale && !s.has(Effect::RateScale)
     }

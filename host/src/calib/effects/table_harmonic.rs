@@ -145,6 +145,11 @@ impl Behaviour for TableHarmonic {
     }
 
     /// When the residual shows its order.
+    /// The angle error at n× of θ2 ripples the in-plane sinusoid into lines at (n ± 1)×.
+    fn turn_multiple(&self) -> u32 {
+        self.0 + 1
+    }
+
     fn candidate(&self, s: &Situation) -> bool {
         s.evidence.orders.get(self.0 as usize) == Some(&true) && !s.has(Effect::TableHarmonic(self.0))
     }

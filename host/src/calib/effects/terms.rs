@@ -109,6 +109,17 @@ pub enum Col {
 }
 
 impl Col {
+    /// The highest multiple of the turn rate at which it varies ([`super::Behaviour::turn_multiple`]):
+    /// ω_s (eq. 2: θ1'·z1 turning with θ2, θ2'·z2 fixed) at the turn rate, the offset and the
+    /// drift's knots and fixed warm-ups not with the turn.
+    pub fn turn_multiple(self) -> u32 {
+        match self {
+            Col::Lin(LinCol::Omega(_)) => 1,
+            Col::Lin(LinCol::One | LinCol::DriftExpFixed(_) | LinCol::DriftKnot { .. }) => 0,
+            Col::Lin(LinCol::Of(e, _)) | Col::Shared(SharedPar { effect: e, .. }) => e.turn_multiple(),
+        }
+    }
+
     /// Whether it can be non-zero in run `run`, of pose `pose`.
     pub fn in_run(self, run: usize, pose: Pose) -> bool {
         match self {

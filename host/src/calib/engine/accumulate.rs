@@ -41,9 +41,9 @@ pub fn accumulate_pairs(data: &LoopData, model: &Model, cols: &[Col], reach: &Re
 
 /// The sums of run `r` of `pass`, sample by sample or in `cells`.
 fn run_sums(pass: &Pass, r: usize, cells: Cells) -> Gram {
-    match cells.rows(pass.data.kin.runs[r].sample_rate_hz) {
-        1 => sample_sums(pass, r),
-        size => super::nodes::cell_sums(pass, r, size),
+    match pass.cell_form(r, cells) {
+        form if form.size == 1 => sample_sums(pass, r),
+        form => super::nodes::cell_sums(pass, r, form),
     }
 }
 

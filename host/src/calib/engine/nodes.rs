@@ -1,22 +1,25 @@
-//! A pass in cells ([`super::cells`]) with the chain evaluated at three nodes per cell, not at
+//! A pass in cells ([`super::cells`]) with the chain evaluated at a few nodes per cell, not at
 //! every sample: the first sample, the next cell's first (the last of a stretch's last cell) and
-//! one between. Every column but the free drift's knots, and the model's output, is taken at a
-//! sample from the quadratic through the nodes' values (Lagrange's form, in the samples' own
-//! times), so a cell's sums are the quadratic's sums over its samples. The knots, straight
+//! one (a short cell) or three (a long one) equally spaced between. Every column but the free
+//! drift's knots, and the model's output, is taken at a sample from the polynomial through the
+//! nodes' values (Lagrange's form, in the samples' own times), so a cell's sums are the
+//! polynomial's sums over its samples. The knots, straight
 //! lines in time between their corners, sum over a cell to its count times their values at its
 //! samples' mean time, taken once per cell and axis (sample by sample in the few cells a corner
 //! crosses). The residual's eᵀe and the counts are the samples' own (a clipped sample leaves
 //! its axis's cell, as it leaves the samples' sums).
 //!
 //! The quadratic's error at a sample is about 0.06·(ω·h)³ of a column varying at ω rad/s over
-//! a node spacing of h s (half a cell, 5 ms): 2.5e-7 of the signal at the tables' 0.5 Hz and
-//! 3e-3 of a harmonic at 12 Hz (a 12-pole gear's 24× mesh at 180 °/s), well inside the
-//! information a cell loses anyway. Consecutive cells share their bounding node, so a cell
-//! costs two evaluations of the chain where its samples would cost eight.
+//! a node spacing of h s (half a short cell, 5 ms): 2.5e-7 of the signal at the tables' 0.5 Hz
+//! and 3e-3 of a harmonic at 12 Hz (a 12-pole gear's 24× mesh at 180 °/s), well inside the
+//! information a cell loses anyway; the quartic's through a long cell's five nodes 10 ms apart
+//! about 0.03·(ω·h)⁵, 1e-9 at 0.5 Hz and 1e-5 at 2 Hz. Consecutive cells share their bounding
+//! node, so a short cell costs two evaluations of the chain where its samples would cost eight,
+//! a long one four where they would cost 32.
 
 use std::ops::Range;
 
-use super::cells::Cells;
+use super::cells::CellForm;
 use super::chain::Evaluator;
 use super::loop_data::LoopData;
 use super::pass::Pass;
@@ -25,21 +28,25 @@ use crate::calib::data::kinematics::KinSample;
 use crate::calib::effects::terms::Point;
 use crate::calib::result::axes::is_clipped;
 
-/// The polynomial through one to three nodes, as weights on the nodes' values at any time.
+/// The most nodes a cell has: a long cell's five.
+const MAX_NODES: usize = 5;
+
+/// The polynomial through one to [`MAX_NODES`] nodes, as weights on the nodes' values at any
+/// time.
 #[derive(Debug, Clone, Copy)]
 struct Lagrange {
     k: usize,
-    t_s: [f64; 3],
+    t_s: [f64; MAX_NODES],
     /// 1 / Π (t_j − t_q) over the other nodes q.
-    inv: [f64; 3],
+    inv: [f64; MAX_NODES],
 }
 
 impl Lagrange {
     /// Through nodes at distinct times `t_s` (s, from an origin near them).
     fn new(t_s: &[f64]) -> Self {
         let k = t_s.len();
-        debug_assert!((1..=3).contains(&k));
-        let mut at = [0.0; 3];
+        debug_assert!((1..=MAX_NODES).contains(&k));
+        let mut at = [0.0; MAX_NODES];
         at[..k].copy_from_slice(t_s);
         let inv = std::array::from_fn(|j| {
             let d: f64 = (0..k).filter(|&q| q != j).map(|q| at[j] - at[q]).product();
@@ -52,15 +59,34 @@ impl Lagrange {
         Self { k, t_s: at, inv }
     }
 
-    /// The weight of each node's value in the polynomial's value at `t_s`.
+    /// The weight of each node's value in the polynomial's value at `t_s` (0 past the k-th).
     #[inline]
-    fn weights(&self, t_s: f64) -> [f64; 3] {
+    fn weights(&self, t_s: f64) -> [f64; MAX_NODES] {
         let d = self.t_s.map(|t| t_s - t);
+        let mut w = [0.0; MAX_NODES];
         match self.k {
-            3 => [d[1] * d[2] * self.inv[0], d[0] * d[2] * self.inv[1], d[0] * d[1] * self.inv[2]],
-            2 => [d[1] * self.inv[0], d[0] * self.inv[1], 0.0],
-            _ => [1.0, 0.0, 0.0],
+            3 => w[..3].copy_from_slice(&[
+                d[1] * d[2] * self.inv[0],
+                d[0] * d[2] * self.inv[1],
+                d[0] * d[1] * self.inv[2],
+            ]),
+            2 => w[..2].copy_from_slice(&[d[1] * self.inv[0], d[0] * self.inv[1]]),
+            1 => w[0] = 1.0,
+            k => {
+                // Π over the other nodes as the product of those before and those after.
+                let mut before = 1.0;
+                for j in 0..k {
+                    w[j] = before * self.inv[j];
+                    before *= d[j];
+                }
+                let mut after = 1.0;
+                for j in (0..k).rev() {
+                    w[j] *= after;
+                    after *= d[j];
+                }
+            }
         }
+        w
     }
 }
 
@@ -101,7 +127,7 @@ impl Node {
 /// What one axis of a cell has summed: its samples' node weights and residuals, and how many.
 #[derive(Debug, Clone, Copy, Default)]
 struct AxisCell {
-    w: [f64; 3],
+    w: [f64; MAX_NODES],
     e: f64,
     n: u32,
 }
@@ -119,7 +145,9 @@ fn merge(list: &mut Vec<(usize, f64)>, (j, w): (usize, f64)) {
 struct CellPass<'p, 'a> {
     pass: &'p Pass<'a>,
     r: usize,
-    nodes: [Node; 3],
+    /// Intervals between a cell's nodes ([`CellForm::intervals`]).
+    intervals: usize,
+    nodes: [Node; MAX_NODES],
     /// Nodes of the last cell.
     k: usize,
     total: Gram,
@@ -139,11 +167,12 @@ struct CellPass<'p, 'a> {
 }
 
 impl<'p, 'a> CellPass<'p, 'a> {
-    fn new(pass: &'p Pass<'a>, r: usize) -> Self {
+    fn new(pass: &'p Pass<'a>, r: usize, intervals: usize) -> Self {
         let l = pass.reach.0.len();
         Self {
             pass,
             r,
+            intervals,
             nodes: std::array::from_fn(|_| Node::new()),
             k: 0,
             total: Gram::new(l),
@@ -164,7 +193,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
     /// The nodes of the cell of samples `cell` in a stretch of consecutive samples ending at
     /// `stretch_end` ([`node_samples`]); the first is the last cell's last when they meet.
     fn place_nodes(&mut self, cell: &Range<usize>, stretch_end: usize) {
-        let (idx, k) = node_samples(cell, stretch_end);
+        let (idx, k) = node_samples(cell, stretch_end, self.intervals);
         let (first, at) = (idx[0], &idx[..k]);
         let samples = &self.pass.data.kin.runs[self.r].samples;
         if self.k > 0 && self.nodes[self.k - 1].i == first {
@@ -183,7 +212,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
         self.place_nodes(&cell, stretch_end);
         let (nodes, k) = (&self.nodes, self.k);
         let t0 = nodes[0].t_s;
-        let times: [f64; 3] = std::array::from_fn(|j| nodes[j].t_s - t0);
+        let times: [f64; MAX_NODES] = std::array::from_fn(|j| nodes[j].t_s - t0);
         let lagrange = Lagrange::new(&times[..k]);
         let samples = &self.pass.data.kin.runs[self.r].samples;
         let stretch = self.pass.data.layout.run_stretch[self.r];
@@ -275,7 +304,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
     }
 
     /// Σ_j w_j·(the values `of` node j) into `row`.
-    fn combine(&mut self, w: [f64; 3], of: impl Fn(&Node) -> &Vec<f64>) {
+    fn combine(&mut self, w: [f64; MAX_NODES], of: impl Fn(&Node) -> &Vec<f64>) {
         let k = self.k;
         self.row.clear();
         self.row.extend_from_slice(of(&self.nodes[0]));
@@ -310,11 +339,11 @@ impl<'p, 'a> CellPass<'p, 'a> {
     }
 }
 
-/// The sums of run `r` in cells of `size` samples: within each chunk of [`CHUNK`] samples, each
+/// The sums of run `r` in cells of `form`: within each chunk of [`CHUNK`] samples, each
 /// stretch of consecutive valid samples cut into cells from its start (the last shorter).
-pub(super) fn cell_sums(pass: &Pass, r: usize, size: usize) -> Gram {
-    let n = pass.data.kin.runs[r].samples.len();
-    let mut cp = CellPass::new(pass, r);
+pub(super) fn cell_sums(pass: &Pass, r: usize, form: CellForm) -> Gram {
+    let (n, size) = (pass.data.kin.runs[r].samples.len(), form.size);
+    let mut cp = CellPass::new(pass, r, form.intervals);
     for start in (0..n).step_by(CHUNK) {
         for stretch in pass.data.runs[r].valid.ranges_in(start, (start + CHUNK).min(n)) {
             for cell in cells_of(&stretch, size) {
@@ -334,15 +363,18 @@ fn cells_of(stretch: &Range<usize>, size: usize) -> impl Iterator<Item = Range<u
 }
 
 /// Where a cell of samples `cell`, in a stretch of consecutive samples ending at `stretch_end`,
-/// takes its nodes: its first sample, the next cell's first (or its own last), and the one
-/// midway; fewer when it has fewer samples.
-fn node_samples(cell: &Range<usize>, stretch_end: usize) -> ([usize; 3], usize) {
+/// takes its nodes: its first sample, the next cell's first (or its own last), and between them
+/// the samples that cut the span into `intervals` equal parts (rounded down); fewer when it has
+/// fewer samples.
+fn node_samples(cell: &Range<usize>, stretch_end: usize, intervals: usize) -> ([usize; MAX_NODES], usize) {
     let (first, last) = (cell.start, if cell.end < stretch_end { cell.end } else { cell.end - 1 });
-    match last - first {
-        0 => ([first; 3], 1),
-        1 => ([first, last, last], 2),
-        _ => ([first, (first + last) / 2, last], 3),
+    let q = intervals.min(last - first).min(MAX_NODES - 1);
+    let mut idx = [last; MAX_NODES];
+    for (j, i) in idx.iter_mut().enumerate().take(q) {
+        *i = first + j * (last - first) / q;
     }
+    idx[0] = first;
+    (idx, q + 1)
 }
 
 /// Visits the valid samples of run `r` in order, each with `values` (a few numbers of the chain
@@ -357,23 +389,23 @@ pub fn for_each_interpolated<const K: usize>(
     mut visit: impl FnMut(usize, KinSample, [f64; K]),
 ) {
     let samples = &data.kin.runs[r].samples;
-    let size = Cells::Span.rows(data.kin.runs[r].sample_rate_hz);
+    let CellForm { size, intervals } = CellForm::short(data.kin.runs[r].sample_rate_hz);
     let mut at = |i: usize| -> (usize, f64, [f64; K]) {
         let s = samples.get(i);
         (i, s.t_s(), values(&ev.point_with(r, i, s)))
     };
-    let mut nodes: [(usize, f64, [f64; K]); 3] = [(usize::MAX, 0.0, [0.0; K]); 3];
+    let mut nodes: [(usize, f64, [f64; K]); MAX_NODES] = [(usize::MAX, 0.0, [0.0; K]); MAX_NODES];
     let mut k = 0;
     for stretch in data.runs[r].valid.ranges_in(0, samples.len()) {
         for cell in cells_of(&stretch, size) {
-            let (idx, kn) = node_samples(&cell, stretch.end);
+            let (idx, kn) = node_samples(&cell, stretch.end, intervals);
             nodes[0] = if k > 0 && nodes[k - 1].0 == idx[0] { nodes[k - 1] } else { at(idx[0]) };
             for j in 1..kn {
                 nodes[j] = at(idx[j]);
             }
             k = kn;
             let t0 = nodes[0].1;
-            let times: [f64; 3] = std::array::from_fn(|j| nodes[j].1 - t0);
+            let times: [f64; MAX_NODES] = std::array::from_fn(|j| nodes[j].1 - t0);
             let lagrange = Lagrange::new(&times[..k]);
             for i in cell.clone() {
                 let s = samples.get(i);
@@ -386,7 +418,7 @@ pub fn for_each_interpolated<const K: usize>(
 
 #[cfg(test)]
 mod tests {
-    use super::Lagrange;
+    use super::{node_samples, Lagrange};
 
     /// The weights reproduce any quadratic through three nodes, a line through two, a constant
     /// through one.
@@ -403,6 +435,34 @@ mod tests {
         let line = Lagrange::new(&[0.0, 0.00125]);
         let w = line.weights(0.0005);
         assert!((w[0] - 0.6).abs() < 1e-12 && (w[1] - 0.4).abs() < 1e-12 && w[2] == 0.0, "{w:?}");
-        assert_eq!(Lagrange::new(&[0.0]).weights(0.3), [1.0, 0.0, 0.0]);
+        assert_eq!(Lagrange::new(&[0.0]).weights(0.3), [1.0, 0.0, 0.0, 0.0, 0.0]);
+    }
+
+    /// Four and five nodes reproduce a cubic and a quartic, the weights summing to one.
+    #[test]
+    fn more_nodes_give_the_polynomial_of_higher_degree() {
+        let quartic = |t: f64| 1.0 - 40.0 * t + 900.0 * t * t - 2e4 * t.powi(3) + 3e5 * t.powi(4);
+        for nodes in [&[0.0, 0.01, 0.02, 0.03][..], &[0.0, 0.01, 0.02, 0.03, 0.04]] {
+            let lagrange = Lagrange::new(nodes);
+            let f = |t: f64| if nodes.len() == 5 { quartic(t) } else { quartic(t) - 3e5 * t.powi(4) };
+            for t in [0.0, 0.0037, 0.015, 0.029, 0.04] {
+                let w = lagrange.weights(t);
+                let got: f64 = nodes.iter().zip(w).map(|(&tn, wj)| wj * f(tn)).sum();
+                assert!((got - f(t)).abs() < 1e-10, "{} nodes at {t}: {got} against {}", nodes.len(), f(t));
+                assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+                assert!(w[nodes.len()..].iter().all(|&x| x == 0.0));
+            }
+        }
+    }
+
+    /// A cell's nodes: its first sample, equal parts to the next cell's first (its own last at a
+    /// stretch's end), fewer where it has fewer samples.
+    #[test]
+    fn a_cells_nodes_cut_it_into_equal_parts() {
+        assert_eq!(node_samples(&(0..32), 100, 4), ([0, 8, 16, 24, 32], 5));
+        assert_eq!(node_samples(&(0..8), 100, 2), ([0, 4, 8, 8, 8], 3));
+        assert_eq!(node_samples(&(96..100), 100, 4), ([96, 97, 98, 99, 99], 4));
+        assert_eq!(node_samples(&(10..12), 12, 4), ([10, 11, 11, 11, 11], 2));
+        assert_eq!(node_samples(&(10..11), 11, 2), ([10, 10, 10, 10, 10], 1));
     }
 }

@@ -1,6 +1,7 @@
 //! What a pass fixes before it visits the samples ([`Pass`]): the evaluator of the chain at the
 //! model, the columns' plan, and how the model's output is reckoned at a point.
 
+use super::cells::{CellForm, Cells};
 use super::chain::{ColPlan, Evaluator};
 use super::loop_data::LoopData;
 use super::model::Model;
@@ -22,6 +23,9 @@ pub(super) struct Pass<'a> {
     /// Whether every coefficient of the model is zero (the linear fit's one pass, from zero):
     /// it predicts an exact 0 at every point, Σ 0·x over finite columns.
     predicts_zero: bool,
+    /// The highest multiple of the turn rate at which a column of the pass or of the model
+    /// varies ([`Col::turn_multiple`]).
+    turn_multiple: u32,
 }
 
 impl<'a> Pass<'a> {
@@ -34,7 +38,15 @@ impl<'a> Pass<'a> {
         let model_leads = ev.lin_plan.dense.len() <= plan.dense.len()
             && ev.lin_plan.dense.iter().zip(&plan.dense).all(|(m, c)| m.1 == c.1);
         let predicts_zero = model.beta.iter().flatten().all(|&b| b == 0.0);
-        Self { data, ev, plan, reach, dense, model_leads, predicts_zero }
+        let turn_multiple = cols.iter().chain(&model.cols()).map(|c| c.turn_multiple()).max().unwrap_or(0);
+        Self { data, ev, plan, reach, dense, model_leads, predicts_zero, turn_multiple }
+    }
+
+    /// The cells of run `r` (`cells`): long where every column varies slowly enough at its speed.
+    pub(super) fn cell_form(&self, r: usize, cells: Cells) -> CellForm {
+        let rk = &self.data.kin.runs[r];
+        let turn_hz = rk.steady_rate_dps.abs() * rk.gear_ratio.abs().max(1.0) / 360.0;
+        cells.form(rk.sample_rate_hz, f64::from(self.turn_multiple) * turn_hz)
     }
 
     /// The model's output on the three axes at `p`, whose values of the plan's
