@@ -27,7 +27,7 @@ use crate::calib::engine::{
 };
 use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
 use crate::calib::result::derived::derive;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SymmetricTridiagonal};
 use serde::{Deserialize, Serialize};
 
 /// Information, in units of the prior (an effect of one σ along the direction gives this Δχ²),
@@ -326,7 +326,8 @@ pub fn consider(
         let threshold = |dof: usize| chi2_upper_quantile(dof, alpha / cands.len() as f64);
         let mut tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
         let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
-        let Some(mut whitened) = whiten(&info, &grad, &sd) else { continue };
+        let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
+        let Some(mut whitened) = whiten(&info, &grad, &sd, &s12) else { continue };
         if !c.walk.is_empty() {
             // A walk's size is read from the data (its scale's upper bound), every direction
             // counted at it: no test of hundreds of steps speaks for any one of them.
@@ -336,12 +337,10 @@ pub fn consider(
             source = format!("{source}, times {scale:.2}: as large as the residual's own wander allows (95 % bound)");
             tried = None;
         }
-        let (factor, lambdas) = posterior(&whitened, tried);
+        let (along, lambdas) = posterior(&whitened, tried);
         if lambdas.is_empty() {
             continue;
         }
-        let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
-        let along = &s12 * factor;
         let added = &along * along.transpose();
         let (axes, _) = derive(params, &added, nominal);
         let term = ConsiderTerm {
@@ -398,7 +397,7 @@ const WALK_BOUND_DROP: f64 = 1.353;
 /// A gyro whose residual shows no wander carries a fraction of the datasheet-sized walk, one
 /// that shows more carries more.
 fn walk_scale(w: &Whitened) -> Option<f64> {
-    let seen: Vec<(f64, f64)> = (0..w.sd.len())
+    let seen: Vec<(f64, f64)> = (0..w.eigenvalues.len())
         .filter(|&i| w.eigenvalues[i] > 1e-9)
         .map(|i| (w.eigenvalues[i], w.projections[i].powi(2)))
         .collect();
@@ -475,16 +474,16 @@ fn max3(v: [f64; 3]) -> f64 {
     v.into_iter().fold(0.0, f64::max)
 }
 
-/// A factor F of the covariance F·Fᵀ (posterior variance plus the square of the posterior
-/// mean) of an effect's parameters in the directions the runs do not separate, from its
-/// partial information and the residual's gradient along its columns, whitened by its prior
-/// σs (`w`); with those directions' information λ. An effect the loop did not try (`tried`
+/// The estimate's sensitivity times a factor F of the covariance F·Fᵀ (posterior variance plus
+/// the square of the posterior mean) of an effect's parameters in the directions the runs do not
+/// separate, from its partial information and the residual's gradient along its columns,
+/// whitened by its prior σs (`w`); with those directions' information λ. An effect the loop did not try (`tried`
 /// None) has every direction counted: no test ruled out what the runs see of it, and its
 /// posterior mean is what they say it is. One it tried (`tried` the loop's χ² threshold for a
 /// number of degrees of freedom) has its separated directions left to the test, unless the
 /// residual's score along them passes that threshold.
 fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
-    let n = w.sd.len();
+    let n = w.eigenvalues.len();
     let lambdas: Vec<f64> = w.eigenvalues.iter().map(|l| l.max(0.0)).collect();
     // A direction the loop's test of the whole effect would see at plausible size with 95 %
     // power; the test's silence speaks for no other.
@@ -499,70 +498,149 @@ fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64
     let kept: Vec<usize> = (0..n).filter(|&i| !(tested && lambdas[i] >= seen)).collect();
     // F = diag(sd)·[U·diag(1/√(1 + λ)), U·diag(1/(1 + λ))·(Uᵀg)] over the kept directions: the
     // covariance diag(sd)·(Σ u uᵀ/(1 + λ) + m mᵀ)·diag(sd) with m = Σ u (u·g)/(1 + λ). Only its
-    // product with the estimate's sensitivity is wanted, and a walk has hundreds of directions:
-    // the n × n covariance itself was an n³ product.
-    let mut factor = DMatrix::zeros(n, kept.len() + 1);
+    // product with the estimate's sensitivity S is wanted (`w.rows` = S·diag(sd)·U), and a walk
+    // has hundreds of directions: the n × n covariance itself was an n³ product.
+    let mut along = DMatrix::zeros(w.rows.nrows(), kept.len() + 1);
     for (c, &i) in kept.iter().enumerate() {
         let shrink = 1.0 / (1.0 + lambdas[i]);
-        let (root, along) = (shrink.sqrt(), shrink * w.projections[i]);
-        for r in 0..n {
-            let u = w.vectors[(r, i)] * w.sd[r];
-            factor[(r, c)] = u * root;
-            factor[(r, kept.len())] += u * along;
+        let (root, mean) = (shrink.sqrt(), shrink * w.projections[i]);
+        for r in 0..w.rows.nrows() {
+            let u = w.rows[(r, i)];
+            along[(r, c)] = u * root;
+            along[(r, kept.len())] += u * mean;
         }
     }
-    (factor, kept.iter().map(|&i| lambdas[i]).collect())
+    (along, kept.iter().map(|&i| lambdas[i]).collect())
 }
 
 /// An effect's partial information and the residual's gradient in units of its prior σs: the
-/// eigen-decomposition of diag(sd)·info·diag(sd) and the whitened gradient's projection on each
-/// eigenvector. [`walk_scale`] and [`posterior`] both read it.
+/// eigenvalues of diag(sd)·info·diag(sd), the whitened gradient's projection on each
+/// eigenvector and the estimate's sensitivity to a step along each. [`walk_scale`] and
+/// [`posterior`] both read it.
 struct Whitened {
-    sd: Vec<f64>,
     eigenvalues: DVector<f64>,
-    vectors: DMatrix<f64>,
+    /// S·diag(sd)·U: the estimate's move per whitened unit along each eigenvector (S the
+    /// estimate's sensitivity to the effect's parameters, U the eigenvectors).
+    rows: DMatrix<f64>,
     projections: Vec<f64>,
 }
 
-/// [`Whitened`] of `info`, `grad` and prior σs `sd`; None when any is not finite.
-fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whitened> {
-    let n = sd.len();
+/// [`Whitened`] of `info`, `grad` and prior σs `sd`, for an estimate of sensitivity `sens` to the
+/// effect's parameters; None when any is not finite.
+fn whiten(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64], sens: &DMatrix<f64>) -> Option<Whitened> {
+    let (n, p) = (sd.len(), sens.nrows());
     let w = DMatrix::from_fn(n, n, |r, c| 0.5 * (info[(r, c)] + info[(c, r)]) * sd[r] * sd[c]);
-    if w.iter().chain(grad.iter()).any(|v| !v.is_finite()) {
+    if w.iter().chain(grad.iter()).chain(sens.iter()).any(|v| !v.is_finite()) {
         return None;
     }
-    let (eigenvalues, vectors) = block_eigen(w);
-    let g_w = DVector::from_fn(n, |r, _| grad[r] * sd[r]);
-    let projections = (0..n).map(|i| vectors.column(i).dot(&g_w)).collect();
-    Some(Whitened { sd: sd.to_vec(), eigenvalues, vectors, projections })
+    // The rows the eigenvectors are wanted in: S·diag(sd), then the whitened gradient.
+    let rows = DMatrix::from_fn(p + 1, n, |r, c| if r < p { sens[(r, c)] * sd[c] } else { grad[c] * sd[c] });
+    let (eigenvalues, along) = block_eigen(w, rows);
+    let projections = along.row(p).iter().copied().collect();
+    Some(Whitened { eigenvalues, rows: along.rows(0, p).into_owned(), projections })
 }
 
-/// The eigen-decomposition of the symmetric `w`, block by block: its parameters fall into
-/// groups no entry links (the three axes' walks when no shared parameter of the model couples
-/// the axes), each decomposed alone. The same eigenpairs as one decomposition, in another
-/// order, at a ninth of its cost for three equal blocks: a 1-h capture's walk has 3 × 360 steps,
-/// and one decomposition of all 1080 was a fifth of its replay.
-fn block_eigen(w: DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+/// The eigenvalues of the symmetric `w` and `rows` times its eigenvectors, block by block: its
+/// parameters fall into groups no entry links (the three axes' walks when no shared parameter
+/// of the model couples the axes), each decomposed alone. The same eigenpairs as one
+/// decomposition, in another order, at a ninth of its cost for three equal blocks: a 1-h
+/// capture's walk has 3 × 360 steps, and one decomposition of all 1080 was a fifth of its
+/// replay.
+fn block_eigen(w: DMatrix<f64>, rows: DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
     let n = w.nrows();
     let blocks = linked_groups(n, |r, c| w[(r, c)] != 0.0);
     if blocks.len() <= 1 {
-        let eig = w.symmetric_eigen();
-        return (eig.eigenvalues, eig.eigenvectors);
+        return eigen_rows(w, rows);
     }
     let mut values = DVector::zeros(n);
-    let mut vectors = DMatrix::zeros(n, n);
+    let mut along = DMatrix::zeros(rows.nrows(), n);
     let mut at = 0;
     for idx in blocks {
-        let eig = w.select_rows(&idx).select_columns(&idx).symmetric_eigen();
-        for j in 0..idx.len() {
-            values[at] = eig.eigenvalues[j];
-            for (i, &r) in idx.iter().enumerate() {
-                vectors[(r, at)] = eig.eigenvectors[(i, j)];
-            }
-            at += 1;
+        let (v, a) = eigen_rows(w.select_rows(&idx).select_columns(&idx), rows.select_columns(&idx));
+        values.rows_mut(at, idx.len()).copy_from(&v);
+        along.columns_mut(at, idx.len()).copy_from(&a);
+        at += idx.len();
+    }
+    (values, along)
+}
+
+/// The eigenvalues of the symmetric `w` and `rows` times its eigenvectors: nalgebra's
+/// tridiagonal form, then the QL iteration applying its rotations to `rows` alone
+/// ([`tridiagonal_eigen`]); nalgebra's whole decomposition if that fails to converge.
+fn eigen_rows(w: DMatrix<f64>, rows: DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    if w.nrows() > 1 {
+        let tri = SymmetricTridiagonal::new(w.clone());
+        let mut d: Vec<f64> = tri.diagonal().iter().copied().collect();
+        let mut along = &rows * tri.q();
+        if tridiagonal_eigen(&mut d, tri.off_diagonal().as_slice(), &mut along) {
+            return (DVector::from_vec(d), along);
         }
     }
-    (values, vectors)
+    let eig = w.symmetric_eigen();
+    (eig.eigenvalues, rows * eig.eigenvectors)
+}
+
+/// The eigenvalues of the symmetric tridiagonal matrix of diagonal `d` and off-diagonal `off`
+/// (`off[i]` joins i and i + 1), left in `d`, and `rows` (m × n) times its eigenvectors, left in
+/// `rows`: the implicit QL iteration with Wilkinson's shift (Bowdler, Martin, Reinsch &
+/// Wilkinson, Numer. Math. 11, 293, 1968: EISPACK's tql2). Written here rather than taken from
+/// nalgebra, whose decomposition rotates all n eigenvectors where the consider covariance
+/// wants their products with a dozen rows: for a walk of 360 steps the rotations were most of
+/// the decomposition. False if an eigenvalue is not found in 60 iterations.
+fn tridiagonal_eigen(d: &mut [f64], off: &[f64], rows: &mut DMatrix<f64>) -> bool {
+    let n = d.len();
+    let mut e = off.to_vec();
+    e.push(0.0);
+    for l in 0..n {
+        let mut iterations = 0;
+        loop {
+            // The first negligible off-diagonal at or after l splits the matrix there.
+            let m = (l..n - 1).find(|&m| e[m].abs() <= f64::EPSILON * (d[m].abs() + d[m + 1].abs())).unwrap_or(n - 1);
+            if m == l {
+                break;
+            }
+            iterations += 1;
+            if iterations > 60 {
+                return false;
+            }
+            ql_step(d, &mut e, (l, m), rows);
+        }
+    }
+    true
+}
+
+/// One implicit QL step on the block l..=m of [`tridiagonal_eigen`], its rotations applied to
+/// the columns of `rows`.
+fn ql_step(d: &mut [f64], e: &mut [f64], (l, m): (usize, usize), rows: &mut DMatrix<f64>) {
+    // Wilkinson's shift: the eigenvalue of the leading 2 × 2 nearer d[l].
+    let g0 = (d[l + 1] - d[l]) / (2.0 * e[l]);
+    let mut g = d[m] - d[l] + e[l] / (g0 + g0.hypot(1.0).copysign(g0));
+    let (mut s, mut c, mut p) = (1.0, 1.0, 0.0);
+    for i in (l..m).rev() {
+        let (f, b) = (s * e[i], c * e[i]);
+        let r = f.hypot(g);
+        e[i + 1] = r;
+        if r == 0.0 {
+            // The block split at i + 1: undo the shift there and iterate again.
+            d[i + 1] -= p;
+            e[m] = 0.0;
+            return;
+        }
+        (s, c) = (f / r, g / r);
+        let h = d[i + 1] - p;
+        let t = (d[i] - h) * s + 2.0 * c * b;
+        p = s * t;
+        d[i + 1] = h + p;
+        g = c * t - b;
+        for k in 0..rows.nrows() {
+            let (x, y) = (rows[(k, i)], rows[(k, i + 1)]);
+            rows[(k, i + 1)] = s * x + c * y;
+            rows[(k, i)] = c * x - s * y;
+        }
+    }
+    d[l] -= p;
+    e[l] = g;
+    e[m] = 0.0;
 }
 
 /// The groups of `0..n` that `linked(r, c)` (for r < c) joins, directly or through others,
@@ -600,9 +678,10 @@ fn linked_groups(n: usize, linked: impl Fn(usize, usize) -> bool) -> Vec<Vec<usi
 
 impl Whitened {
     /// The same effect with prior σs `scale` times: information and gradient along the same
-    /// eigenvectors, the one by scale², the other by scale.
+    /// eigenvectors, the one by scale², the other (and the estimate's move per whitened unit)
+    /// by scale.
     fn scaled(mut self, scale: f64) -> Self {
-        self.sd.iter_mut().for_each(|v| *v *= scale);
+        self.rows *= scale;
         self.eigenvalues *= scale * scale;
         self.projections.iter_mut().for_each(|p| *p *= scale);
         self
@@ -612,6 +691,11 @@ impl Whitened {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`whiten`] for the effect's parameters themselves (S = I): [`posterior`] then gives F.
+    fn whiten_id(info: &DMatrix<f64>, grad: &DVector<f64>, sd: &[f64]) -> Option<Whitened> {
+        whiten(info, grad, sd, &DMatrix::identity(sd.len(), sd.len()))
+    }
 
     /// [`posterior`]'s covariance F·Fᵀ.
     fn posterior_cov(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {
@@ -641,7 +725,7 @@ mod tests {
         assert_eq!(linked_groups(5, |r, c| (r, c) == (0, 3) || (r, c) == (3, 4)), [vec![0, 3, 4], vec![1], vec![2]]);
         // x and z linked, y alone: the 3 × 3 of one axis per parameter.
         let w = DMatrix::from_row_slice(3, 3, &[4.0, 0.0, 1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 3.0]);
-        let (values, vectors) = block_eigen(w.clone());
+        let (values, vectors) = block_eigen(w.clone(), DMatrix::identity(3, 3));
         let whole = w.clone().symmetric_eigen();
         let mut got: Vec<f64> = values.iter().copied().collect();
         let mut want: Vec<f64> = whole.eigenvalues.iter().copied().collect();
@@ -656,49 +740,91 @@ mod tests {
         assert!((vectors.transpose() * &vectors - DMatrix::identity(3, 3)).abs().max() < 1e-12);
     }
 
+    /// The QL iteration's eigenvalues are nalgebra's, and its rows times the eigenvectors give
+    /// what nalgebra's vectors give for any function of the matrix: rows·f(W)·rowsᵀ, for
+    /// matrices of one to 60 parameters (random, one with a repeated eigenvalue, one already
+    /// diagonal), to 1e-10 of their scale.
+    #[test]
+    fn the_ql_iteration_gives_nalgebras_eigenvalues_and_rows() {
+        let mut state = 12345u64;
+        let mut uniform = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for n in [1, 2, 3, 7, 20, 60] {
+            let a = DMatrix::from_fn(n, n, |_, _| uniform());
+            let random = &a * a.transpose();
+            let mut repeated = DMatrix::identity(n, n) * 2.0;
+            repeated[(0, 0)] = 5.0;
+            let diagonal = DMatrix::from_fn(n, n, |r, c| if r == c { r as f64 } else { 0.0 });
+            for w in [random, repeated, diagonal] {
+                let rows = DMatrix::from_fn(4, n, |_, _| uniform());
+                let tri = SymmetricTridiagonal::new(w.clone());
+                let mut d: Vec<f64> = tri.diagonal().iter().copied().collect();
+                let converged = tridiagonal_eigen(&mut d, tri.off_diagonal().as_slice(), &mut (&rows * tri.q()));
+                assert!(converged, "n = {n}: the QL iteration itself converges");
+                let (values, along) = eigen_rows(w.clone(), rows.clone());
+                let whole = w.clone().symmetric_eigen();
+                let (mut got, mut want): (Vec<f64>, Vec<f64>) =
+                    (values.iter().copied().collect(), whole.eigenvalues.iter().copied().collect());
+                got.sort_by(f64::total_cmp);
+                want.sort_by(f64::total_cmp);
+                let scale = want.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                assert!(got.iter().zip(&want).all(|(g, w)| (g - w).abs() <= 1e-10 * scale), "{got:?} against {want:?}");
+                let f = |l: f64| 1.0 / (1.0 + l.abs());
+                let mine = &along * DMatrix::from_diagonal(&values.map(f)) * along.transpose();
+                let theirs = &rows * &whole.eigenvectors;
+                let theirs = &theirs * DMatrix::from_diagonal(&whole.eigenvalues.map(f)) * theirs.transpose();
+                let size = theirs.abs().max().max(1e-300);
+                assert!((mine - &theirs).abs().max() <= 1e-10 * size, "n = {n}");
+            }
+        }
+    }
+
     /// A direction the data do not see keeps its prior; one they see well is left to the tests.
     #[test]
     fn posterior_keeps_the_prior_where_the_runs_see_nothing() {
         let info = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c, n) = posterior_cov(&whiten(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), Some(&|_| 16.4));
+        let (c, n) =
+            posterior_cov(&whiten_id(&info, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), Some(&|_| 16.4));
         assert_eq!(n, [0.0]);
         assert!((c[(0, 0)] - 4.0).abs() < 1e-12, "{c}");
         assert!(c[(1, 1)].abs() < 1e-12 && c[(0, 1)].abs() < 1e-12, "{c}");
         // Seen at λ = 40 (a 6σ signal at plausible size) but by a test at χ² 35, which would
         // miss it one time in four: counted.
         let info40 = DMatrix::from_row_slice(1, 1, &[40.0]);
-        let (c, n) = posterior_cov(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 35.0));
+        let (c, n) = posterior_cov(&whiten_id(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 35.0));
         assert_eq!(n, [40.0]);
         assert!((c[(0, 0)] - 1.0 / 41.0).abs() < 1e-12, "{c}");
-        let (_, n) = posterior_cov(&whiten(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 16.4));
+        let (_, n) = posterior_cov(&whiten_id(&info40, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| 16.4));
         assert!(n.is_empty(), "{n:?}");
         // Half-seen: λ = 3 (σ = 1, information 3) shrinks the variance to 1/4.
         let info = DMatrix::from_row_slice(1, 1, &[3.0]);
         let (c, n) =
-            posterior_cov(&whiten(&info, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| f64::INFINITY));
+            posterior_cov(&whiten_id(&info, &DVector::zeros(1), &[1.0]).expect("finite"), Some(&|_| f64::INFINITY));
         assert_eq!(n.len(), 1);
         assert!((n[0] - 3.0).abs() < 1e-12, "{n:?}");
         assert!((c[(0, 0)] - 0.25).abs() < 1e-12, "{c}");
         // A direction seen well (whitened λ = 3²·1e6 ≥ 25) of an effect the loop did not try is
         // counted: its posterior variance is 1/(1 + λ) of the prior's.
         let info2 = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1e6]);
-        let (c2, n2) = posterior_cov(&whiten(&info2, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), None);
+        let (c2, n2) = posterior_cov(&whiten_id(&info2, &DVector::zeros(2), &[2.0, 3.0]).expect("finite"), None);
         assert_eq!(n2.len(), 2);
         assert!((c2[(1, 1)] - 9.0 / (1.0 + 9e6)).abs() < 1e-15, "{c2}");
         // A tried effect whose separated direction the residual pulls on past the test's
         // threshold (whitened g = 3·3000, score 9000²/9e6 = 9 > 0.5) was never tested: it is counted, with
         // the posterior mean g_w/(1 + λ) = 9000/(1 + 9e6) of its whitened σ (3).
         let g = DVector::from_column_slice(&[0.0, 3000.0]);
-        let (c3, n3) = posterior_cov(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 0.5));
+        let (c3, n3) = posterior_cov(&whiten_id(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 0.5));
         assert_eq!(n3.len(), 2);
         let mean = 3.0 * 9000.0 / (1.0 + 9e6);
         assert!((c3[(1, 1)] - (9.0 / (1.0 + 9e6) + mean * mean)).abs() < 1e-15, "{c3}");
         // Below the threshold (9 ≤ 10) the test speaks for it.
-        let (c4, n4) = posterior_cov(&whiten(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 10.0));
+        let (c4, n4) = posterior_cov(&whiten_id(&info2, &g, &[2.0, 3.0]).expect("finite"), Some(&|_| 10.0));
         assert_eq!((n4.len(), c4[(1, 1)]), (1, 0.0));
         // The residual's pull adds the square of the posterior mean: g = 2 → mean 2/4.
         let (c, _) = posterior_cov(
-            &whiten(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite"),
+            &whiten_id(&info, &DVector::from_element(1, 2.0), &[1.0]).expect("finite"),
             Some(&|_| f64::INFINITY),
         );
         assert!((c[(0, 0)] - 0.5).abs() < 1e-12, "{c}");
@@ -746,16 +872,16 @@ mod tests {
     fn a_walks_size_is_bounded_by_the_wander_the_data_show() {
         let n = 100;
         let info = DMatrix::from_diagonal_element(n, n, 4.0);
-        let quiet =
-            walk_scale(&whiten(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite")).expect("finite");
+        let quiet = walk_scale(&whiten_id(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite"))
+            .expect("finite");
         assert!(quiet > 0.05 && quiet < 0.3, "{quiet}");
         let walking =
-            walk_scale(&whiten(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite"))
+            walk_scale(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite"))
                 .expect("finite");
         assert!(walking > 1.0 && walking < 1.4, "{walking}");
         // The prior's σs only set the units: for the same data, twice the σ, half the scale.
         let halved =
-            walk_scale(&whiten(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]).expect("finite"));
+            walk_scale(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]).expect("finite"));
         assert!((halved.expect("finite") - walking / 2.0).abs() < 1e-6 * walking);
     }
 
@@ -787,8 +913,8 @@ mod tests {
         let info = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0]);
         let grad = DVector::from_column_slice(&[1.0, -2.0, 0.5]);
         let sd = [0.5, 1.5, 2.0];
-        let (c1, l1) = posterior_cov(&whiten(&info, &grad, &sd).expect("finite").scaled(3.0), None);
-        let (c2, l2) = posterior_cov(&whiten(&info, &grad, &sd.map(|v| 3.0 * v)).expect("finite"), None);
+        let (c1, l1) = posterior_cov(&whiten_id(&info, &grad, &sd).expect("finite").scaled(3.0), None);
+        let (c2, l2) = posterior_cov(&whiten_id(&info, &grad, &sd.map(|v| 3.0 * v)).expect("finite"), None);
         assert!((c1 - &c2).amax() <= 1e-12 * c2.amax(), "{c2}");
         for (a, b) in l1.iter().zip(&l2) {
             assert!((a - b).abs() <= 1e-12 * b.abs(), "{l1:?} against {l2:?}");
