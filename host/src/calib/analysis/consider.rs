@@ -27,7 +27,7 @@ use crate::calib::engine::{
 };
 use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
 use crate::calib::result::derived::derive;
-use nalgebra::{DMatrix, DVector, SymmetricTridiagonal};
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// Information, in units of the prior (an effect of one σ along the direction gives this Δχ²),
@@ -564,20 +564,57 @@ fn block_eigen(w: DMatrix<f64>, rows: DMatrix<f64>) -> (DVector<f64>, DMatrix<f6
     (values, along)
 }
 
-/// The eigenvalues of the symmetric `w` and `rows` times its eigenvectors: nalgebra's
-/// tridiagonal form, then the QL iteration applying its rotations to `rows` alone
-/// ([`tridiagonal_eigen`]); nalgebra's whole decomposition if that fails to converge.
+/// The eigenvalues of the symmetric `w` and `rows` times its eigenvectors: its tridiagonal form
+/// with the reflections applied to `rows` ([`tridiagonalize`]), then the QL iteration applying
+/// its rotations to them ([`tridiagonal_eigen`]); nalgebra's whole decomposition if that fails
+/// to converge.
 fn eigen_rows(w: DMatrix<f64>, rows: DMatrix<f64>) -> (DVector<f64>, DMatrix<f64>) {
     if w.nrows() > 1 {
-        let tri = SymmetricTridiagonal::new(w.clone());
-        let mut d: Vec<f64> = tri.diagonal().iter().copied().collect();
-        let mut along = &rows * tri.q();
-        if tridiagonal_eigen(&mut d, tri.off_diagonal().as_slice(), &mut along) {
+        let mut along = rows.clone();
+        let (mut d, off) = tridiagonalize(w.clone(), &mut along);
+        if tridiagonal_eigen(&mut d, &off, &mut along) {
             return (DVector::from_vec(d), along);
         }
     }
     let eig = w.symmetric_eigen();
     (eig.eigenvalues, rows * eig.eigenvectors)
+}
+
+/// The symmetric `a` as Q·T·Qᵀ, T tridiagonal, by Householder reflections (Golub & Van Loan,
+/// *Matrix Computations*, 4th ed., Alg. 8.3.1): T's diagonal and off-diagonal, and `rows`·Q in
+/// `rows`. Written here rather than taken from nalgebra's `SymmetricTridiagonal`, which gives Q
+/// only as the n × n matrix (n³ more work, a sixth of a 1-h replay's consider covariance) where
+/// each reflection applied to a dozen rows costs 2·12·n.
+fn tridiagonalize(mut a: DMatrix<f64>, rows: &mut DMatrix<f64>) -> (Vec<f64>, Vec<f64>) {
+    let n = a.nrows();
+    let mut off = vec![0.0; n.saturating_sub(1)];
+    for (k, off_k) in off.iter_mut().enumerate().take(n.saturating_sub(2)) {
+        let m = n - k - 1;
+        // The reflection H = I − β·v·vᵀ taking column k below the diagonal to (∓|x|, 0, …).
+        let mut v: DVector<f64> = a.view((k + 1, k), (m, 1)).column(0).into_owned();
+        let norm = v.norm();
+        if norm == 0.0 {
+            continue;
+        }
+        let sign = if v[0] >= 0.0 { 1.0 } else { -1.0 };
+        v[0] += sign * norm;
+        let beta = 2.0 / v.norm_squared();
+        *off_k = -sign * norm;
+        // The trailing block B → H·B·H = B − v·wᵀ − w·vᵀ, p = β·B·v, w = p − (β·pᵀv/2)·v.
+        let p = a.view((k + 1, k + 1), (m, m)) * &v * beta;
+        let w = &p - &v * (0.5 * beta * p.dot(&v));
+        let mut b = a.view_mut((k + 1, k + 1), (m, m));
+        b.ger(-1.0, &v, &w, 1.0);
+        b.ger(-1.0, &w, &v, 1.0);
+        // rows·H on the columns it acts on.
+        let mut r = rows.columns_mut(k + 1, m);
+        let rv = &r * &v;
+        r.ger(-beta, &rv, &v, 1.0);
+    }
+    if n >= 2 {
+        off[n - 2] = a[(n - 1, n - 2)];
+    }
+    ((0..n).map(|i| a[(i, i)]).collect(), off)
 }
 
 /// The eigenvalues of the symmetric tridiagonal matrix of diagonal `d` and off-diagonal `off`
@@ -759,9 +796,9 @@ mod tests {
             let diagonal = DMatrix::from_fn(n, n, |r, c| if r == c { r as f64 } else { 0.0 });
             for w in [random, repeated, diagonal] {
                 let rows = DMatrix::from_fn(4, n, |_, _| uniform());
-                let tri = SymmetricTridiagonal::new(w.clone());
-                let mut d: Vec<f64> = tri.diagonal().iter().copied().collect();
-                let converged = tridiagonal_eigen(&mut d, tri.off_diagonal().as_slice(), &mut (&rows * tri.q()));
+                let mut reflected = rows.clone();
+                let (mut d, off) = tridiagonalize(w.clone(), &mut reflected);
+                let converged = tridiagonal_eigen(&mut d, &off, &mut reflected);
                 assert!(converged, "n = {n}: the QL iteration itself converges");
                 let (values, along) = eigen_rows(w.clone(), rows.clone());
                 let whole = w.clone().symmetric_eigen();
