@@ -238,7 +238,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
                 let pred = (0..k).map(|j| w[j] * nodes[j].pred[a]).sum::<f64>();
                 let e = f64::from(s.rate_counts[a]) - pred;
                 self.local.add_sample(a, e);
-                ax.w.iter_mut().zip(w).for_each(|(s, w)| *s += w);
+                ax.w[..k].iter_mut().zip(&w[..k]).for_each(|(s, w)| *s += w);
                 (ax.e, ax.n) = (ax.e + e, ax.n + 1);
                 t_sum_s[a] += dt_s;
             }
