@@ -477,9 +477,9 @@ fn max3(v: [f64; 3]) -> f64 {
 /// The estimate's sensitivity times a factor F of the covariance F·Fᵀ (posterior variance plus
 /// the square of the posterior mean) of an effect's parameters in the directions the runs do not
 /// separate, from its partial information and the residual's gradient along its columns,
-/// whitened by its prior σs (`w`); with those directions' information λ. An effect the loop did not try (`tried`
-/// None) has every direction counted: no test ruled out what the runs see of it, and its
-/// posterior mean is what they say it is. One it tried (`tried` the loop's χ² threshold for a
+/// whitened by its prior σs (`w`); with those directions' information λ. An effect the loop did
+/// not try (`tried` None) has every direction counted: no test ruled out what the runs see of
+/// it, and its posterior mean is what they say it is. One it tried (`tried` the loop's χ² threshold for a
 /// number of degrees of freedom) has its separated directions left to the test, unless the
 /// residual's score along them passes that threshold.
 fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64>, Vec<f64>) {

@@ -3,11 +3,11 @@
 //! one (a short cell) or three (a long one) equally spaced between. Every column but the free
 //! drift's knots, and the model's output, is taken at a sample from the polynomial through the
 //! nodes' values (Lagrange's form, in the samples' own times), so a cell's sums are the
-//! polynomial's sums over its samples. The knots, straight
-//! lines in time between their corners, sum over a cell to its count times their values at its
-//! samples' mean time, taken once per cell and axis (sample by sample in the few cells a corner
-//! crosses). The residual's eᵀe and the counts are the samples' own (a clipped sample leaves
-//! its axis's cell, as it leaves the samples' sums).
+//! polynomial's sums over its samples. The knots, straight lines in time between their corners,
+//! sum over a cell to its count times their values at its samples' mean time, taken once per
+//! cell and axis (sample by sample in the few cells a corner crosses). The residual's eᵀe and
+//! the counts are the samples' own (a clipped sample leaves its axis's cell, as it leaves the
+//! samples' sums).
 //!
 //! The quadratic's error at a sample is about 0.06·(ω·h)³ of a column varying at ω rad/s over
 //! a node spacing of h s (half a short cell, 5 ms): 2.5e-7 of the signal at the tables' 0.5 Hz
@@ -368,12 +368,12 @@ fn cells_of(stretch: &Range<usize>, size: usize) -> impl Iterator<Item = Range<u
 /// fewer samples.
 fn node_samples(cell: &Range<usize>, stretch_end: usize, intervals: usize) -> ([usize; MAX_NODES], usize) {
     let (first, last) = (cell.start, if cell.end < stretch_end { cell.end } else { cell.end - 1 });
+    // q = 0 only where the cell is one sample (last = first).
     let q = intervals.min(last - first).min(MAX_NODES - 1);
     let mut idx = [last; MAX_NODES];
     for (j, i) in idx.iter_mut().enumerate().take(q) {
         *i = first + j * (last - first) / q;
     }
-    idx[0] = first;
     (idx, q + 1)
 }
 
