@@ -33,7 +33,7 @@
 //! calibration is redone on every run, into `out/` there, with its own records database so the
 //! operator's records are not filled with bench results and two children never write one file.
 //!
-//! `BENCH_SEEDS=N` runs seeds 1..=N (default 10); `BENCH_PLANS` lists the run plans, separated by
+//! `BENCH_SEEDS=N` runs seeds 1..=N (default 10), `BENCH_SEEDS=A-B` seeds A..=B; `BENCH_PLANS` lists the run plans, separated by
 //! `;`, each the base-table rates of `--rates-dps` and, after `@`, the seconds per run (default
 //! [`replay::DURATION_S`]). The default, `180,-180@300`, is the session the tool asks for once it finds
 //! g-sensitivity, long enough for the statistical σ of a sensitivity (6.7 ppm) to put the 20-ppm
@@ -334,11 +334,13 @@ fn main() {
     println!("host calibrate --replay with every effect on, {HOST}");
     println!("effects: {}", EFFECTS.join(" "));
     println!(
-        "seeds 1..={seeds}, plans {}; {} calibrations at a time; CPU = user + system time of the child (wait4)",
+        "seeds {}..={}, plans {}; {} calibrations at a time; CPU = user + system time of the child (wait4)",
+        seeds.start(),
+        seeds.end(),
         plans.join(" ; "),
         replay::WORKERS
     );
-    let jobs: Vec<(usize, u64)> = (0..plans.len()).flat_map(|p| (1..=seeds).map(move |s| (p, s))).collect();
+    let jobs: Vec<(usize, u64)> = (0..plans.len()).flat_map(|p| seeds.clone().map(move |s| (p, s))).collect();
     let t = Instant::now();
     let mut finished = 0;
     let outcomes = replay::run_parallel(

@@ -42,7 +42,7 @@
 //! effectful cells dominate, and the full matrix takes of the order of a day on 2 cores: select.
 //!
 //! Selection, all optional:
-//! - `TRUST_SEEDS=N`: seeds 1..=N (default 10);
+//! - `TRUST_SEEDS=N`: seeds 1..=N (default 10); `TRUST_SEEDS=A-B`: seeds A..=B;
 //! - `TRUST_DESIGNS="180@120;180,90@20"`: designs, the syntax of `all_effects`' `BENCH_PLANS`
 //!   (no `@`: 120 s);
 //! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order;
@@ -319,6 +319,7 @@ fn verdict(holds: bool) -> &'static str {
 fn main() {
     // `cargo bench` passes `--bench`; nothing else is taken.
     let seeds = replay::seeds_from_env("TRUST_SEEDS", 10);
+    let n_seeds = seeds.clone().count();
     let default_designs = DEFAULT_RATES.iter().flat_map(|r| DEFAULT_LENGTHS_S.iter().map(move |d| format!("{r}@{d}")));
     let designs: Vec<String> = replay::plans_from_env("TRUST_DESIGNS", &default_designs.collect::<Vec<_>>().join(";"))
         .iter()
@@ -340,10 +341,11 @@ fn main() {
 
     println!("trust matrix: host calibrate --replay, no effect declared, no latitude; {HOST}");
     println!(
-        "{} designs × {} effect cases × {seeds} seeds = {} calibrations, {} at a time; live design {live}",
+        "{} designs × {} effect cases × {n_seeds} seeds (from {}) = {} calibrations, {} at a time; live design {live}",
         designs.len(),
         cases.len(),
-        designs.len() * cases.len() * seeds as usize,
+        designs.len() * cases.len() * n_seeds,
+        seeds.start(),
         replay::WORKERS
     );
     println!("designs: {}", designs.join(" ; "));
@@ -363,7 +365,7 @@ fn main() {
     println!("{HEADINGS}");
 
     let cells: Vec<(usize, usize)> = (0..designs.len()).flat_map(|d| (0..cases.len()).map(move |c| (d, c))).collect();
-    let jobs: Vec<(usize, u64)> = (0..cells.len()).flat_map(|cell| (1..=seeds).map(move |s| (cell, s))).collect();
+    let jobs: Vec<(usize, u64)> = (0..cells.len()).flat_map(|cell| seeds.clone().map(move |s| (cell, s))).collect();
     let is_live = |d: usize, c: usize| designs[d] == live && cases[c].catalogued;
     let mut per_cell: Vec<Vec<SeedOutcome>> = vec![Vec::new(); cells.len()];
     let mut finished = 0;
@@ -393,7 +395,7 @@ fn main() {
                 cases[c].label
             );
             per_cell[cell].push(r.outcome.clone());
-            if per_cell[cell].len() == seeds as usize {
+            if per_cell[cell].len() == n_seeds {
                 println!("{}", cell_line(&designs[d], &cases[c], is_live(d, c), &trust::cell_stats(&per_cell[cell])));
                 let _ = std::io::stdout().flush();
             }
@@ -402,7 +404,7 @@ fn main() {
     let wall_s = t.elapsed().as_secs_f64();
 
     let stats: Vec<CellStats> = runs
-        .chunks(seeds as usize)
+        .chunks(n_seeds)
         .map(|rs| trust::cell_stats(&rs.iter().map(|r| r.outcome.clone()).collect::<Vec<_>>()))
         .collect();
     println!();

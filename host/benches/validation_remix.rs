@@ -14,8 +14,8 @@
 //! own sensor and noise draw, which need not hold for another: they are printed, not judged.
 //! The bench exits 0 whatever it finds: a measurement, not a test.
 //!
-//! `REMIX_SEEDS=N`, `REMIX_FOLDERS=clean-s101,gsens-1speed-s101` (default: every folder with a
-//! `truth.json`). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
+//! `REMIX_SEEDS=N` (or `A-B`: seeds A..=B), `REMIX_FOLDERS=clean-s101,gsens-1speed-s101`
+//! (default: every folder with a `truth.json`). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
 //!
 //! `cargo bench -p host --bench validation_remix --profile release`: 6 folders × 5 seeds, 30
 //! calibrations, about 30 s of their CPU (2.5 s at most each, `realistic-2speed-s101`).
@@ -110,7 +110,7 @@ fn main() {
         .filter(|p| only.is_empty() || only.iter().any(|o| p.ends_with(o)))
         .collect();
     folders.sort();
-    let jobs: Vec<(usize, u64)> = (0..folders.len()).flat_map(|f| (1..=seeds).map(move |s| (f, s))).collect();
+    let jobs: Vec<(usize, u64)> = (0..folders.len()).flat_map(|f| seeds.clone().map(move |s| (f, s))).collect();
     let name = |f: usize| folders[f].file_name().and_then(|n| n.to_str()).unwrap_or("?").to_string();
     let results = replay::run_parallel(
         &jobs,

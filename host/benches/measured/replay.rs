@@ -48,9 +48,16 @@ pub fn plans_from_env(var: &str, default: &str) -> Vec<String> {
         .collect()
 }
 
-/// The number of seeds in `var` (at least 1), or `default`.
-pub fn seeds_from_env(var: &str, default: u64) -> u64 {
-    std::env::var(var).ok().and_then(|v| v.trim().parse().ok()).unwrap_or(default).max(1)
+/// The seeds `var` names: `N` for seeds 1 to N (at least 1), `A-B` for seeds A to B (to look
+/// at seeds a first run did not cover without redoing it); `1..=default` when unset or unreadable.
+pub fn seeds_from_env(var: &str, default: u64) -> std::ops::RangeInclusive<u64> {
+    let text = std::env::var(var).unwrap_or_default();
+    let range = match text.trim().split_once('-') {
+        Some((a, b)) => a.trim().parse::<u64>().ok().zip(b.trim().parse::<u64>().ok()),
+        None => text.trim().parse::<u64>().ok().map(|n| (1, n)),
+    };
+    let (first, last) = range.unwrap_or((1, default));
+    first.max(1)..=last.max(first.max(1))
 }
 
 /// The cached capture `dir/x.cap` of `plan` for `seed` with `effects` (each `NAME` or
