@@ -4,11 +4,14 @@
 //! Bonferroni-corrected level, every significant one turned into a sentence that says what, where,
 //! how strong and what it suggests. Also the binned residual and spectrum the report plots.
 
+use crate::calib::analysis::angle_sums::{
+    angle_bin_centres, harmonic_coefficients, AngleFits, AngleSums, OrderSums, SlopeSums, ANGLE_BINS,
+};
 use crate::calib::analysis::binning::Binning;
 use crate::calib::analysis::blocking::Blocking;
 use crate::calib::analysis::spectrum::{AmplitudeSpectrum, Periodogram};
 use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
-use crate::calib::engine::{for_each_interpolated, harmonics_of, Evaluator, LoopData, Model};
+use crate::calib::engine::{for_each_interpolated, Evaluator, LoopData, Model};
 use crate::calib::result::axes::{is_clipped, AXES};
 use crate::geometry::Pose;
 use serde::{Deserialize, Serialize};
@@ -279,45 +282,6 @@ impl Diagnostics {
     }
 }
 
-/// Sums for a least-squares fit of a·sin + b·cos (or a mean, n = 0).
-#[derive(Debug, Clone, Copy, Default)]
-struct OrderSums {
-    ss: f64,
-    cc: f64,
-    sc: f64,
-    es: f64,
-    ec: f64,
-}
-
-/// Running sums for a slope of e against x.
-#[derive(Debug, Clone, Copy, Default)]
-struct SlopeSums {
-    n: f64,
-    x: f64,
-    xx: f64,
-    e: f64,
-    xe: f64,
-}
-
-impl SlopeSums {
-    fn add(&mut self, x: f64, e: f64) {
-        self.n += 1.0;
-        self.x += x;
-        self.xx += x * x;
-        self.e += e;
-        self.xe += x * e;
-    }
-
-    /// (slope, σ of slope) for residual variance `var`.
-    fn slope(&self, var: f64) -> (f64, f64) {
-        let sxx = self.xx - self.x * self.x / self.n;
-        if sxx <= 0.0 || self.n < 3.0 {
-            return (0.0, f64::INFINITY);
-        }
-        ((self.xe - self.x * self.e / self.n) / sxx, (var / sxx).sqrt())
-    }
-}
-
 /// Binned means.
 #[derive(Debug, Clone)]
 struct Bins {
@@ -361,50 +325,6 @@ impl Bins {
     }
 }
 
-impl OrderSums {
-    /// Least-squares (a, b) of a·sin + b·cos (for n = 0, (mean, 0) with cos = 1).
-    fn solve(&self) -> (f64, f64) {
-        if self.ss == 0.0 {
-            return if self.cc > 0.0 { (0.0, self.ec / self.cc) } else { (0.0, 0.0) };
-        }
-        let det = self.ss * self.cc - self.sc * self.sc;
-        if det > 0.0 {
-            ((self.es * self.cc - self.ec * self.sc) / det, (self.ec * self.ss - self.es * self.sc) / det)
-        } else {
-            (0.0, 0.0)
-        }
-    }
-}
-
-/// (a, b) of every order.
-fn harmonic_coefficients(o: &[OrderSums; MAX_ORDER + 1]) -> [(f64, f64); MAX_ORDER + 1] {
-    std::array::from_fn(|n| o[n].solve())
-}
-
-/// Orders 0..=MAX_ORDER as one flat vector: (sin 0θ, cos 0θ, sin θ, cos θ, …) for the harmonics,
-/// (a₀, b₀, a₁, b₁, …) for a fit's coefficients, so a fit's value is their dot product.
-type Flat = [f64; 2 * (MAX_ORDER + 1)];
-
-fn flatten(v: &[(f64, f64); MAX_ORDER + 1]) -> Flat {
-    std::array::from_fn(|i| if i % 2 == 0 { v[i / 2].0 } else { v[i / 2].1 })
-}
-
-/// Σ x·y over the first `len` elements, in eight partial sums so that the additions do not wait
-/// on each other (one running sum was a chain of 66 dependent additions per call).
-#[inline]
-fn dot_prefix(x: &Flat, y: &Flat, len: usize) -> f64 {
-    let (x, y) = (&x[..len], &y[..len]);
-    let mut acc = [0.0f64; 8];
-    let whole = len / 8 * 8;
-    for (a, b) in x[..whole].chunks_exact(8).zip(y[..whole].chunks_exact(8)) {
-        for j in 0..8 {
-            acc[j] += a[j] * b[j];
-        }
-    }
-    let rest: f64 = x[whole..].iter().zip(&y[whole..]).map(|(a, b)| a * b).sum();
-    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + rest
-}
-
 /// Sums of the residual per bin of |rate along the axis|, for the rate-magnitude test of the
 /// residual without its 0× and 1× parts (offset and phase misfits, reported as such). Those parts
 /// are b₀ + a₁ sin θ + b₁ cos θ, so the bin sums of the residual, of sin θ and of cos θ, taken in
@@ -435,146 +355,6 @@ impl RateBinSums {
             b.count[k] = self.count[k];
         }
         b
-    }
-}
-
-/// θ2 bins of the harmonic fits and the speed-ripple test: 2^13 per turn. Every sum those need
-/// is a sum over samples of something times sin nθ2 or cos nθ2 (n ≤ 32), so summing the samples
-/// into θ2 bins first costs one addition per sample instead of 33 sine-cosine pairs, and the
-/// ripple test needs no second pass. Each harmonic becomes the step function of its values at the
-/// bin centres, and the fits are exact least squares on that basis: at 32× a bin spans
-/// 32·2π/8192 = 0.025 rad of phase, which costs a harmonic 2.5e-5 of its power (sinc²), far below
-/// what any test at the Bonferroni level can notice.
-const ANGLE_BINS: usize = 8192;
-
-/// sin θ, cos θ at the centre of each of the [`ANGLE_BINS`].
-fn angle_bin_centres() -> Vec<(f64, f64)> {
-    (0..ANGLE_BINS).map(|b| ((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64).sin_cos()).collect()
-}
-
-/// One run's sums per θ2 bin for the harmonic fits of the residual and of the speed deviation d
-/// (in %), and for the slope of the residual against d with every harmonic 0…32× removed from
-/// both (the ripple test).
-#[derive(Debug, Clone)]
-struct AngleSums {
-    /// Used samples per bin.
-    count: Vec<f64>,
-    /// Σ d per bin over the used samples.
-    dev: Vec<f64>,
-    /// Σ d² over the used samples.
-    dev_sq: f64,
-    /// Per axis: Σ e per bin over its unclipped samples.
-    e: [Vec<f64>; 3],
-    /// Per axis: Σ d·e over its unclipped samples.
-    dev_e: [f64; 3],
-    /// Per axis: its clipped samples' count and Σ d per bin, and Σ d² (taken off the shared sums).
-    clip_count: [Vec<f64>; 3],
-    clip_dev: [Vec<f64>; 3],
-    clip_dev_sq: [f64; 3],
-}
-
-/// What [`AngleSums`] give per axis: the residual's order sums, the harmonic fit of the speed
-/// deviation, and the ripple test's slope sums.
-struct AngleFits {
-    orders: [[OrderSums; MAX_ORDER + 1]; 3],
-    ripple: [SlopeSums; 3],
-}
-
-impl AngleSums {
-    fn new() -> Self {
-        let zeros = || vec![0.0; ANGLE_BINS];
-        Self {
-            count: zeros(),
-            dev: zeros(),
-            dev_sq: 0.0,
-            e: std::array::from_fn(|_| zeros()),
-            dev_e: [0.0; 3],
-            clip_count: std::array::from_fn(|_| zeros()),
-            clip_dev: std::array::from_fn(|_| zeros()),
-            clip_dev_sq: [0.0; 3],
-        }
-    }
-
-    /// A used sample in bin `b` with speed deviation `dev_pct`.
-    #[inline]
-    fn add_sample(&mut self, b: usize, dev_pct: f64) {
-        self.count[b] += 1.0;
-        self.dev[b] += dev_pct;
-        self.dev_sq += dev_pct * dev_pct;
-    }
-
-    /// Axis `a`'s residual `e` at that sample.
-    #[inline]
-    fn add_residual(&mut self, a: usize, b: usize, dev_pct: f64, e: f64) {
-        self.e[a][b] += e;
-        self.dev_e[a] += dev_pct * e;
-    }
-
-    /// Axis `a` clipped at that sample.
-    #[inline]
-    fn add_clipped(&mut self, a: usize, b: usize, dev_pct: f64) {
-        self.clip_count[a][b] += 1.0;
-        self.clip_dev[a][b] += dev_pct;
-        self.clip_dev_sq[a] += dev_pct * dev_pct;
-    }
-
-    /// The fits, on the bin-centre basis.
-    fn fits(&self) -> AngleFits {
-        let used: Vec<usize> = (0..ANGLE_BINS).filter(|&b| self.count[b] > 0.0).collect();
-        let bin_harmonics: Vec<Flat> = used
-            .iter()
-            .map(|&b| flatten(&harmonics_of((b as f64 + 0.5) * std::f64::consts::TAU / ANGLE_BINS as f64)))
-            .collect();
-        let axis_bin = |a: usize, b: usize| {
-            (self.count[b] - self.clip_count[a][b], self.dev[b] - self.clip_dev[a][b], self.e[a][b])
-        };
-        let mut orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
-        let mut dev_orders = [[OrderSums::default(); MAX_ORDER + 1]; 3];
-        for (&b, h) in used.iter().zip(&bin_harmonics) {
-            for a in 0..3 {
-                let (n, d, e) = axis_bin(a, b);
-                if n == 0.0 {
-                    continue;
-                }
-                for (o, (eo, dout)) in orders[a].iter_mut().zip(dev_orders[a].iter_mut()).enumerate() {
-                    let (sn, cn) = (h[2 * o], h[2 * o + 1]);
-                    eo.ss += n * sn * sn;
-                    eo.cc += n * cn * cn;
-                    eo.sc += n * sn * cn;
-                    eo.es += e * sn;
-                    eo.ec += e * cn;
-                    dout.es += d * sn;
-                    dout.ec += d * cn;
-                }
-            }
-        }
-        for a in 0..3 {
-            for (eo, dout) in orders[a].iter().zip(dev_orders[a].iter_mut()) {
-                (dout.ss, dout.cc, dout.sc) = (eo.ss, eo.cc, eo.sc);
-            }
-        }
-        let coefs: [Flat; 3] = std::array::from_fn(|a| flatten(&harmonic_coefficients(&orders[a])));
-        let dev_flat: [Flat; 3] = std::array::from_fn(|a| flatten(&harmonic_coefficients(&dev_orders[a])));
-        let all = 2 * (MAX_ORDER + 1);
-        // Σ (d − D(θ))·(e − E(θ)) and its companions from the bin sums: D and E, the harmonic
-        // fits, are constant within a bin.
-        let ripple = std::array::from_fn(|a| {
-            let mut s = SlopeSums { xx: self.dev_sq - self.clip_dev_sq[a], xe: self.dev_e[a], ..SlopeSums::default() };
-            for (&b, h) in used.iter().zip(&bin_harmonics) {
-                let (n, d, e) = axis_bin(a, b);
-                if n == 0.0 {
-                    continue;
-                }
-                let (fit_d, fit_e) = (dot_prefix(&dev_flat[a], h, all), dot_prefix(&coefs[a], h, all));
-                s.n += n;
-                s.x += d - n * fit_d;
-                s.xx += n * fit_d * fit_d - 2.0 * d * fit_d;
-                s.e += e - n * fit_e;
-                s.xe += n * fit_d * fit_e - d * fit_e - e * fit_d;
-            }
-            s
-        });
-        AngleFits { orders, ripple }
     }
 }
 
@@ -907,7 +687,7 @@ fn run_diag(
     let fs = rk.sample_rate_hz;
     let table_hz = (rk.gear_ratio * rk.steady_rate_dps).abs() / 360.0;
     let base_hz = rk.steady_rate_dps.abs() / 360.0;
-    let AngleFits { orders, ripple: mut ripples } = sums.angle.fits();
+    let AngleFits { orders, ripple: mut ripples } = sums.angle.fits(fft_planner);
     let n_used = sums.e[0].len().max(1);
     let speed_deviation_rms_percent = (sums.dev_sq / n_used as f64).sqrt() * 100.0;
     let band_lo = (NOISE_BAND_FIRST_HARMONIC * table_hz).max(NOISE_BAND_MIN_HZ);
@@ -1122,27 +902,6 @@ fn findings(d: &Diagnostics) -> Vec<Finding> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The interleaved recurrences stay within 1e-13 of sin nθ, cos nθ up to the last order,
-    /// and the split dot product gives the plain sum.
-    #[test]
-    fn harmonics_and_their_fit_match_direct_evaluation() {
-        // (Angles a few radians: at large θ the direct sin(nθ) carries the rounding of nθ.)
-        for theta in [0.0, 0.3, -2.0, 5.5] {
-            let h = harmonics_of(theta);
-            for (n, &(s, c)) in h.iter().enumerate() {
-                let (ds, dc) = (n as f64 * theta).sin_cos();
-                assert!((s - ds).abs() < 1e-13 && (c - dc).abs() < 1e-13, "θ {theta}, order {n}: {s} {c}");
-            }
-            let coefs: [(f64, f64); MAX_ORDER + 1] =
-                std::array::from_fn(|n| (0.1 * n as f64 - 1.0, 1.0 / (n + 1) as f64));
-            let (x, y) = (flatten(&coefs), flatten(&h));
-            let plain: f64 = coefs.iter().zip(&h).map(|(a, b)| a.0 * b.0 + a.1 * b.1).sum();
-            assert!((dot_prefix(&x, &y, x.len()) - plain).abs() < 1e-12, "θ {theta}");
-            let first_two = coefs[0].1 * h[0].1 + coefs[1].0 * h[1].0 + coefs[1].1 * h[1].1;
-            assert!((dot_prefix(&x, &y, 4) - first_two).abs() < 1e-15);
-        }
-    }
 
     /// The ring of running sums gives the floor bit for bit as the whole prefix array it
     /// replaced (kept here as the reference), NaN windows skipped alike.

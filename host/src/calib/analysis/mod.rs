@@ -3,6 +3,7 @@
 //! runs that should agree, the sanity checks that refuse a degenerate fit, the paper method's
 //! cross-check, and the statistics they share. The top layer: imports every layer below.
 
+pub mod angle_sums;
 pub mod binning;
 pub mod blocking;
 pub mod closure;

@@ -44,7 +44,7 @@ pub use crate::calib::effects::terms::{Bound, Col, LinCol, Point, Reported, Shar
 pub use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
 pub use accumulate::{accumulate, accumulate_pairs};
 pub use cells::Cells;
-pub use chain::{harmonics_of, Cursor, Evaluator};
+pub use chain::{Cursor, Evaluator};
 pub use cross::CrossSums;
 pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
 pub use model::Model;
