@@ -1158,6 +1158,33 @@ fn smoothed_temperatures_are_the_per_sample_ones() {
     assert!((data.temp_spread_c() - (hi - lo)).abs() <= 2e-5, "{} vs {}", data.temp_spread_c(), hi - lo);
 }
 
+/// The passes' grid of the smoothed temperature is the swept value at its points, and within
+/// the bound its spacing gives ([`crate::calib::engine::TEMPERATURE_GRID_S`]: 1.25e-4 °C next
+/// to a kink, with 1e-5 for f32 rounding) at every sample between, through a warm-up whose
+/// whole-°C steps make the kinks.
+#[test]
+fn the_temperature_grid_follows_the_swept_temperature() {
+    use crate::calib::engine::{RunTemperatures, TEMPERATURE_GRID_S};
+    let (runs, _) = capture_with(9, &[180.0], 30.0, &["offset_drift"], FullScale::Dps500);
+    let data = LoopData::new(kinematics::reconstruct(&runs, &KinOptions::default()).expect("kinematics"));
+    for (r, rk) in data.kin.runs.iter().enumerate() {
+        let step = (TEMPERATURE_GRID_S * rk.sample_rate_hz).round() as usize;
+        let (grid, mut swept) = (data.temperature_grid(r), RunTemperatures::new(rk, data.temp_mean_counts));
+        let (mut worst, mut moved, first) = (0.0f32, 0.0f32, grid.at(0));
+        for i in 0..rk.samples.len() {
+            let want = swept.at(i);
+            let off = (grid.at(i) - want).abs();
+            if i % step == 0 || i + 1 == rk.samples.len() {
+                assert_eq!(grid.at(i), want, "run {r}, grid point {i}");
+            }
+            worst = worst.max(off);
+            moved = moved.max((want - first).abs());
+        }
+        assert!(worst <= 1.35e-4, "run {r}: {worst} °C off between the grid's points");
+        assert!(moved > 0.5, "run {r}: the temperature moved {moved} °C");
+    }
+}
+
 /// g-sensitivity at three times its simulated default (0.15 °/s/g at most) with one speed in one
 /// direction, where it turns in the sensor frame exactly as the signal does: no test can see it,
 /// M absorbs it (hundreds of ppm), and only σ can carry it. The consider term names it, its

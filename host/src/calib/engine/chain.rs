@@ -6,7 +6,7 @@ use crate::calib::effects::terms::{decay, dot, AxisTerms, Ctx, IndexEdge, Needs,
 use crate::calib::effects::{encoder_error, Effect, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
 
-use super::loop_data::{LoopData, RunTemperatures};
+use super::loop_data::LoopData;
 use super::model::{shifts_of, Model};
 use crate::calib::effects::terms::{Col, LinCol, Point, SharedPar};
 use crate::calib::effects::DRIFT_KNOT_SPACINGS_S;
@@ -255,9 +255,6 @@ pub struct Evaluator<'a> {
     needs_temperature: bool,
     /// Whether a column is a free-drift knot: only those read a point's place on the knot grids.
     needs_knots: bool,
-    /// The smoothed temperatures of the run the last point was in (every pass visits a run's
-    /// samples forward, and each run after the other).
-    temperatures: std::cell::RefCell<Option<RunTemperatures<'a>>>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -349,7 +346,6 @@ impl<'a> Evaluator<'a> {
                 .map(|&c| Col::Lin(c))
                 .chain(cols.iter().copied())
                 .any(|c| matches!(c, Col::Lin(LinCol::DriftKnot { .. }))),
-            temperatures: Default::default(),
         }
     }
 
@@ -372,14 +368,9 @@ impl<'a> Evaluator<'a> {
             out.fill(0.0);
             return;
         }
-        let rk = &self.data.kin.runs[r];
-        let mut temps = self.temperatures.borrow_mut();
-        let temps = match &mut *temps {
-            Some(t) if std::ptr::eq(t.run, rk) => t,
-            other => other.insert(RunTemperatures::new(rk, self.data.temp_mean_counts)),
-        };
+        let grid = self.data.temperature_grid(r);
         for (t, i) in out.iter_mut().zip(range) {
-            *t = temps.at(i);
+            *t = grid.at(i);
         }
     }
 

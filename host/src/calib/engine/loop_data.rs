@@ -119,17 +119,73 @@ pub struct LoopData {
     /// Spread of the smoothed die temperature over every sample, °C, once asked for
     /// ([`LoopData::temp_spread_c`]).
     temp_spread_c: std::sync::OnceLock<f64>,
+    /// Each run's smoothed die temperature on its grid, once a pass asks for it
+    /// ([`LoopData::temperature_grid`]).
+    temperature_grids: std::sync::OnceLock<Vec<TemperatureGrid>>,
+}
+
+/// Spacing of the grid on which a run's smoothed die temperature is kept, s: 10 ms, a short
+/// cell. The smoothed temperature is a moving average of OUT_TEMP's whole-°C steps over
+/// [`TEMPERATURE_SMOOTHING_S`], so piecewise linear with kinks where a step enters or leaves the
+/// window; linear interpolation between grid points is exact on its pieces and off by at most
+/// (1 °C / 20 s)·(10 ms / 4) = 1.25e-4 °C next to a kink (for a temperature coefficient of
+/// 100 ppm/°C, 0.0125 ppm for those few samples).
+pub const TEMPERATURE_GRID_S: f64 = 0.01;
+
+/// One run's smoothed die temperature ([`RunTemperatures`]) at every `step`-th sample and at its
+/// last, and linearly between them. Every pass takes the temperature at its points; swept from
+/// the readings each time, that was an interpolation and a running sum per sample and pass (5 %
+/// of `host calibrate` on `realistic-2speed-s101`). Kept per sample it would cost 4 bytes each
+/// (44 MiB at 4 hours: issue 7's memory bar); on the grid, half a byte at 800 Hz.
+#[derive(Debug, Clone)]
+pub struct TemperatureGrid {
+    step: usize,
+    /// Index of the run's last sample.
+    last: usize,
+    /// The smoothed temperature at samples 0, step, 2·step, … and at `last`, °C.
+    values: Vec<f32>,
+}
+
+impl TemperatureGrid {
+    /// The grid of `run`, from one sweep of its samples.
+    fn of(run: &RunKinematics, temp_mean_counts: f64) -> Self {
+        let step = ((TEMPERATURE_GRID_S * run.sample_rate_hz).round() as usize).max(1);
+        let last = run.samples.len().saturating_sub(1);
+        let mut temps = RunTemperatures::new(run, temp_mean_counts);
+        let mut values: Vec<f32> = (0..=last).step_by(step).map(|i| temps.at(i)).collect();
+        if !last.is_multiple_of(step) {
+            values.push(temps.at(last));
+        }
+        Self { step, last, values }
+    }
+
+    /// The smoothed temperature at sample `i`, °C from the capture mean: the grid's value at its
+    /// points, linear between them.
+    #[inline]
+    pub fn at(&self, i: usize) -> f32 {
+        let k = i / self.step;
+        let (a, b) = (k * self.step, ((k + 1) * self.step).min(self.last));
+        match (self.values.get(k), self.values.get(k + 1)) {
+            (Some(&va), Some(&vb)) if b > a => {
+                let w = (i - a) as f64 / (b - a) as f64;
+                (f64::from(va) + w * (f64::from(vb) - f64::from(va))) as f32
+            }
+            (Some(&va), _) => va,
+            _ => f32::NAN,
+        }
+    }
 }
 
 /// The smoothed die temperature at one run's samples, °C from the capture mean: the moving
 /// average over [`TEMPERATURE_SMOOTHING_S`] of OUT_TEMP interpolated at each sample (falling 1
 /// count per °C, datasheet Table 5), rounded to f32. Computed as the samples are visited, from
 /// running sums of which only the 2h + 2 a window spans are kept (a ring), rather than held per
-/// sample (4 bytes each, 44 MiB at 4 hours: issue 7's memory bar). Every pass visits a run's
-/// samples forward, which costs one interpolation per sample; going back restarts the run.
+/// sample (4 bytes each, 44 MiB at 4 hours: issue 7's memory bar). Visiting a run's samples
+/// forward costs one interpolation per sample; going back restarts the run. The passes read it
+/// from a grid made in one such sweep ([`TemperatureGrid`]).
 #[derive(Debug, Clone)]
 pub struct RunTemperatures<'a> {
-    pub(super) run: &'a RunKinematics,
+    run: &'a RunKinematics,
     temp_mean_counts: f64,
     /// Half-width of the moving average, samples.
     h: usize,
@@ -233,7 +289,17 @@ impl LoopData {
             temp_mean_counts: temp_mean,
             temp_moved: temp_hi > temp_lo,
             temp_spread_c: std::sync::OnceLock::new(),
+            temperature_grids: std::sync::OnceLock::new(),
         }
+    }
+
+    /// Run `r`'s smoothed die temperature on its grid; every run's grid is made the first time
+    /// a pass asks (only passes whose columns use the temperature do, and only where it moved).
+    pub fn temperature_grid(&self, r: usize) -> &TemperatureGrid {
+        let grids = self
+            .temperature_grids
+            .get_or_init(|| self.kin.runs.iter().map(|run| TemperatureGrid::of(run, self.temp_mean_counts)).collect());
+        &grids[r]
     }
 
     /// Spread of the smoothed die temperature over every sample, °C: a sweep over every

@@ -46,7 +46,7 @@ pub use accumulate::{accumulate, accumulate_pairs};
 pub use cells::Cells;
 pub use chain::{Cursor, Evaluator};
 pub use cross::CrossSums;
-pub use loop_data::{LoopData, RunTemperatures, TEMPERATURE_SMOOTHING_S};
+pub use loop_data::{LoopData, RunTemperatures, TemperatureGrid, TEMPERATURE_GRID_S, TEMPERATURE_SMOOTHING_S};
 pub use model::Model;
 pub use nodes::for_each_interpolated;
 pub use solve::{
