@@ -5,7 +5,7 @@ use super::PlusMinus;
 use crate::calib::analysis::closure::{Ask, EarthExcess, Note};
 use crate::calib::analysis::consider::SEPARATED_SNR2;
 use crate::calib::analysis::consistency::Consistency;
-use crate::calib::result::consider_term::ConsiderTerm;
+use crate::calib::result::consider_term::{ConsiderTerm, ModelChoiceTerm};
 
 /// A run the data cannot do without, as the operator is asked for it.
 pub fn ask(a: &Ask) -> String {
@@ -59,6 +59,7 @@ pub fn note(n: &Note) -> String {
             PlusMinus(*horizontal_dph)
         ),
         Note::Unseparated(t) => unseparated(t),
+        Note::ModelChoice(t) => model_choice(t),
     }
 }
 
@@ -109,6 +110,19 @@ fn unseparated(t: &ConsiderTerm) -> String {
         worst(t.k_sigma_ppm),
         worst(t.direction_sigma_deg),
         t.removed_by
+    )
+}
+
+/// A step's near tie the final model lacks, in words.
+fn model_choice(t: &ModelChoiceTerm) -> String {
+    let worst = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
+    format!(
+        "Model choice: the loop took {} where {} would also explain the residual (Akaike weight {:.3} of that step's candidates): these runs do not tell them clearly apart, and M moves with the choice. That move at its weight adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Longer runs, or runs in the other direction, tell the two apart.",
+        t.taken,
+        t.alternative,
+        t.weight,
+        worst(t.k_sigma_ppm),
+        worst(t.direction_sigma_deg)
     )
 }
 

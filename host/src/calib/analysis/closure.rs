@@ -7,6 +7,7 @@
 use crate::calib::analysis::consider::{columns, consider, ConsiderOverrides, Consideration};
 use crate::calib::analysis::consistency::{consistency, Consistency};
 use crate::calib::analysis::diagnostics::{diagnose, Diagnostics, Finding};
+use crate::calib::analysis::model_choice::{self, Alternative};
 use crate::calib::analysis::paper::paper_check;
 use crate::calib::analysis::selection::{
     both_directions, distinct_rates_dps, held_out, least_needed, not_converged, separates_delay_and_index,
@@ -22,7 +23,7 @@ use crate::calib::engine::{
     SharedPar,
 };
 use crate::calib::result::axes::AXES;
-use crate::calib::result::consider_term::ConsiderTerm;
+use crate::calib::result::consider_term::{ConsiderTerm, ModelChoiceTerm};
 use crate::calib::result::derived::{derive, AxisEstimate, InterAxisAngle};
 use crate::calib::result::error::CalError;
 use crate::calib::result::estimate::Estimate;
@@ -252,6 +253,8 @@ pub enum Note {
     },
     /// A catalogued effect the runs do not separate: its plausible size is carried in σ.
     Unseparated(ConsiderTerm),
+    /// A step's near tie the final model lacks: M's move to it, at its weight, is carried in σ.
+    ModelChoice(ModelChoiceTerm),
 }
 
 impl Note {
@@ -902,6 +905,7 @@ fn loop_on(
         steps: vec![ctx.report(0, &state, None, None, Vec::new(), Vec::new())],
         skipped: Vec::new(),
         last_sums: None,
+        alternatives: Vec::new(),
     };
     while state.fitted.model.effects.len() < opts.max_effects {
         match ctx.next_state(&state, &mut trail)? {
@@ -939,6 +943,8 @@ struct Trail {
     /// loop it is of the final model, and the consider covariance reads it; where Earth is, it
     /// holds Earth's columns, and Earth's fit starts from the solution they give.
     last_sums: Option<CrossSums>,
+    /// Every step's near ties ([`crate::calib::analysis::model_choice`]).
+    alternatives: Vec<Alternative>,
 }
 
 impl Trail {
@@ -989,6 +995,7 @@ impl Context<'_> {
         for sk in outcome.skipped {
             trail.skip(sk);
         }
+        trail.alternatives.extend(outcome.alternatives.iter().copied());
         let Some((bi, mut fitted)) = outcome.accepted else {
             trail.last_sums = outcome.sums;
             return Ok(None);
@@ -1114,12 +1121,19 @@ impl Context<'_> {
     ) -> LoopReport {
         let (asks, mut notes) = closing_advice(self.data, &state.fitted, self.opts.latitude_deg);
         let considered = self.consider(&state, trail.last_sums.as_ref());
-        state.estimate = base_estimate_with(&state.fitted, self.nominal, Some(&considered.cov));
+        let (choice_cov, choices) = model_choice::spread(
+            &trail.alternatives,
+            &state.fitted.model.effects,
+            &state.estimate.params,
+            self.nominal,
+        );
+        state.estimate = base_estimate_with(&state.fitted, self.nominal, Some(&(&considered.cov + choice_cov)));
         // The final model's error against a simulated truth, in the σ it is reported with.
         if let (Some(last), Some(t)) = (trail.steps.last_mut(), self.truth) {
             last.truth = Some(TruthErrors::of(&state.estimate.axes, &t));
         }
         notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
+        notes.extend(choices.into_iter().map(Note::ModelChoice));
         let earth_excess = earth_implausible(&state.fitted);
         let consistency = consistency(
             self.data,

@@ -10,6 +10,7 @@ pub mod closure;
 pub mod consider;
 pub mod consistency;
 pub mod diagnostics;
+pub mod model_choice;
 pub mod paper;
 pub mod sanity;
 pub mod selection;

@@ -14,6 +14,7 @@
 //! (p ≈ 1e-19): with 10⁶ samples ln n charges each parameter 14.
 
 use crate::calib::analysis::diagnostics::{Diagnostics, FindingKind, MAX_ORDER};
+use crate::calib::analysis::model_choice::{self, Alternative, Candidacy};
 use crate::calib::effects::terms::{Evidence, Situation};
 use crate::calib::effects::{Effect, DRIFT_TAU_RANGE_S};
 use crate::calib::engine::{
@@ -193,6 +194,9 @@ pub struct StepOutcome {
     pub drift_choice: Vec<DriftChoice>,
     /// The candidates' pass (of the model the step started from), when one was made.
     pub sums: Option<CrossSums>,
+    /// The near ties of the accepted candidate, a drift model's excepted (its alternatives are
+    /// compared by BIC): [`crate::calib::analysis::model_choice`].
+    pub alternatives: Vec<Alternative>,
 }
 
 /// A drift model compared as an alternative.
@@ -281,6 +285,7 @@ pub fn step(
         accepted: None,
         drift_choice: Vec::new(),
         sums: None,
+        alternatives: Vec::new(),
     };
     if cands.is_empty() {
         return Ok(nothing());
@@ -320,12 +325,14 @@ pub fn step(
             }
         }
     }
+    let alternatives = accepted.as_ref().map_or_else(Vec::new, |(bi, _)| near_ties(&scores, *bi));
     Ok(StepOutcome {
         scores: scores.into_iter().map(|s| s.score).collect(),
         skipped,
         accepted,
         drift_choice,
         sums: Some(sums),
+        alternatives,
     })
 }
 
@@ -420,6 +427,26 @@ fn m_positions(lin: &[LinCol], sel: &Selection) -> Vec<usize> {
         })
         .collect();
     (0..3).flat_map(|a| per_axis.iter().map(move |p| a * sel.lin.len() + p)).collect()
+}
+
+/// The alternatives to candidate `bi` among `scores` ([`model_choice::alternatives`]): every
+/// other candidate with a linearised solution that places M, drift models excepted.
+fn near_ties(scores: &[Scored], bi: usize) -> Vec<Alternative> {
+    let candidacy = |s: &Scored| -> Option<Candidacy> {
+        let sol = s.solution.as_ref().filter(|_| s.m_at.len() == 9 && !s.score.effect.is_drift())?;
+        Some(Candidacy {
+            effect: s.score.effect,
+            delta_chi2: s.score.delta_chi2,
+            params: s.score.dof,
+            m: std::array::from_fn(|i| sol.delta[s.m_at[i]]),
+        })
+    };
+    let Some(taken) = candidacy(&scores[bi]) else { return Vec::new() };
+    let others: Vec<Candidacy> = (0..scores.len())
+        .filter(|&j| j != bi && scores[j].score.effect != taken.effect)
+        .filter_map(|j| candidacy(&scores[j]))
+        .collect();
+    model_choice::alternatives(&taken, &others)
 }
 
 /// Hausman's specification test (Econometrica 46, 1251, 1978) of a drift curve against the free

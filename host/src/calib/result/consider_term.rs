@@ -41,3 +41,22 @@ pub struct ConsiderTerm {
     /// The runs that would separate it.
     pub removed_by: String,
 }
+
+/// A step's near tie: an alternative to the effect the loop took, about as likely given the
+/// data, that the final model lacks. Where two effects' signatures are nearly alike in these
+/// runs, the one taken may be the wrong one, and M moves with the choice; the spread of M over
+/// the alternatives, each at its Akaike weight, is carried in σ
+/// ([`crate::calib::analysis::model_choice`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelChoiceTerm {
+    /// The effect taken at that step (its key).
+    pub taken: String,
+    /// The alternative (its key).
+    pub alternative: String,
+    /// Its Akaike weight among the step's candidates (the one taken and its alternatives).
+    pub weight: f64,
+    /// σ it adds to each sensitivity, ppm.
+    pub k_sigma_ppm: [f64; 3],
+    /// σ it adds to each axis direction, degrees.
+    pub direction_sigma_deg: [f64; 3],
+}
