@@ -25,8 +25,7 @@ use crate::calib::effects::Effect;
 use crate::calib::engine::{
     accumulate_pairs, normal_equations, Cells, CrossSums, Fitted, Gram, LoopData, Reach, Selection,
 };
-use crate::calib::result::consider_term::{ConsiderTerm, ConsideredParam};
-use crate::calib::result::derived::derive;
+use crate::calib::result::consider_term::{added_sigmas, ConsiderTerm, ConsideredParam};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -342,14 +341,14 @@ pub fn consider(
             continue;
         }
         let added = &along * along.transpose();
-        let (axes, _) = derive(params, &added, nominal);
+        let (k_sigma_ppm, direction_sigma_deg) = added_sigmas(params, &added, nominal);
         let term = ConsiderTerm {
             effect: c.effect.key(),
             name: c.effect.name(),
             params: considered,
             source,
-            k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),
-            direction_sigma_deg: axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees()),
+            k_sigma_ppm,
+            direction_sigma_deg,
             unseparated: lambdas.len(),
             least_seen: lambdas.iter().copied().fold(f64::INFINITY, f64::min),
             removed_by: c.effect.identified_by().into(),

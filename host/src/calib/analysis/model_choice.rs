@@ -14,8 +14,7 @@
 //! an axis delay at 15.3 (weight 0.06), which had left M 4σ off.
 
 use crate::calib::effects::Effect;
-use crate::calib::result::consider_term::ModelChoiceTerm;
-use crate::calib::result::derived::derive;
+use crate::calib::result::consider_term::{added_sigmas, ModelChoiceTerm};
 use nalgebra::DMatrix;
 
 /// Least Akaike weight of an alternative that is carried (engineering judgement: below it, a
@@ -72,17 +71,16 @@ pub fn spread(
 ) -> (DMatrix<f64>, Vec<ModelChoiceTerm>) {
     let mut cov = DMatrix::zeros(12, 12);
     let mut terms = Vec::new();
-    let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
     for alt in alternatives.iter().filter(|a| !in_final.contains(&a.effect)) {
         let d = DMatrix::from_fn(12, 1, |p, _| if p % 4 == 3 { 0.0 } else { alt.m_shift[3 * (p / 4) + p % 4] });
         let added = alt.weight * &d * d.transpose();
-        let (axes, _) = derive(params, &added, nominal);
+        let (k_sigma_ppm, direction_sigma_deg) = added_sigmas(params, &added, nominal);
         terms.push(ModelChoiceTerm {
             taken: alt.taken.key(),
             alternative: alt.effect.key(),
             weight: alt.weight,
-            k_sigma_ppm: std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6),
-            direction_sigma_deg: axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees()),
+            k_sigma_ppm,
+            direction_sigma_deg,
         });
         cov += added;
     }

@@ -2,7 +2,20 @@
 //! plausible size with its source, and the σ it adds to the sensitivities and directions
 //! ([`crate::calib::analysis::consider`] computes them).
 
+use crate::calib::result::derived::derive;
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
+
+/// What a covariance `added` to the 12 base parameters (`CalReport` order) adds at `params`:
+/// each sensitivity's σ, ppm of the sensitivity (k, its row of M's norm), and each direction's σ,
+/// degrees. What a consider term and a model-choice term report.
+pub fn added_sigmas(params: &[f64; 12], added: &DMatrix<f64>, nominal: f64) -> ([f64; 3], [f64; 3]) {
+    let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
+    let (axes, _) = derive(params, added, nominal);
+    let k_ppm = std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6);
+    let direction_deg = axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees());
+    (k_ppm, direction_deg)
+}
 
 /// One parameter of a considered effect.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
