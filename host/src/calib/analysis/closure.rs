@@ -692,6 +692,7 @@ impl Context<'_> {
             paper,
             drift: drift_table(&s.fitted.model, data),
             consider: Vec::new(),
+            model_choice: Vec::new(),
         }
     }
 }
@@ -1133,7 +1134,7 @@ impl Context<'_> {
             last.truth = Some(TruthErrors::of(&state.estimate.axes, &t));
         }
         notes.extend(considered.terms.iter().cloned().map(Note::Unseparated));
-        notes.extend(choices.into_iter().map(Note::ModelChoice));
+        notes.extend(choices.iter().cloned().map(Note::ModelChoice));
         let earth_excess = earth_implausible(&state.fitted);
         let consistency = consistency(
             self.data,
@@ -1156,6 +1157,7 @@ impl Context<'_> {
         };
         let mut final_report = self.cal_report(&state, paper);
         final_report.consider = considered.terms;
+        final_report.model_choice = choices;
         let added = trail.steps.len() > 1;
         LoopReport {
             steps: trail.steps,

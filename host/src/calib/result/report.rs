@@ -140,6 +140,11 @@ pub struct CalReport {
     /// adds to σ (already in `cov` and every σ derived from it).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub consider: Vec<super::consider_term::ConsiderTerm>,
+    /// The near ties of the loop's steps: alternatives to an effect it took, about as likely given
+    /// the data, each with its Akaike weight and what the spread of M over them adds to σ (already
+    /// in `cov` and every σ derived from it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_choice: Vec<super::consider_term::ModelChoiceTerm>,
 }
 
 /// The modelled offset through one run, sampled every [`DRIFT_TABLE_STEP_S`].
