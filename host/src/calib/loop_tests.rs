@@ -1728,3 +1728,20 @@ fn a_near_tie_between_candidates_is_carried_in_sigma_and_reported() {
         assert!(t.sensitivity_z[a].abs() <= Z_1D, "axis {a} sensitivity {:.2}σ off", t.sensitivity_z[a]);
     }
 }
+
+/// A base-encoder eccentricity of the simulator's default 0.01° on 20-s runs in both
+/// directions: the residual's 2× line is too weak on such runs for the diagnostics to let the
+/// loop try it, M takes up its constant part, and the answer was 4.26σ off at exit 0 (the trust
+/// bench, `180,-180@20`, seed 44). The consider term sees the residual's score along it and
+/// carries it in σ: within 3σ, with the term named.
+#[test]
+fn an_encoder_eccentricity_too_weak_to_try_is_carried_in_sigma() {
+    let (runs, truth) = capture_with(44, &[180.0, -180.0], 20.0, &["encoder_eccentricity"], FullScale::Dps500);
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    let term = r.final_report().consider.iter().find(|t| t.effect == Effect::EncoderEccentricity.key()).cloned();
+    let term = term.unwrap_or_else(|| panic!("no encoder term: {:?}", r.final_report().consider));
+    assert!(term.direction_sigma_deg.iter().any(|&d| d > 0.002), "{term:?}");
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(t.max_sensitivity_ppm() > 20.0, "the effect must bias M for this test to mean anything: {t:?}");
+    assert_within_3_sigma(&t, "20-s runs, encoder eccentricity");
+}
