@@ -1698,7 +1698,7 @@ fn assert_encoder_error_found(
     assert_within_3_sigma(&truth_of(r.steps.last().expect("steps")), &format!("a base encoder 0.05° off, {truth:?}"));
 }
 
-/// A near tie carried into the report: with 20-s runs at two speeds, a per-axis delay (2 ms on
+/// A near tie carried into the report: with 20-s runs at two speeds, a per-axis delay (0.1 ms on
 /// the y axis, the simulator's default) and a table tilt explain nearly the same structure, and
 /// the loop took the tilt (the trust bench's `180,90@20`, `axis_delay`, seed 8: Δχ² 18.8 against
 /// 15.3). The alternative is named in the notes and in `calibration.json`'s `model_choice`, with
