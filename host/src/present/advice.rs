@@ -91,7 +91,6 @@ fn unseparated(t: &ConsiderTerm) -> String {
     } else {
         sizes.join(", ")
     };
-    let worst = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
     // Information grows with rig time: where these runs see the effect at all (λ ≥ 0.25, a
     // judgement: beyond 100× the rig time no one runs), the same design longer separates it.
     let longer = if (LEAST_SEEN_FOR_LONGER..SEPARATED_SNR2).contains(&t.least_seen) {
@@ -113,9 +112,13 @@ fn unseparated(t: &ConsiderTerm) -> String {
     )
 }
 
+/// The largest of a term's three per-axis figures.
+fn worst(v: [f64; 3]) -> f64 {
+    v.into_iter().fold(0.0, f64::max)
+}
+
 /// A step's near tie the final model lacks, in words.
 fn model_choice(t: &ModelChoiceTerm) -> String {
-    let worst = |v: [f64; 3]| v.into_iter().fold(0.0, f64::max);
     format!(
         "Model choice: the loop took {} where {} would also explain the residual (Akaike weight {:.3} of that step's candidates): these runs do not tell them clearly apart, and M moves with the choice. That move at its weight adds up to {:.1} ppm to a sensitivity's σ and {:.4}° to a direction's, carried in every σ and in cov. Longer runs, or runs in the other direction, tell the two apart.",
         t.taken,

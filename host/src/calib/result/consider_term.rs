@@ -10,9 +10,8 @@ use serde::{Deserialize, Serialize};
 /// each sensitivity's σ, ppm of the sensitivity (k, its row of M's norm), and each direction's σ,
 /// degrees. What a consider term and a model-choice term report.
 pub fn added_sigmas(params: &[f64; 12], added: &DMatrix<f64>, nominal: f64) -> ([f64; 3], [f64; 3]) {
-    let k: [f64; 3] = std::array::from_fn(|a| (0..3).map(|j| params[4 * a + j].powi(2)).sum::<f64>().sqrt());
     let (axes, _) = derive(params, added, nominal);
-    let k_ppm = std::array::from_fn(|a| axes[a].k_counts_per_dps.sigma / k[a] * 1e6);
+    let k_ppm = axes.each_ref().map(|ax| ax.k_counts_per_dps.sigma / ax.k_counts_per_dps.value * 1e6);
     let direction_deg = axes.map(|ax| ax.s.iter().map(|e| e.sigma.powi(2)).sum::<f64>().sqrt().to_degrees());
     (k_ppm, direction_deg)
 }
