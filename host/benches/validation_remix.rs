@@ -15,7 +15,8 @@
 //! The bench exits 0 whatever it finds: a measurement, not a test.
 //!
 //! `REMIX_SEEDS=N` (or `A-B`: seeds A..=B), `REMIX_FOLDERS=clean-s101,gsens-1speed-s101`
-//! (default: every folder with a `truth.json`). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
+//! (default: every folder with a `truth.json`), `REMIX_ROOT=DIR` (default `../shared/validation`:
+//! folders of captures in its layout, such as its folders with runs left out or cut short). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
 //!
 //! `cargo bench -p host --bench validation_remix --profile release`: 6 folders × 5 seeds, 30
 //! calibrations, about 30 s of their CPU (2.5 s at most each, `realistic-2speed-s101`).
@@ -26,11 +27,17 @@ use measured::replay::{self, max_abs};
 use measured::trust::{cell_stats, SeedOutcome, BAR_Z};
 use std::path::{Path, PathBuf};
 
-/// A folder's remix of seed `seed`, made once: its captures and truth.
-fn remixed(folder: &Path, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> {
+/// A folder's name, with its runs' cut.
+fn label(folder: &Path, cut_s: Option<f64>) -> String {
     let name = folder.file_name().and_then(|n| n.to_str()).unwrap_or("folder");
-    let dir = measured::bench_dir(&format!("remix/{name}/m{seed}"));
-    let remix = Remix::drawn(seed);
+    cut_s.map_or_else(|| name.to_string(), |c| format!("{name}-cut{c}s"))
+}
+
+/// A folder's remix of seed `seed` with its runs cut to `cut_s`, made once: its captures and
+/// truth.
+fn remixed(folder: &Path, cut_s: Option<f64>, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> {
+    let dir = measured::bench_dir(&format!("remix/{}/m{seed}", label(folder, cut_s)));
+    let remix = Remix { cut_s, ..Remix::drawn(seed) };
     let truth = replay::read_json(&folder.join("truth.json"))?;
     let text = serde_json::to_string_pretty(&remix.truth(&truth)?).expect("a JSON value");
     std::fs::write(dir.join("truth.json"), text).map_err(|e| format!("write truth.json: {e}"))?;
@@ -54,10 +61,10 @@ fn remixed(folder: &Path, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> 
 }
 
 /// One seed's outcome, and its line.
-fn judge(folder: &Path, seed: u64) -> (SeedOutcome, String) {
+fn judge(folder: &Path, cut_s: Option<f64>, seed: u64) -> (SeedOutcome, String) {
     let mut o = SeedOutcome::default();
     let mut wall_s = f64::NAN;
-    let run = remixed(folder, seed).and_then(|(dir, caps)| {
+    let run = remixed(folder, cut_s, seed).and_then(|(dir, caps)| {
         let usage = replay::calibrate_files(&dir, &caps)?;
         (o.code, o.cpu_s, wall_s) = ((usage.code >= 0).then_some(usage.code), Some(usage.cpu_s), usage.wall_s);
         let truth = replay::read_json(&dir.join("truth.json"))?;
@@ -93,8 +100,27 @@ fn errors(cal: &serde_json::Value, truth: &serde_json::Value) -> (f64, f64) {
     (dir_deg, ppm)
 }
 
+/// `REMIX_CUT_S`: the cuts, seconds (`none`: whole runs); default whole runs only.
+fn cuts_from_env() -> Vec<Option<f64>> {
+    let Ok(spec) = std::env::var("REMIX_CUT_S") else {
+        return vec![None];
+    };
+    spec.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| match s {
+            "none" => None,
+            _ => Some(s.parse::<f64>().ok().filter(|c| *c > 0.0).unwrap_or_else(|| {
+                eprintln!("REMIX_CUT_S: {s:?} is not a positive number of seconds or none");
+                std::process::exit(2)
+            })),
+        })
+        .collect()
+}
+
 fn main() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/validation");
+    let root = std::env::var_os("REMIX_ROOT")
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/validation"), PathBuf::from);
     let seeds = replay::seeds_from_env("REMIX_SEEDS", 5);
     let only: Vec<String> = std::env::var("REMIX_FOLDERS")
         .map(|v| v.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect())
@@ -110,18 +136,20 @@ fn main() {
         .filter(|p| only.is_empty() || only.iter().any(|o| p.ends_with(o)))
         .collect();
     folders.sort();
-    let jobs: Vec<(usize, u64)> = (0..folders.len()).flat_map(|f| seeds.clone().map(move |s| (f, s))).collect();
-    let name = |f: usize| folders[f].file_name().and_then(|n| n.to_str()).unwrap_or("?").to_string();
+    let cuts = cuts_from_env();
+    let cells: Vec<(usize, Option<f64>)> = (0..folders.len()).flat_map(|f| cuts.iter().map(move |&c| (f, c))).collect();
+    let jobs: Vec<(usize, u64)> = (0..cells.len()).flat_map(|c| seeds.clone().map(move |s| (c, s))).collect();
+    let name = |c: usize| label(&folders[cells[c].0], cells[c].1);
     let results = replay::run_parallel(
         &jobs,
-        |&(f, seed)| judge(&folders[f], seed),
+        |&(c, seed)| judge(&folders[cells[c].0], cells[c].1, seed),
         |i, (_, line)| println!("{} m{}: {line}", name(jobs[i].0), jobs[i].1),
     );
     println!(
-        "\nfolder                        seeds  exit 0/3/other  max|z| exit0  max|z| all  z RMS exit0  conf.wrong  CPU s/cal  bar"
+        "\nfolder                              seeds  exit 0/3/other  max|z| exit0  max|z| all  z RMS exit0  conf.wrong  CPU s/cal  bar"
     );
     let mut all_hold = true;
-    for f in 0..folders.len() {
+    for f in 0..cells.len() {
         let outcomes: Vec<SeedOutcome> =
             jobs.iter().zip(&results).filter(|((g, _), _)| *g == f).map(|(_, (o, _))| o.clone()).collect();
         let c = cell_stats(&outcomes);
@@ -133,7 +161,7 @@ fn main() {
         all_hold &= holds;
         let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.2}"));
         println!(
-            "{:<29} {:>5}  {:>14}  {:>12}  {:>10}  {:>11}  {:>10}  {:>9.2}  {}",
+            "{:<35} {:>5}  {:>14}  {:>12}  {:>10}  {:>11}  {:>10}  {:>9.2}  {}",
             name(f),
             c.seeds,
             format!("{}/{}/{}", c.exit0, c.exit3, c.other),

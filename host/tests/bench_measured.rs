@@ -243,7 +243,7 @@ mod remix {
     #[test]
     fn the_identity_gives_the_capture_back() {
         let bytes = demo();
-        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1 };
+        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1, cut_s: None };
         let (out, held) = id.capture("demo.cap", &bytes).expect("a clean capture");
         assert_eq!(held, 0);
         assert!(out == bytes, "{} bytes against {}", out.len(), bytes.len());
@@ -255,7 +255,8 @@ mod remix {
     fn every_sample_goes_through_a_and_nothing_else_moves() {
         let bytes = demo();
         let a = Matrix3::new(3.0, 0.01, -0.02, 0.005, 0.98, 0.0, -0.01, 0.03, 1.02);
-        let (out, held) = Remix { a, noise_counts: 0.0, seed: 1 }.capture("demo.cap", &bytes).expect("clean");
+        let (out, held) =
+            Remix { a, noise_counts: 0.0, seed: 1, cut_s: None }.capture("demo.cap", &bytes).expect("clean");
         let (before, after) = (frames(&bytes), frames(&out));
         assert_eq!(before.len(), after.len());
         let (mut samples, mut want_held) = (0, 0);
@@ -284,7 +285,7 @@ mod remix {
     #[test]
     fn the_noise_has_its_sigma_and_its_seed() {
         let bytes = demo();
-        let noisy = Remix { a: Matrix3::identity(), noise_counts: 3.0, seed: 7 };
+        let noisy = Remix { a: Matrix3::identity(), noise_counts: 3.0, seed: 7, cut_s: None };
         let (out, _) = noisy.capture("demo.cap", &bytes).expect("clean");
         assert!(out == noisy.capture("demo.cap", &bytes).expect("clean").0, "the same seed, the same draw");
         assert!(out != noisy.capture("other.cap", &bytes).expect("clean").0, "another name, another draw");
@@ -302,12 +303,53 @@ mod remix {
         assert!((var - 9.083).abs() < 0.03 * 9.083, "variance {var} over {n} counts");
     }
 
+    /// A cut keeps each run's first seconds and its `RunStopped` (moved to the cut), drops the
+    /// rest of the run, keeps everything outside runs, and closes the sequence numbers' gap.
+    #[test]
+    fn a_cut_keeps_each_runs_first_seconds() {
+        let bytes = demo();
+        let cut_s = 3.0;
+        let cut = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1, cut_s: Some(cut_s) };
+        let (out, _) = cut.capture("demo.cap", &bytes).expect("clean");
+        let (before, after) = (frames(&bytes), frames(&out));
+        // The frames kept, in order: outside runs all of them; in a run those before its first
+        // sample at or past the cut; its RunStopped at that sample's time.
+        let (mut want, mut first, mut cut_at, mut runs) = (Vec::new(), None, None, 0);
+        for (_, m) in &before {
+            match m {
+                RigMsg::RunStarted(_) => (first, cut_at, runs) = (None, None, runs + 1),
+                RigMsg::RunStopped(stop) => {
+                    let mut stop = *stop;
+                    stop.t_us = cut_at.expect("demo's runs are longer than the cut");
+                    want.push(RigMsg::RunStopped(stop));
+                    (first, cut_at) = (None, None);
+                    continue;
+                }
+                RigMsg::Sample(s) => {
+                    let t0 = *first.get_or_insert(s.t_us);
+                    if cut_at.is_none() && f64::from(s.t_us - t0) >= cut_s * 1e6 {
+                        cut_at = Some(s.t_us);
+                    }
+                }
+                _ => {}
+            }
+            if cut_at.is_none() {
+                want.push(*m);
+            }
+        }
+        assert!(runs >= 2 && want.len() < before.len(), "{runs} runs, {} of {} frames", want.len(), before.len());
+        assert_eq!(after.iter().map(|(_, m)| *m).collect::<Vec<_>>(), want);
+        for (i, (seq, _)) in after.iter().enumerate() {
+            assert_eq!(*seq, before[0].0.wrapping_add(i as u16), "frame {i}: no gap in the sequence numbers");
+        }
+    }
+
     /// A capture with damaged bytes is refused, saying where.
     #[test]
     fn a_damaged_capture_is_refused() {
         let mut bytes = demo();
         bytes[1000] ^= 0x5a;
-        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1 };
+        let id = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1, cut_s: None };
         let err = id.capture("demo.cap", &bytes).expect_err("damaged");
         assert!(err.starts_with("demo.cap: ") && err.contains("bytes at offset"), "{err}");
     }
@@ -321,7 +363,7 @@ mod remix {
             "units": "counts"
         });
         let a = Matrix3::new(1.02, 0.01, 0.0, -0.005, 0.99, 0.002, 0.0, 0.0, 1.0);
-        let got = Remix { a, noise_counts: 3.0, seed: 4 }.truth(&truth).expect("a truth");
+        let got = Remix { a, noise_counts: 3.0, seed: 4, cut_s: None }.truth(&truth).expect("a truth");
         let m = Matrix3::new(57.0, 0.5, -0.1, 0.3, 56.0, 0.8, -0.4, -0.7, 58.0);
         let want = a * m;
         let m2 = m_true(&got).expect("M");

@@ -25,6 +25,45 @@ pub struct Remix {
     pub noise_counts: f64,
     /// Seeds the noise (each capture's from it and the capture's name).
     pub seed: u64,
+    /// Each run cut to its first this many seconds (from its first sample after `RunStarted`),
+    /// or whole.
+    pub cut_s: Option<f64>,
+}
+
+/// Where a capture's run stands while it is cut ([`Remix::cut_s`]).
+#[derive(Debug, Default)]
+struct Cut {
+    /// The run's first sample's time, µs, once a run has started and sent one.
+    first_us: Option<u32>,
+    /// The first dropped sample's time, µs, once the run is past the cut.
+    cut_at_us: Option<u32>,
+    /// Frames dropped so far: later frames' sequence numbers close the gap, so the decoder
+    /// counts no loss.
+    dropped: u16,
+}
+
+impl Cut {
+    /// Whether the frame `msg` is kept, with a `RunStopped` moved to the cut.
+    fn keep(&mut self, cut_s: f64, msg: &mut RigMsg) -> bool {
+        match msg {
+            RigMsg::RunStarted(_) => (self.first_us, self.cut_at_us) = (None, None),
+            RigMsg::RunStopped(stop) => {
+                stop.t_us = self.cut_at_us.unwrap_or(stop.t_us);
+                (self.first_us, self.cut_at_us) = (None, None);
+                return true;
+            }
+            RigMsg::Sample(s) => {
+                let first = *self.first_us.get_or_insert(s.t_us);
+                if self.cut_at_us.is_none() && f64::from(s.t_us.wrapping_sub(first)) >= cut_s * 1e6 {
+                    self.cut_at_us = Some(s.t_us);
+                }
+            }
+            _ => {}
+        }
+        let keep = self.cut_at_us.is_none();
+        self.dropped = self.dropped.wrapping_add(u16::from(!keep));
+        keep
+    }
 }
 
 /// Spread of A's diagonal about 1: ±3 %, of the order of a MEMS gyro's part-to-part sensitivity
@@ -54,13 +93,14 @@ impl Remix {
                 CROSS_SPREAD_RAD * u
             }
         });
-        Self { a, noise_counts: NOISE_COUNTS, seed }
+        Self { a, noise_counts: NOISE_COUNTS, seed, cut_s: None }
     }
 
     /// The capture `bytes` (named `name`, which seeds its noise with [`Remix::seed`]) with every
     /// sample's counts remixed, rounded and held to the i16 range, and how many counts that held.
-    /// Every other frame is re-encoded as it was, with its sequence number. Bytes that were not a
-    /// valid frame are an error: a remix of a damaged capture would not be one of the sensor.
+    /// Every other frame is re-encoded as it was, with its sequence number (less the frames a
+    /// cut dropped before it). Bytes that were not a valid frame are an error: a remix of a
+    /// damaged capture would not be one of the sensor.
     pub fn capture(&self, name: &str, bytes: &[u8]) -> Result<(Vec<u8>, u64), String> {
         let name_hash =
             name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3));
@@ -69,8 +109,12 @@ impl Remix {
         let (mut out, mut clipped, mut bad) = (Vec::with_capacity(bytes.len() + bytes.len() / 8), 0u64, None);
         let mut frame = [0u8; MAX_FRAME_LEN + 1];
         let mut decoder = StreamDecoder::new();
+        let mut cut = Cut::default();
         decoder.feed::<RigMsg>(bytes, |ev| match ev {
-            Event::Frame { seq, msg, .. } => {
+            Event::Frame { seq, mut msg, .. } => {
+                if self.cut_s.is_some_and(|c| !cut.keep(c, &mut msg)) {
+                    return;
+                }
                 let msg = match msg {
                     RigMsg::Sample(mut s) => {
                         let x = self.a * Vector3::from(s.rate_counts.map(f64::from));
@@ -84,7 +128,7 @@ impl Remix {
                     }
                     other => other,
                 };
-                match encode_frame(seq, &msg, &mut frame) {
+                match encode_frame(seq.wrapping_sub(cut.dropped), &msg, &mut frame) {
                     Ok(n) => out.extend_from_slice(&frame[..n]),
                     Err(e) => {
                         bad.get_or_insert(format!("re-encoding frame {seq}: {e:?}"));
@@ -121,7 +165,7 @@ impl Remix {
         out["sensor"]["S"] = json!(dirs);
         out["sensor"]["v_off"] = json!(v2.iter().collect::<Vec<_>>());
         let a: Vec<Vec<f64>> = self.a.row_iter().map(|r| r.iter().copied().collect()).collect();
-        out["remix"] = json!({ "a": a, "noise_counts": self.noise_counts, "seed": self.seed });
+        out["remix"] = json!({ "a": a, "noise_counts": self.noise_counts, "seed": self.seed, "cut_s": self.cut_s });
         Ok(out)
     }
 }
