@@ -22,32 +22,60 @@
 //! calibrations, about 30 s of their CPU (2.5 s at most each, `realistic-2speed-s101`).
 
 mod measured;
-use measured::remix::{m_true, Remix};
+use measured::remix::{grown, m_true, Remix};
 use measured::replay::{self, max_abs};
 use measured::trust::{cell_stats, SeedOutcome, BAR_Z};
 use std::path::{Path, PathBuf};
 
-/// A folder's name, with its runs' cut.
-fn label(folder: &Path, cut_s: Option<f64>) -> String {
-    let name = folder.file_name().and_then(|n| n.to_str()).unwrap_or("folder");
-    cut_s.map_or_else(|| name.to_string(), |c| format!("{name}-cut{c}s"))
+/// What one row of the table remixes: a folder, its runs cut or whole, its effect grown or not.
+#[derive(Debug, Clone)]
+struct Cell {
+    folder: PathBuf,
+    cut_s: Option<f64>,
+    /// The folder's difference from its clean twin ([`TWIN`]) times this ([`grown`]).
+    gain: Option<f64>,
 }
 
-/// A folder's remix of seed `seed` with its runs cut to `cut_s`, made once: its captures and
-/// truth.
-fn remixed(folder: &Path, cut_s: Option<f64>, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> {
-    let dir = measured::bench_dir(&format!("remix/{}/m{seed}", label(folder, cut_s)));
-    let remix = Remix { cut_s, ..Remix::drawn(seed) };
-    let truth = replay::read_json(&folder.join("truth.json"))?;
+/// The folder whose rig and noise draw the others of `../shared/validation` that hold one
+/// effect share, frame for frame: what an effect is grown from.
+const TWIN: &str = "clean-s101";
+
+impl Cell {
+    /// The folder's name, with its cut and gain.
+    fn label(&self) -> String {
+        let mut name = self.folder.file_name().and_then(|n| n.to_str()).unwrap_or("folder").to_string();
+        if let Some(g) = self.gain {
+            name += &format!("-x{g}");
+        }
+        if let Some(c) = self.cut_s {
+            name += &format!("-cut{c}s");
+        }
+        name
+    }
+
+    /// A capture of the cell's folder, its effect grown if the cell says so.
+    fn capture_bytes(&self, cap: &Path, file: &str) -> Result<Vec<u8>, String> {
+        let read = |p: &Path| std::fs::read(p).map_err(|e| format!("read {}: {e}", p.display()));
+        let bytes = read(cap)?;
+        let Some(gain) = self.gain else { return Ok(bytes) };
+        let twin = self.folder.with_file_name(TWIN).join(file);
+        grown(file, &read(&twin)?, &bytes, gain)
+    }
+}
+
+/// A cell's remix of seed `seed`, made once: its captures and truth.
+fn remixed(cell: &Cell, seed: u64) -> Result<(PathBuf, Vec<PathBuf>), String> {
+    let dir = measured::bench_dir(&format!("remix/{}/m{seed}", cell.label()));
+    let remix = Remix { cut_s: cell.cut_s, ..Remix::drawn(seed) };
+    let truth = replay::read_json(&cell.folder.join("truth.json"))?;
     let text = serde_json::to_string_pretty(&remix.truth(&truth)?).expect("a JSON value");
     std::fs::write(dir.join("truth.json"), text).map_err(|e| format!("write truth.json: {e}"))?;
     let mut caps = Vec::new();
-    for cap in replay::captures_in(folder)? {
+    for cap in replay::captures_in(&cell.folder)? {
         let file = cap.file_name().and_then(|n| n.to_str()).unwrap_or("x.cap").to_string();
         let out = dir.join(&file);
         if !out.exists() {
-            let bytes = std::fs::read(&cap).map_err(|e| format!("read {}: {e}", cap.display()))?;
-            let (mixed, held) = remix.capture(&file, &bytes)?;
+            let (mixed, held) = remix.capture(&file, &cell.capture_bytes(&cap, &file)?)?;
             if held > 0 {
                 eprintln!("{}: {held} counts held at the i16 range", out.display());
             }
@@ -61,10 +89,10 @@ fn remixed(folder: &Path, cut_s: Option<f64>, seed: u64) -> Result<(PathBuf, Vec
 }
 
 /// One seed's outcome, and its line.
-fn judge(folder: &Path, cut_s: Option<f64>, seed: u64) -> (SeedOutcome, String) {
+fn judge(cell: &Cell, seed: u64) -> (SeedOutcome, String) {
     let mut o = SeedOutcome::default();
     let mut wall_s = f64::NAN;
-    let run = remixed(folder, cut_s, seed).and_then(|(dir, caps)| {
+    let run = remixed(cell, seed).and_then(|(dir, caps)| {
         let usage = replay::calibrate_files(&dir, &caps)?;
         (o.code, o.cpu_s, wall_s) = ((usage.code >= 0).then_some(usage.code), Some(usage.cpu_s), usage.wall_s);
         let truth = replay::read_json(&dir.join("truth.json"))?;
@@ -100,9 +128,10 @@ fn errors(cal: &serde_json::Value, truth: &serde_json::Value) -> (f64, f64) {
     (dir_deg, ppm)
 }
 
-/// `REMIX_CUT_S`: the cuts, seconds (`none`: whole runs); default whole runs only.
-fn cuts_from_env() -> Vec<Option<f64>> {
-    let Ok(spec) = std::env::var("REMIX_CUT_S") else {
+/// A list of positive numbers or `none` from `var` (`REMIX_CUT_S`, `REMIX_GAIN`); `[None]`
+/// when it is not set.
+fn options_from_env(var: &str) -> Vec<Option<f64>> {
+    let Ok(spec) = std::env::var(var) else {
         return vec![None];
     };
     spec.split(',')
@@ -111,11 +140,32 @@ fn cuts_from_env() -> Vec<Option<f64>> {
         .map(|s| match s {
             "none" => None,
             _ => Some(s.parse::<f64>().ok().filter(|c| *c > 0.0).unwrap_or_else(|| {
-                eprintln!("REMIX_CUT_S: {s:?} is not a positive number of seconds or none");
+                eprintln!("{var}: {s:?} is neither a positive number nor none");
                 std::process::exit(2)
             })),
         })
         .collect()
+}
+
+/// Every cell: each folder with each cut, and each gain where the folder has a twin to grow
+/// its effect from (every capture of it also in [`TWIN`], which is not its own twin).
+fn cells(folders: &[PathBuf]) -> Vec<Cell> {
+    let (cuts, gains) = (options_from_env("REMIX_CUT_S"), options_from_env("REMIX_GAIN"));
+    let has_twin = |f: &Path| {
+        !f.ends_with(TWIN)
+            && replay::captures_in(f).is_ok_and(|caps| {
+                caps.iter().all(|c| c.file_name().is_some_and(|n| f.with_file_name(TWIN).join(n).exists()))
+            })
+    };
+    let mut out = Vec::new();
+    for folder in folders {
+        for &gain in gains.iter().filter(|g| g.is_none() || has_twin(folder)) {
+            for &cut_s in &cuts {
+                out.push(Cell { folder: folder.clone(), cut_s, gain });
+            }
+        }
+    }
+    out
 }
 
 fn main() {
@@ -136,13 +186,12 @@ fn main() {
         .filter(|p| only.is_empty() || only.iter().any(|o| p.ends_with(o)))
         .collect();
     folders.sort();
-    let cuts = cuts_from_env();
-    let cells: Vec<(usize, Option<f64>)> = (0..folders.len()).flat_map(|f| cuts.iter().map(move |&c| (f, c))).collect();
+    let cells = cells(&folders);
     let jobs: Vec<(usize, u64)> = (0..cells.len()).flat_map(|c| seeds.clone().map(move |s| (c, s))).collect();
-    let name = |c: usize| label(&folders[cells[c].0], cells[c].1);
+    let name = |c: usize| cells[c].label();
     let results = replay::run_parallel(
         &jobs,
-        |&(c, seed)| judge(&folders[cells[c].0], cells[c].1, seed),
+        |&(c, seed)| judge(&cells[c], seed),
         |i, (_, line)| println!("{} m{}: {line}", name(jobs[i].0), jobs[i].1),
     );
     println!(

@@ -344,6 +344,40 @@ mod remix {
         }
     }
 
+    /// A grown effect: gain 0 gives the base back and gain 1 the capture with the effect, byte
+    /// for byte; gain 3 puts each count at base + 3·(with − base); captures that are not the
+    /// same frames are refused.
+    #[test]
+    fn an_effect_grows_by_its_difference_from_the_twin() {
+        let base = demo();
+        let a = Matrix3::new(1.01, 0.002, 0.0, 0.0, 0.995, -0.003, 0.001, 0.0, 1.0);
+        let (with, _) = Remix { a, noise_counts: 0.0, seed: 1, cut_s: None }.capture("demo.cap", &base).expect("clean");
+        assert!(grown("demo.cap", &base, &with, 0.0).expect("twins") == base, "gain 0: the base");
+        assert!(grown("demo.cap", &base, &with, 1.0).expect("twins") == with, "gain 1: the capture");
+        let tripled = grown("demo.cap", &base, &with, 3.0).expect("twins");
+        let (mut moved, mut samples) = (0, 0);
+        for (((s0, b), (_, w)), (s3, g)) in frames(&base).iter().zip(&frames(&with)).zip(&frames(&tripled)) {
+            assert_eq!(s0, s3);
+            match (b, w, g) {
+                (RigMsg::Sample(b), RigMsg::Sample(w), RigMsg::Sample(g)) => {
+                    for i in 0..3 {
+                        let (cb, cw) = (i32::from(b.rate_counts[i]), i32::from(w.rate_counts[i]));
+                        let want = (cb + 3 * (cw - cb)).clamp(-32768, 32767);
+                        assert_eq!(i32::from(g.rate_counts[i]), want);
+                        moved += usize::from(cw != cb);
+                    }
+                    samples += 1;
+                }
+                _ => assert_eq!(b, g),
+            }
+        }
+        assert!(samples > 10_000 && moved > samples, "{moved} counts moved in {samples} samples");
+        let cut = Remix { a: Matrix3::identity(), noise_counts: 0.0, seed: 1, cut_s: Some(3.0) };
+        let (short, _) = cut.capture("demo.cap", &base).expect("clean");
+        let err = grown("demo.cap", &base, &short, 2.0).expect_err("not twins");
+        assert!(err.starts_with("demo.cap: ") && err.contains("frames against"), "{err}");
+    }
+
     /// A capture with damaged bytes is refused, saying where.
     #[test]
     fn a_damaged_capture_is_refused() {

@@ -180,3 +180,50 @@ pub fn m_true(truth: &Value) -> Result<[[f64; 3]; 3], String> {
     }
     Ok(m)
 }
+
+/// Every frame of a capture, in order, or where it is damaged.
+fn frames(name: &str, bytes: &[u8]) -> Result<Vec<(u16, RigMsg)>, String> {
+    let (mut out, mut bad) = (Vec::new(), None);
+    let mut decoder = StreamDecoder::new();
+    decoder.feed::<RigMsg>(bytes, |ev| match ev {
+        Event::Frame { seq, msg, .. } => out.push((seq, msg)),
+        Event::Error { offset, len, error } => {
+            bad.get_or_insert(format!("{name}: {len} bytes at offset {offset} are no frame: {error:?}"));
+        }
+    });
+    bad.map_or(Ok(out), Err)
+}
+
+/// An effect grown `gain` times in a capture we did not write: `base + gain·(with − base)` per
+/// count, every other frame `base`'s. `with` must hold `base`'s frames at the same times, the
+/// same rig and noise draw with one effect added (`clean-s101` and `gsens-1speed-s101` of
+/// `../shared/validation` are such a pair), so the difference is that effect's counts (and the
+/// two roundings, at most 0.41 counts rms, times the gain). Its truth is `with`'s for an effect that
+/// leaves M alone (a bias: g-sensitivity, Earth's rate).
+pub fn grown(name: &str, base: &[u8], with: &[u8], gain: f64) -> Result<Vec<u8>, String> {
+    let (base, with) = (frames(name, base)?, frames(name, with)?);
+    if base.len() != with.len() {
+        return Err(format!("{name}: {} frames against {} in its twin", with.len(), base.len()));
+    }
+    let mut out = Vec::with_capacity(base.len() * 24);
+    let mut frame = [0u8; MAX_FRAME_LEN + 1];
+    for (i, ((seq, b), (_, w))) in base.iter().zip(&with).enumerate() {
+        let msg = match (b, w) {
+            (RigMsg::Sample(sb), RigMsg::Sample(sw)) if sb.t_us == sw.t_us => {
+                let mut s = *sb;
+                for ((c, &cb), &cw) in s.rate_counts.iter_mut().zip(&sb.rate_counts).zip(&sw.rate_counts) {
+                    let v = f64::from(cb) + gain * (f64::from(cw) - f64::from(cb));
+                    *c = v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+                }
+                RigMsg::Sample(s)
+            }
+            (RigMsg::Sample(_), _) | (_, RigMsg::Sample(_)) => {
+                return Err(format!("{name}: frame {i} is not the same sample in both"));
+            }
+            _ => *b,
+        };
+        let n = encode_frame(*seq, &msg, &mut frame).map_err(|e| format!("{name}: re-encoding frame {seq}: {e:?}"))?;
+        out.extend_from_slice(&frame[..n]);
+    }
+    Ok(out)
+}
