@@ -85,7 +85,9 @@ const DEFAULT_LENGTHS_S: [&str; 3] = ["20", "120", "300"];
 const DEFAULT_LIVE: &str = "180,90,-180@120";
 
 /// Effects outside the calibration's catalogue: structure no model explains, flagged at best.
-const NOT_CATALOGUED: [&str; 2] = ["mystery_harmonic", "mount_compliance"];
+/// (The timestamps' jitter is noise in the kinematics, which no effect models: the calibration
+/// takes each stamp as the sample's instant.)
+const NOT_CATALOGUED: [&str; 3] = ["mystery_harmonic", "mount_compliance", "timestamp_jitter"];
 
 /// The no-effect case, the realistic set together, and a rig drawn at random per seed.
 const NONE: &str = "none";
@@ -122,6 +124,7 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "rig_clock" => e.rig_clock.map(|c| c.error_ppm),
         "encoder_eccentricity" => e.encoder_eccentricity.map(|c| c.amplitude_deg),
         "encoder_ellipticity" => e.encoder_ellipticity.map(|c| c.amplitude_deg),
+        "timestamp_jitter" => e.timestamp_jitter.map(|j| j.rms_us),
         _ => None,
     }
 }

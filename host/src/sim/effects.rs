@@ -54,6 +54,10 @@ pub struct Effects {
     /// The sensor package turned on its mount by the load of its own rotation (no model).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mount_compliance: Option<MountCompliance>,
+    /// Sample timestamps more jittery than the firmware's
+    /// ([`TimestampJitter::BASELINE_US`]), which it replaces.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestamp_jitter: Option<TimestampJitter>,
     /// Offset, sensitivity and direction as functions of die temperature (`host simulate
     /// --chamber-c` switches it on; not in [`Effects::NAMES`]: a single session at one
     /// temperature cannot show it).
@@ -400,6 +404,31 @@ impl Default for RigClock {
     }
 }
 
+/// Physical source: the rig stamps each sample when its data-ready interrupt runs, while the
+/// gyro sampled, and the encoder was latched, at the data-ready edge itself; the interrupt's
+/// latency varies with whatever else the MCU was doing (a higher-priority handler, a flash wait
+/// state). Without it the stamps have [`TimestampJitter::BASELINE_US`]; this replaces it.
+/// Default 5 µs (engineering judgement: a rig whose sampling shares its MCU with busier
+/// handlers; the independent validation captures show 2.9 µs).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TimestampJitter {
+    /// Jitter of each sample's timestamp, µs rms.
+    pub rms_us: f64,
+}
+
+impl TimestampJitter {
+    /// The stamps' jitter without the effect, µs rms (assumed: interrupt latency of the
+    /// data-ready handler on a Cortex-M at tens of MHz).
+    pub const BASELINE_US: f64 = 1.0;
+}
+
+impl Default for TimestampJitter {
+    fn default() -> Self {
+        Self { rms_us: 5.0 }
+    }
+}
+
 /// Physical source: an encoder's scale (disc or ring) mounted e off its shaft's axis reads the
 /// angle with an error of (e/r)·sin(θ1 + φ) at scale radius r, the error a single read head
 /// cannot see and that dual-head encoders exist to cancel. Default 0.01° (36 arcsec): 3.5 µm
@@ -530,7 +559,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 21] = [
+    pub const NAMES: [(&'static str, &'static str); 22] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -552,6 +581,7 @@ impl Effects {
         ("rig_clock", "rig time base's frequency error, ppm (default 20)"),
         ("encoder_eccentricity", "base encoder's reading error once a turn, degrees (default 0.01)"),
         ("encoder_ellipticity", "base encoder's reading error twice a turn, degrees (default 0.01)"),
+        ("timestamp_jitter", "jitter of the samples' timestamps, µs rms (default 5; without it 1)"),
     ];
 
     /// True when no effect is on.
@@ -696,6 +726,13 @@ impl Effects {
                 e.amplitude_deg = value.unwrap_or(e.amplitude_deg);
                 self.encoder_ellipticity = Some(e);
             }
+            "timestamp_jitter" => {
+                let rms_us = value.unwrap_or(TimestampJitter::default().rms_us);
+                if rms_us < 0.0 {
+                    return Err(EffectSpecError(format!("effect {spec:?}: a jitter is at least 0 µs")));
+                }
+                self.timestamp_jitter = Some(TimestampJitter { rms_us });
+            }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();
                 return Err(EffectSpecError(format!("unknown effect {name:?}; known: {}", known.join(", "))));
@@ -722,6 +759,11 @@ impl Effects {
     /// Each axis's delay beyond the common one, s.
     pub fn axis_delay_s(&self) -> [f64; 3] {
         self.axis_delay.map_or([0.0; 3], |d| d.delay_ms.map(|ms| ms * 1e-3))
+    }
+
+    /// The samples' timestamp jitter, µs rms.
+    pub fn timestamp_jitter_us(&self) -> f64 {
+        self.timestamp_jitter.map_or(TimestampJitter::BASELINE_US, |j| j.rms_us)
     }
 
     /// The rig's timer ticks per true µs (1 + its frequency error).

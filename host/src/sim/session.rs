@@ -35,10 +35,6 @@ use protocol::GEAR_RATIO;
 /// runs its ODR from an internal RC-trimmed oscillator; the datasheet gives no tolerance).
 pub const ODR_ERROR_SIGMA_PPM: f64 = 300.0;
 
-/// Sample timestamp jitter, µs rms (assumed: interrupt latency of the data-ready handler on a
-/// Cortex-M at tens of MHz).
-pub const TIMESTAMP_JITTER_US: f64 = 1.0;
-
 /// Die temperature at power-up, °C (assumed: lab ambient).
 pub const AMBIENT_C: f64 = 25.0;
 
@@ -223,7 +219,7 @@ impl Session {
             walk_t_s: 0.0,
             walk_rng: salted_rng(cfg.seed, Stream::RandomWalk, salt),
             jitter_rng: salted_rng(cfg.seed, Stream::Jitter, salt),
-            jitter: Normal::new(0.0, TIMESTAMP_JITTER_US).expect("finite σ"),
+            jitter: Normal::new(0.0, cfg.effects.timestamp_jitter_us()).expect("finite σ"),
             samples_read: 0,
             run: None,
             runs: Vec::new(),
@@ -714,7 +710,7 @@ impl Session {
             gyro: self.gyro,
             odr_hz_actual: 1.0 / self.period_s,
             odr_error_ppm: self.odr_error_ppm,
-            timestamp_jitter_us: TIMESTAMP_JITTER_US,
+            timestamp_jitter_us: self.effects.timestamp_jitter_us(),
             encoder_counts_per_rev: ENCODER_COUNTS_PER_REV,
             gear_ratio_nominal: f64::from(GEAR_RATIO.num) / f64::from(GEAR_RATIO.den),
             gear_ratio: self.gear_ratio,
