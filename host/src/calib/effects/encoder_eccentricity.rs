@@ -2,7 +2,8 @@
 //! turn.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts,
+    Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -106,28 +107,28 @@ impl Behaviour for EncoderError {
     /// θ2 moves by −ratio·∂δ/∂(a, b), as a shift of the index-referenced angle does
     /// (`t.d_shift`); θ1' by −θ1'_read·∂δ'/∂(a, b), which the output follows as
     /// [`AxisTerms::per_theta1_rate`]. δ is taken at the angle the encoder read, as the chain
-    /// takes it: the point holds the corrected angle, and the two terms nearly cancel (450 and
-    /// 360 counts/rad for a sum of 93 on the trust bench's rig), so the 1e-5 rad between the
-    /// angles was 3.5e-4 of the sum.
-    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+    /// takes it ([`Point::encoder_read`]): at the corrected angle the two terms, which nearly
+    /// cancel (450 and 360 counts/rad for a sum of 93 on the trust bench's rig), would be 1e-5
+    /// rad, 3.5e-4 of their sum, off.
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
         let Own::Shared(k) = own else { return 0.0 };
         if p.theta1_rate_dps == 0.0 {
             return 0.0;
         }
         let ratio = p.rate2_dps / p.theta1_rate_dps;
-        let orders = cx.shifts.encoder_rad;
-        // The angle read, from the corrected one: δ at the corrected angle is O(δ²) off.
-        let corrected = p.theta2_rad / ratio;
-        let read = corrected + encoder_error(orders, corrected).0;
-        let rate_read_dps = p.theta1_rate_dps / (1.0 - encoder_error(orders, read).1);
-        let along_rate = t.per_theta1_rate(p) * rate_read_dps;
+        let read = &p.encoder_read;
+        let along_rate = t.per_theta1_rate(p) * read.rate_dps;
         let n = f64::from(self.0);
-        let (s, c) = (n * read).sin_cos();
+        let (s, c) = read.sin_cos[usize::from(self.0) - 1];
         if k == 0 {
             -t.d_shift * ratio * s - along_rate * n * c
         } else {
             -t.d_shift * ratio * (1.0 - c) - along_rate * n * s
         }
+    }
+
+    fn needs(&self, _: Own) -> Needs {
+        Needs { encoder: true, ..Needs::NONE }
     }
 
     /// Its 2× line (3× for order 2) separates it at any speed or direction, but only as far as

@@ -206,11 +206,13 @@ pub struct Needs {
     pub fixture: bool,
     /// The smoothed die temperature (`Point::temp_c`).
     pub temperature: bool,
+    /// The base encoder's reading (`Point::encoder_read`).
+    pub encoder: bool,
 }
 
 impl Needs {
     /// Nothing beyond eq. 1-2.
-    pub const NONE: Needs = Needs { heading: false, fixture: false, temperature: false };
+    pub const NONE: Needs = Needs { heading: false, fixture: false, temperature: false, encoder: false };
 
     /// Either's needs.
     pub fn or(self, o: Needs) -> Needs {
@@ -218,7 +220,33 @@ impl Needs {
             heading: self.heading || o.heading,
             fixture: self.fixture || o.fixture,
             temperature: self.temperature || o.temperature,
+            encoder: self.encoder || o.encoder,
         }
+    }
+}
+
+/// The base encoder's reading at a point, before the model's correction of it: what the
+/// encoder's error columns are functions of ([`super::encoder_eccentricity`]), taken once per
+/// point rather than once per column and axis (six sines and cosines a point where they were
+/// 6 % of a realistic replay).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EncoderRead {
+    /// θ1' as read, °/s.
+    pub rate_dps: f64,
+    /// sin and cos of n× θ1 as read, index n − 1 (the eccentricity's order 1 and the
+    /// ellipticity's 2).
+    pub sin_cos: [(f64, f64); 2],
+}
+
+impl EncoderRead {
+    /// Not taken: no column of the pass needs it.
+    pub const NAN: EncoderRead = EncoderRead { rate_dps: f64::NAN, sin_cos: [(f64::NAN, f64::NAN); 2] };
+
+    /// The reading at θ1 = `theta1_read_rad` turning at `rate_dps`.
+    #[inline]
+    pub fn at(theta1_read_rad: f64, rate_dps: f64) -> Self {
+        let (s, c) = libm::sincos(theta1_read_rad);
+        Self { rate_dps, sin_cos: [(s, c), (2.0 * s * c, c * c - s * s)] }
     }
 }
 
@@ -322,6 +350,8 @@ pub struct Point {
     /// transmission error's argument), index n, for the harmonic orders the model and the pass
     /// use (NaN for the others): each once per sample, not once per column and axis.
     pub mesh_sin_cos: [(f64, f64); MAX_HARMONIC_ORDER + 1],
+    /// The base encoder's reading (NaN unless a column needs it, [`Needs::encoder`]).
+    pub encoder_read: EncoderRead,
     /// The run's pose (the transmission error has a parameter set per pose).
     pub pose: Pose,
     /// ∂ω_s/∂(Earth's vertical, north-at-zero, west-at-zero rate), package frame; the first is

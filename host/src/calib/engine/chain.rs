@@ -2,7 +2,7 @@
 //! the rate the sensor sees, and each column's value or Jacobian ([`Evaluator`]).
 
 use crate::calib::data::kinematics::{KinSample, KinSamples};
-use crate::calib::effects::terms::{decay, dot, AxisTerms, Ctx, IndexEdge, Needs, Own, Shifts};
+use crate::calib::effects::terms::{decay, dot, AxisTerms, Ctx, EncoderRead, IndexEdge, Needs, Own, Shifts};
 use crate::calib::effects::{encoder_error, Effect, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
 
@@ -246,6 +246,8 @@ pub struct Evaluator<'a> {
     needs_heading: bool,
     /// Whether the points need the pose-2 fixture's Jacobian.
     needs_fixture: bool,
+    /// Whether the points need the base encoder's reading (its error's columns).
+    needs_encoder: bool,
     /// Whether the model moves no angle or rate and the pass needs no shared column's
     /// Jacobian: the points are then eq. 1-2 alone ([`Evaluator::plain_point`]), which is every
     /// pass of a calibration whose residual the linear model already explains.
@@ -338,6 +340,7 @@ impl<'a> Evaluator<'a> {
             lin_beta,
             needs_heading: needs.heading,
             needs_fixture: needs.fixture,
+            needs_encoder: needs.encoder,
             plain,
             needs_temperature: needs.temperature,
             needs_knots: model
@@ -391,6 +394,32 @@ impl<'a> Evaluator<'a> {
         }
     }
 
+    /// sin and cos of the base's heading in the lab at the index-referenced table angle
+    /// `theta2_rad`: the sensor table is geared to a shaft fixed to the ground (EXCITER.md,
+    /// "Mechanism"), so θ2 = ratio·θ1_lab + const and the index fixes the heading for every
+    /// run, while the encoder's count restarts with each capture. (0, 0) where no column needs
+    /// it: without a horizontal Earth term in the pass the heading multiplies zeros only.
+    /// (Each angle's sine and cosine once: they were 4 of the 5 libm calls a point made.)
+    #[inline]
+    fn heading_sin_cos(&self, theta2_rad: f64, ratio: f64) -> (f64, f64) {
+        if self.needs_heading {
+            (theta2_rad / ratio).sin_cos()
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    /// The base encoder's reading at the angle `theta1_read_rad` it read, turning at
+    /// `rate1_dps` as read, where a column needs it ([`Point::encoder_read`]).
+    #[inline]
+    fn encoder_read(&self, theta1_read_rad: f64, rate1_dps: f64) -> EncoderRead {
+        if self.needs_encoder {
+            EncoderRead::at(theta1_read_rad, rate1_dps)
+        } else {
+            EncoderRead::NAN
+        }
+    }
+
     /// [`Evaluator::point`] of a model that moves angles or rates, or of a pass that wants the
     /// shared parameters' Jacobians.
     #[inline(never)]
@@ -398,6 +427,7 @@ impl<'a> Evaluator<'a> {
         let rk = &self.data.kin.runs[r];
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
+        let encoder_read = self.encoder_read((theta2 + sh.theta2_offset_rad) / rk.gear_ratio, rate1);
         let (th, rate1) = encoder_corrected(sh.encoder_rad, rk.gear_ratio, theta2 + sh.theta2_offset_rad, rate1);
         let theta2 = th - sh.theta2_offset_rad;
         // The transmission error is periodic in the mesh angle, which moves with the table
@@ -434,12 +464,7 @@ impl<'a> Evaluator<'a> {
         let filter_dw2 = dw2;
         // Earth's rate in the table frame O2, per unit of each component (module docs of
         // `earth_basis`), added to ω2.
-        // The base's heading in the lab: the sensor table is geared to a shaft fixed to the
-        // ground (EXCITER.md, "Mechanism"), so θ2 = ratio·θ1_lab + const and the index fixes the
-        // heading for every run, while the encoder's count restarts with each capture.
-        // (Each angle's sine and cosine once: they were 4 of the 5 libm calls a point made.)
-        // Without a horizontal Earth term in the pass the heading multiplies zeros only.
-        let (s1, c1) = if self.needs_heading { (theta2 / rk.gear_ratio).sin_cos() } else { (0.0, 0.0) };
+        let (s1, c1) = self.heading_sin_cos(theta2, rk.gear_ratio);
         let basis = earth_basis((s1, c1), (se, ce));
         let [ev, en, ew] = sh.earth_dps;
         let w2: [f64; 3] = std::array::from_fn(|i| w2[i] + ev * basis[0][i] + en * basis[1][i] + ew * basis[2][i]);
@@ -482,6 +507,7 @@ impl<'a> Evaluator<'a> {
             dtheta_eff: ripple,
             drate_eff_dps: rate2 * dripple,
             mesh_sin_cos,
+            encoder_read,
             pose: rk.pose,
             d_earth,
             d_filter,
@@ -521,6 +547,7 @@ impl<'a> Evaluator<'a> {
             t_scaled: f64::NAN,
             temp_c: f64::NAN,
             mesh_sin_cos: [(f64::NAN, f64::NAN); MAX_HARMONIC_ORDER + 1],
+            encoder_read: EncoderRead::NAN,
             pose: self.data.kin.runs[r].pose,
             d_earth: [nan3; 3],
             d_filter: nan3,
