@@ -16,7 +16,13 @@
 //!
 //! `REMIX_SEEDS=N` (or `A-B`: seeds A..=B), `REMIX_FOLDERS=clean-s101,gsens-1speed-s101`
 //! (default: every folder with a `truth.json`), `REMIX_ROOT=DIR` (default `../shared/validation`:
-//! folders of captures in its layout, such as its folders with runs left out or cut short). Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
+//! folders of captures in its layout, such as its folders with runs left out),
+//! `REMIX_CUT_S=30,45,none`: each folder also (or, without `none`, only) with every run cut to
+//! its first so many seconds, a design no folder holds (default: whole runs);
+//! `REMIX_GAIN=3,none`: each folder that shares `clean-s101`'s rig and noise draw frame for
+//! frame (the g-sensitivity and Earth folders) also (or only) with its difference from
+//! `clean-s101`, its one effect, grown that many times (`measured::remix::grown`).
+//! Remixed captures are kept in `target/bench-data/remix/<folder>/m<seed>/`.
 //!
 //! `cargo bench -p host --bench validation_remix --profile release`: 6 folders × 5 seeds, 30
 //! calibrations, about 30 s of their CPU (2.5 s at most each, `realistic-2speed-s101`).

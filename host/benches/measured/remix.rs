@@ -198,8 +198,8 @@ fn frames(name: &str, bytes: &[u8]) -> Result<Vec<(u16, RigMsg)>, String> {
 /// count, every other frame `base`'s. `with` must hold `base`'s frames at the same times, the
 /// same rig and noise draw with one effect added (`clean-s101` and `gsens-1speed-s101` of
 /// `../shared/validation` are such a pair), so the difference is that effect's counts (and the
-/// two roundings, at most 0.41 counts rms, times the gain). Its truth is `with`'s for an effect that
-/// leaves M alone (a bias: g-sensitivity, Earth's rate).
+/// two roundings, at most 0.41 counts rms, times the gain). Its truth is `with`'s for an effect
+/// that leaves M alone (a bias: g-sensitivity, Earth's rate).
 pub fn grown(name: &str, base: &[u8], with: &[u8], gain: f64) -> Result<Vec<u8>, String> {
     let (base, with) = (frames(name, base)?, frames(name, with)?);
     if base.len() != with.len() {
