@@ -220,7 +220,7 @@ mod trust {
 mod remix {
     use crate::measured::remix::*;
     use nalgebra::{Matrix3, Vector3};
-    use protocol::{Event, RigMsg, StreamDecoder};
+    use protocol::RigMsg;
     use serde_json::json;
 
     fn demo() -> Vec<u8> {
@@ -230,12 +230,7 @@ mod remix {
 
     /// Every frame of a capture, in order.
     fn frames(bytes: &[u8]) -> Vec<(u16, RigMsg)> {
-        let mut out = Vec::new();
-        StreamDecoder::new().feed::<RigMsg>(bytes, |ev| match ev {
-            Event::Frame { seq, msg, .. } => out.push((seq, msg)),
-            Event::Error { offset, error, .. } => panic!("no frame at {offset}: {error:?}"),
-        });
-        out
+        crate::measured::remix::frames("capture", bytes).unwrap_or_else(|e| panic!("{e}"))
     }
 
     /// A = I without noise gives the capture back byte for byte: the frames are re-encoded as

@@ -182,7 +182,7 @@ pub fn m_true(truth: &Value) -> Result<[[f64; 3]; 3], String> {
 }
 
 /// Every frame of a capture, in order, or where it is damaged.
-fn frames(name: &str, bytes: &[u8]) -> Result<Vec<(u16, RigMsg)>, String> {
+pub fn frames(name: &str, bytes: &[u8]) -> Result<Vec<(u16, RigMsg)>, String> {
     let (mut out, mut bad) = (Vec::new(), None);
     let mut decoder = StreamDecoder::new();
     decoder.feed::<RigMsg>(bytes, |ev| match ev {

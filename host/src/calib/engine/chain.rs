@@ -427,8 +427,9 @@ impl<'a> Evaluator<'a> {
         let rk = &self.data.kin.runs[r];
         let sh = &self.shifts;
         let (theta2, rate1) = interpolate(&rk.samples, i, sh.delay_s);
-        let encoder_read = self.encoder_read((theta2 + sh.theta2_offset_rad) / rk.gear_ratio, rate1);
-        let (th, rate1) = encoder_corrected(sh.encoder_rad, rk.gear_ratio, theta2 + sh.theta2_offset_rad, rate1);
+        let theta2_read = theta2 + sh.theta2_offset_rad;
+        let encoder_read = self.encoder_read(theta2_read / rk.gear_ratio, rate1);
+        let (th, rate1) = encoder_corrected(sh.encoder_rad, rk.gear_ratio, theta2_read, rate1);
         let theta2 = th - sh.theta2_offset_rad;
         // The transmission error is periodic in the mesh angle, which moves with the table
         // against the index (1:1 gears): the index-referenced θ2, lagging by the gear lag. The
