@@ -25,7 +25,9 @@
 //!
 //! Designs are the base-table rates of `host simulate --rates-dps` and the seconds per run: one
 //! speed `180`, two speeds `180,90`, both directions `180,-180`, three speeds `180,90,-180`, at
-//! 20, 120 and 300 s (12 designs). Effects: `none`; each switch of `host simulate --effect`
+//! 20, 120 and 300 s (12 designs). A design ending in `/files` (`180,90@120/files`) has its runs
+//! captured one per file, each simulated on its own as the independent validation captures hold
+//! them (a clock, a noise draw and, with `capture_level`, a zero-rate level of its own). Effects: `none`; each switch of `host simulate --effect`
 //! alone (`host::sim::Effects::NAMES`) at its default size and at 3× it (`NAME=VALUE`, the
 //! value read from the simulator's own defaults); `all`, the realistic set of the
 //! `all_effects` bench together at default size; and `drawn` (`host simulate --drawn-rig`):
@@ -125,6 +127,7 @@ fn headline(name: &str, e: &Effects) -> Option<f64> {
         "encoder_eccentricity" => e.encoder_eccentricity.map(|c| c.amplitude_deg),
         "encoder_ellipticity" => e.encoder_ellipticity.map(|c| c.amplitude_deg),
         "timestamp_jitter" => e.timestamp_jitter.map(|j| j.rms_us),
+        "capture_level" => e.capture_level.map(|c| c.sigma_dps),
         _ => None,
     }
 }
@@ -207,9 +210,45 @@ fn list_from_env(var: &str, default: Vec<String>) -> Vec<String> {
     }
 }
 
-/// A case's directory under `target/bench-data/trust-matrix/`.
+/// A case's directory under `target/bench-data/trust-matrix/` (a design's `/` as `+`).
 fn case_dir(design: &str, case: &Case, seed: u64) -> PathBuf {
-    measured::bench_dir("trust-matrix").join(design).join(&case.label).join(format!("s{seed}"))
+    measured::bench_dir("trust-matrix").join(design.replace('/', "+")).join(&case.label).join(format!("s{seed}"))
+}
+
+/// A design's suffix for its runs captured one per file, each simulated on its own, as the
+/// independent validation captures hold them: `180,90@120/files`.
+const FILES: &str = "/files";
+
+/// A design written out in full ([`full_plan`]), its [`FILES`] suffix kept.
+fn full_design(design: &str) -> String {
+    match design.strip_suffix(FILES) {
+        Some(plan) => full_plan(plan) + FILES,
+        None => full_plan(design),
+    }
+}
+
+/// The captures of `design` for `seed` with the effect `options`, simulated if not cached: one
+/// capture of every run; or, with [`FILES`], one per pose and rate, each simulated on its own
+/// with `capture_level` (a noise draw and a zero-rate level of its own: level 0 unless the case
+/// sets one), in `p<pose>_<rate>/` below `dir`.
+fn captures(dir: &Path, design: &str, seed: u64, options: &[String]) -> Result<Vec<PathBuf>, String> {
+    let Some(plan) = design.strip_suffix(FILES) else {
+        return replay::simulated_with(dir, design, seed, options).map(|cap| vec![cap]);
+    };
+    let (rates, duration_s) = replay::rates_and_duration(plan);
+    let mut own = options.to_vec();
+    if !own.iter().any(|o| o.starts_with("--effect=capture_level")) {
+        own.push(effect_option("capture_level=0"));
+    }
+    let mut caps = Vec::new();
+    for pose in [1, 2] {
+        for rate in rates.split(',') {
+            let options: Vec<String> = own.iter().cloned().chain([format!("--poses={pose}")]).collect();
+            let sub = dir.join(format!("p{pose}_{rate}"));
+            caps.push(replay::simulated_with(&sub, &format!("{rate}@{duration_s}"), seed, &options)?);
+        }
+    }
+    Ok(caps)
 }
 
 /// One seed of one cell, and what went wrong when it did.
@@ -242,15 +281,19 @@ fn run_seed(design: &str, case: &Case, seed: u64, keep_capture: bool) -> SeedRun
         }
     }
     if !keep_capture {
-        let _ = std::fs::remove_file(dir.join("simulate.args"));
-        let _ = std::fs::remove_file(dir.join("x.cap"));
+        let subs = std::fs::read_dir(&dir).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.is_dir());
+        for d in std::iter::once(dir.clone()).chain(subs) {
+            let _ = std::fs::remove_file(d.join("simulate.args"));
+            let _ = std::fs::remove_file(d.join("x.cap"));
+        }
     }
     r
 }
 
 fn judge(dir: &Path, design: &str, case: &Case, seed: u64) -> SeedRun {
     let mut r = SeedRun { outcome: SeedOutcome::default(), wall_s: None, problem: None };
-    let usage = match replay::simulated_with(dir, design, seed, &case.options).and_then(|cap| replay::calibrate(&cap)) {
+    let caps = captures(dir, design, seed, &case.options);
+    let usage = match caps.as_ref().map_err(String::clone).and_then(|caps| replay::calibrate_files(dir, caps)) {
         Ok(u) => u,
         Err(e) => {
             r.problem = Some(e);
@@ -265,8 +308,11 @@ fn judge(dir: &Path, design: &str, case: &Case, seed: u64) -> SeedRun {
         r.problem = Some(format!("exit {}: {}", usage.code, last_line(&dir.join("calibrate.log"))));
         return r;
     }
-    let z = replay::read_json(&dir.join("out/calibration.json"))
-        .and_then(|cal| trust::z_values(&cal, &replay::read_json(&dir.join("x.truth.json"))?));
+    let z = replay::read_json(&dir.join("out/calibration.json")).and_then(|cal| {
+        // Every capture's truth holds the seed's sensor.
+        let first = caps.as_ref().map_err(String::clone)?[0].with_file_name("x.truth.json");
+        trust::z_values(&cal, &replay::read_json(&first)?)
+    });
     match z {
         Ok(z) => {
             let _ = std::fs::write(dir.join("z.json"), serde_json::to_string(&z.to_vec()).expect("numbers"));
@@ -326,9 +372,9 @@ fn main() {
     let default_designs = DEFAULT_RATES.iter().flat_map(|r| DEFAULT_LENGTHS_S.iter().map(move |d| format!("{r}@{d}")));
     let designs: Vec<String> = replay::plans_from_env("TRUST_DESIGNS", &default_designs.collect::<Vec<_>>().join(";"))
         .iter()
-        .map(|d| full_plan(d))
+        .map(|d| full_design(d))
         .collect();
-    let live = full_plan(&std::env::var("TRUST_LIVE").unwrap_or_else(|_| DEFAULT_LIVE.into()));
+    let live = full_design(&std::env::var("TRUST_LIVE").unwrap_or_else(|_| DEFAULT_LIVE.into()));
     let default_effects = std::iter::once(NONE)
         .chain(Effects::NAMES.iter().map(|(n, _)| *n))
         .chain([ALL, DRAWN])

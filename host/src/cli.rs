@@ -269,7 +269,7 @@ struct SimulateArgs {
     /// nonlinearity_cubic, nonlinearity_square, gear_ratio_error, mystery_harmonic,
     /// mount_compliance, earth_rotation, gear_transmission, g_sensitivity, table_tilt,
     /// pose_fixture, bias_random_walk, axis_delay, rig_clock, encoder_eccentricity,
-    /// encoder_ellipticity, timestamp_jitter.
+    /// encoder_ellipticity, timestamp_jitter, capture_level.
     #[arg(long = "effect")]
     effects: Vec<String>,
     /// Every effect of a real rig (the realistic set, the delays between the gyro's axes and the

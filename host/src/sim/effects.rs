@@ -58,6 +58,9 @@ pub struct Effects {
     /// ([`TimestampJitter::BASELINE_US`]), which it replaces.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timestamp_jitter: Option<TimestampJitter>,
+    /// A capture taken on its own: a zero-rate level and a noise draw of its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub capture_level: Option<CaptureLevel>,
     /// Offset, sensitivity and direction as functions of die temperature (`host simulate
     /// --chamber-c` switches it on; not in [`Effects::NAMES`]: a single session at one
     /// temperature cannot show it).
@@ -429,6 +432,28 @@ impl Default for TimestampJitter {
     }
 }
 
+/// Physical source: a capture taken on its own, as the independent validation captures hold
+/// one run per file. Between two captures the gyro's zero-rate level moves (the die a fraction
+/// of a degree warmer or cooler after the pause, at the L3G4200D's ±0.03 °/s/°C, datasheet
+/// Table 4; the offset's walk over it), and the capture's noise is a draw of its own. The
+/// level, per axis, is drawn from the seed and the capture's runs (poses, rates, lengths), so
+/// the captures of one sensor taken run by run each have theirs, while the sensor is the seed's.
+/// Default 0.005 °/s (1σ; engineering judgement: steps of this size stay under the
+/// calibration's run-to-run test on 120-s runs, about 0.01 °/s, and are the ones only its σ can
+/// carry).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureLevel {
+    /// One σ of the capture's level on each axis, °/s.
+    pub sigma_dps: f64,
+}
+
+impl Default for CaptureLevel {
+    fn default() -> Self {
+        Self { sigma_dps: 0.005 }
+    }
+}
+
 /// Physical source: an encoder's scale (disc or ring) mounted e off its shaft's axis reads the
 /// angle with an error of (e/r)·sin(θ1 + φ) at scale radius r, the error a single read head
 /// cannot see and that dual-head encoders exist to cancel. Default 0.01° (36 arcsec): 3.5 µm
@@ -559,7 +584,7 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 22] = [
+    pub const NAMES: [(&'static str, &'static str); 23] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
@@ -582,6 +607,7 @@ impl Effects {
         ("encoder_eccentricity", "base encoder's reading error once a turn, degrees (default 0.01)"),
         ("encoder_ellipticity", "base encoder's reading error twice a turn, degrees (default 0.01)"),
         ("timestamp_jitter", "jitter of the samples' timestamps, µs rms (default 5; without it 1)"),
+        ("capture_level", "this capture's own zero-rate level and noise draw, 1σ °/s per axis (default 0.005)"),
     ];
 
     /// True when no effect is on.
@@ -732,6 +758,13 @@ impl Effects {
                     return Err(EffectSpecError(format!("effect {spec:?}: a jitter is at least 0 µs")));
                 }
                 self.timestamp_jitter = Some(TimestampJitter { rms_us });
+            }
+            "capture_level" => {
+                let sigma_dps = value.unwrap_or(CaptureLevel::default().sigma_dps);
+                if sigma_dps < 0.0 {
+                    return Err(EffectSpecError(format!("effect {spec:?}: a level's σ is at least 0 °/s")));
+                }
+                self.capture_level = Some(CaptureLevel { sigma_dps });
             }
             _ => {
                 let known: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();

@@ -61,6 +61,7 @@ enum Stream {
     Jitter = 3,
     RandomWalk = 4,
     Effects = 5,
+    CaptureLevel = 6,
 }
 
 /// The stream [`crate::sim::Effects::drawn`] draws a seed's rig from (`host simulate
@@ -81,6 +82,21 @@ fn salted_rng(seed: u64, stream: Stream, salt: u32) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
     r.set_stream(stream as u64 + STREAMS_PER_SALT * u64::from(salt));
     r
+}
+
+/// The salt of a capture taken on its own ([`crate::sim::effects::CaptureLevel`]): FNV-1a over
+/// its runs (pose, rate, length), above the chamber setpoints' salts (their indices, < 256), so
+/// that captures of one sensor with other runs draw other noise and another level.
+fn capture_salt(runs: &[super::RunSpec]) -> u32 {
+    let mut h: u32 = 0x811c_9dc5;
+    for r in runs {
+        let pose = [u8::from(r.pose == Pose::Two)];
+        for b in pose.into_iter().chain(r.rate_dps.to_bits().to_le_bytes()).chain(r.duration_s.to_bits().to_le_bytes())
+        {
+            h = (h ^ u32::from(b)).wrapping_mul(0x0100_0193);
+        }
+    }
+    ((h >> 8) | 1) << 8
 }
 
 /// The run in progress.
@@ -161,6 +177,8 @@ pub struct Session {
     walk_dps: [f64; 3],
     walk_t_s: f64,
     walk_rng: ChaCha8Rng,
+    /// This capture's own zero-rate level, °/s per axis (0 unless it is taken on its own).
+    level_dps: [f64; 3],
     jitter_rng: ChaCha8Rng,
     jitter: Normal<f64>,
     samples_read: u32,
@@ -180,7 +198,13 @@ impl Session {
         let theta2_start_rad = rig.random_range(0.0..std::f64::consts::TAU);
         // OUT_TEMP offset: arbitrary per part (datasheet Table 5 specifies only the slope).
         let out_temp_at_0c = f64::from(rig.random_range(20i32..60));
-        let salt = cfg.chamber.map_or(0, |c| c.index);
+        let mut salt = cfg.chamber.map_or(0, |c| c.index);
+        let mut level_dps = [0.0; 3];
+        if let Some(c) = cfg.effects.capture_level {
+            salt += capture_salt(&cfg.runs);
+            let mut r = salted_rng(cfg.seed, Stream::CaptureLevel, salt);
+            level_dps = std::array::from_fn(|_| c.sigma_dps * Distribution::<f64>::sample(&StandardNormal, &mut r));
+        }
         let mut s = Self {
             seed: cfg.seed,
             gyro: cfg.gyro,
@@ -218,6 +242,7 @@ impl Session {
             walk_dps: [0.0; 3],
             walk_t_s: 0.0,
             walk_rng: salted_rng(cfg.seed, Stream::RandomWalk, salt),
+            level_dps,
             jitter_rng: salted_rng(cfg.seed, Stream::Jitter, salt),
             jitter: Normal::new(0.0, cfg.effects.timestamp_jitter_us()).expect("finite σ"),
             samples_read: 0,
@@ -600,7 +625,7 @@ impl Session {
         let mut rate_counts = [0i16; 3];
         for i in 0..3 {
             let z: f64 = StandardNormal.sample(&mut self.noise_rng);
-            let offset = k[i] * (self.sensor.offset_dps[i] + drift[i]);
+            let offset = k[i] * (self.sensor.offset_dps[i] + self.level_dps[i] + drift[i]);
             rate_counts[i] = quantise(pre[i] + offset + self.noise_counts[i] * z);
         }
         let jitter_us = self.jitter.sample(&mut self.jitter_rng);
@@ -704,7 +729,9 @@ impl Session {
             k_counts_per_dps: self.sensor.k_counts_per_dps(fs),
             s: self.sensor.s.map(|v| [v[0], v[1], v[2]]),
             tilt_deg: self.sensor.tilt_deg,
-            offset_counts: self.sensor.offset_counts(fs),
+            offset_counts: std::array::from_fn(|i| {
+                self.sensor.offset_counts(fs)[i] + self.sensor.k_counts_per_dps(fs)[i] * self.level_dps[i]
+            }),
             noise_dps_per_sqrt_hz: self.noise_density,
             noise_counts_per_sample: self.noise_counts,
             gyro: self.gyro,

@@ -567,6 +567,45 @@ fn a_jittery_timestamp_moves_only_the_timestamps_by_its_rms() {
     assert!(n > 9000.0 && (rms - 19.0).abs() < 0.015 * 19.0, "{rms} µs rms over {n} samples");
 }
 
+/// Mean over run `r` of axis `a`'s counts in `e` less those in `b`, sample by sample.
+fn mean_difference(b: &Capture, e: &Capture, r: usize, a: usize) -> (f64, usize) {
+    let (rb, re) = (&b.runs[r], &e.runs[r]);
+    assert_eq!(rb.samples.len(), re.samples.len());
+    let sum: f64 =
+        rb.samples.iter().zip(&re.samples).map(|(x, y)| f64::from(y.rate_counts[a] - x.rate_counts[a])).sum();
+    (sum / rb.samples.len() as f64, rb.samples.len())
+}
+
+#[test]
+fn a_capture_taken_on_its_own_has_a_level_and_a_noise_draw_of_its_own() {
+    let (mut cfg, base, cb, eff, ce) = with_and_without(39, "capture_level=0.02", 6.0);
+    // The same motion (the stamps' jitter is a draw of its own too).
+    let counts = |c: &Capture| encoders(c).into_iter().map(|(_, e)| e).collect::<Vec<_>>();
+    assert!(counts(&cb) == counts(&ce), "the encoder counts differ");
+    // Its level is in the truth's offsets and in the counts: the mean difference from the same
+    // capture without it is k·level, within the two noise draws' 3 counts rms each over n
+    // samples (5σ).
+    let mut moved = 0.0_f64;
+    for (a, k) in base.truth.k_counts_per_dps.into_iter().enumerate() {
+        let level = eff.truth.offset_counts[a] - base.truth.offset_counts[a];
+        moved = moved.max(level.abs() / k);
+        for r in 0..cb.runs.len() {
+            let (d, n) = mean_difference(&cb, &ce, r, a);
+            let tol = 5.0 * base.truth.noise_counts_per_sample[a] * (2.0 / n as f64).sqrt();
+            assert!((d - level).abs() < tol, "axis {a}, run {r}: {d} counts against the level's {level}");
+        }
+    }
+    assert!(moved > 0.002 && moved < 0.1, "a level of 0.02 °/s (1σ) drew at most {moved} °/s");
+    // Its own noise: two draws of 3 counts rms agree on about one sample in ten.
+    let same = axis(&cb, 0).iter().zip(axis(&ce, 0)).filter(|(x, y)| **x == *y).count();
+    assert!(same * 4 < axis(&cb, 0).len(), "{same} samples alike");
+    // Another capture of the same sensor (pose 1 alone) draws another level; the sensor is the seed's.
+    cfg.runs.truncate(1);
+    let alone = simulate(&cfg).unwrap();
+    assert_eq!(alone.truth.m_counts_per_dps, eff.truth.m_counts_per_dps);
+    assert!((0..3).all(|a| alone.truth.offset_counts[a] != eff.truth.offset_counts[a]));
+}
+
 #[test]
 fn axes_sampled_apart_each_read_the_rate_of_their_own_instant() {
     let (cfg, _, cb, _, ce) = with_and_without(37, "axis_delay=0.4", 6.0);

@@ -142,6 +142,8 @@ struct Candidate {
     /// For the levels of a walk ([`Effect::considered_as_walk`]): each column's predecessor
     /// in its stretch (None for a stretch's first considered level). Empty otherwise.
     walk: Vec<Option<usize>>,
+    /// How the notes say that its size is the data's bound ([`Effect::size_read_from_data`]).
+    from_data: Option<&'static str>,
 }
 
 fn candidates(
@@ -164,6 +166,7 @@ fn candidates(
             source: "",
             tried,
             walk: Vec::new(),
+            from_data: effect.size_read_from_data(),
         };
         let mut walk = Vec::new();
         // Adds a column with its bound; whether it was (it has a size and a reported unit).
@@ -327,13 +330,14 @@ pub fn consider(
         let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
         let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
         let Some(mut whitened) = whiten(&info, &grad, &sd, &s12) else { continue };
-        if !c.walk.is_empty() {
-            // A walk's size is read from the data (its scale's upper bound), every direction
-            // counted at it: no test of hundreds of steps speaks for any one of them.
-            let Some(scale) = walk_scale(&whitened) else { continue };
+        if let Some(how) = c.from_data {
+            // Its size is read from the data (its scale's upper bound), every direction
+            // counted at it: no test of hundreds of steps, or of a level per stretch, speaks for
+            // any one of them.
+            let Some(scale) = scale_bound(&whitened) else { continue };
             whitened = whitened.scaled(scale);
             considered.iter_mut().for_each(|p| p.sigma *= scale);
-            source = format!("{source}, times {scale:.2}: as large as the residual's own wander allows (95 % bound)");
+            source = format!("{source}, times {scale:.2}: {how} (95 % bound)");
             tried = None;
         }
         let (along, lambdas) = posterior(&whitened, tried);
@@ -384,18 +388,18 @@ fn prior_params(c: &Candidate, pl: &[(bool, usize)], nl_ext: usize) -> (Vec<usiz
 }
 
 /// Half the χ²₁ quantile of a one-sided 95 % bound (2.71 / 2): how far the log-likelihood of
-/// a walk's scale falls from its maximum at the bound [`walk_scale`] returns.
-const WALK_BOUND_DROP: f64 = 1.353;
+/// a prior's scale falls from its maximum at the bound [`scale_bound`] returns.
+const SCALE_BOUND_DROP: f64 = 1.353;
 
-/// Empirical Bayes for a walk whose steps have prior σs times an unknown scale s: the upper
-/// 95 % bound of s from the data's own sight of the steps (`w`, their partial information and
-/// the residual's gradient whitened by those σs). Along each eigendirection of it (λ),
+/// Empirical Bayes for parameters (a walk's steps, the levels between stretches) whose prior
+/// σs are known up to a common scale s: the upper 95 % bound of s from the data's own sight of
+/// them (`w`, their partial information and the residual's gradient whitened by those σs). Along each eigendirection of it (λ),
 /// the whitened score p has variance λ + s²λ² (noise plus the walk), so the log-likelihood of s²
-/// is −½ Σ [ln(λ + s²λ²) + p²/(λ + s²λ²)]; the bound is where it falls [`WALK_BOUND_DROP`] below
+/// is −½ Σ [ln(λ + s²λ²) + p²/(λ + s²λ²)]; the bound is where it falls [`SCALE_BOUND_DROP`] below
 /// its maximum on the far side (Morris, JASA 78, 47, 1983, for the parametric empirical Bayes).
 /// A gyro whose residual shows no wander carries a fraction of the datasheet-sized walk, one
 /// that shows more carries more.
-fn walk_scale(w: &Whitened) -> Option<f64> {
+fn scale_bound(w: &Whitened) -> Option<f64> {
     let seen: Vec<(f64, f64)> = (0..w.eigenvalues.len())
         .filter(|&i| w.eigenvalues[i] > 1e-9)
         .map(|i| (w.eigenvalues[i], w.projections[i].powi(2)))
@@ -419,7 +423,7 @@ fn walk_scale(w: &Whitened) -> Option<f64> {
     }
     let s2_best = 0.5 * (a + b);
     let best = (s2_best, ll(s2_best).max(ll(grid[at])));
-    let floor = best.1 - WALK_BOUND_DROP;
+    let floor = best.1 - SCALE_BOUND_DROP;
     let (mut lo, mut hi) = (best.0, best.0.max(1e-4));
     while ll(hi) > floor {
         if hi > 1e8 {
@@ -514,7 +518,7 @@ fn posterior(w: &Whitened, tried: Option<&dyn Fn(usize) -> f64>) -> (DMatrix<f64
 
 /// An effect's partial information and the residual's gradient in units of its prior σs: the
 /// eigenvalues of diag(sd)·info·diag(sd), the whitened gradient's projection on each
-/// eigenvector and the estimate's sensitivity to a step along each. [`walk_scale`] and
+/// eigenvector and the estimate's sensitivity to a step along each. [`scale_bound`] and
 /// [`posterior`] both read it.
 struct Whitened {
     eigenvalues: DVector<f64>,
@@ -908,16 +912,16 @@ mod tests {
     fn a_walks_size_is_bounded_by_the_wander_the_data_show() {
         let n = 100;
         let info = DMatrix::from_diagonal_element(n, n, 4.0);
-        let quiet = walk_scale(&whiten_id(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite"))
+        let quiet = scale_bound(&whiten_id(&info, &DVector::from_element(n, 2.0), &vec![1.0; n]).expect("finite"))
             .expect("finite");
         assert!(quiet > 0.05 && quiet < 0.3, "{quiet}");
         let walking =
-            walk_scale(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite"))
+            scale_bound(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![1.0; n]).expect("finite"))
                 .expect("finite");
         assert!(walking > 1.0 && walking < 1.4, "{walking}");
         // The prior's σs only set the units: for the same data, twice the σ, half the scale.
         let halved =
-            walk_scale(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]).expect("finite"));
+            scale_bound(&whiten_id(&info, &DVector::from_element(n, 20f64.sqrt()), &vec![2.0; n]).expect("finite"));
         assert!((halved.expect("finite") - walking / 2.0).abs() < 1e-6 * walking);
     }
 

@@ -94,6 +94,10 @@ impl Behaviour for DriftKnots {
         Some(format!("offset step over {} s", self.0))
     }
 
+    fn size_read_from_data(&self) -> Option<&'static str> {
+        Some("as large as the residual's own wander allows")
+    }
+
     /// On top of a drift curve whose residual still drifts (a random walk, a warm-up that lags
     /// the die), as a drift model of its own, or in place of coarser knots whose residual still
     /// drifts (a random walk three times the default left run offsets between 40-s knots,

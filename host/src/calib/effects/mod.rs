@@ -32,6 +32,7 @@ mod rate_power;
 mod rate_scale;
 mod rig_clock;
 mod scale_temperature;
+mod stretch_level;
 mod table_harmonic;
 mod table_tilt;
 
@@ -136,6 +137,15 @@ pub trait Behaviour {
         None
     }
 
+    /// Whether the size [`Behaviour::consider`] gives is a scale the data bound rather than a
+    /// size of its own, and how the notes say it: the consider covariance then takes it times
+    /// the 95 % upper bound the residual's own sight of the parameters puts on that scale (a
+    /// walk's steps, the levels between stretches: many parameters each seen a little, none
+    /// of which a test speaks for). None (the default) for a size taken as it is.
+    fn size_read_from_data(&self) -> Option<&'static str> {
+        None
+    }
+
     /// What of a point parameter `own` needs beyond eq. 1-2.
     fn needs(&self, own: Own) -> Needs {
         let _ = own;
@@ -236,6 +246,8 @@ registry! {
     ScaleTemperature => scale_temperature::ScaleTemperature,
     /// [`rig_clock::RigClock`].
     RigClock => rig_clock::RigClock,
+    /// [`stretch_level::StretchLevel`].
+    StretchLevel => stretch_level::StretchLevel,
     /// [`encoder_eccentricity::EncoderError`] once a turn.
     EncoderEccentricity => encoder_eccentricity::EncoderError(1),
     /// [`encoder_eccentricity::EncoderError`] twice a turn.
@@ -320,6 +332,11 @@ impl Effect {
         self.behaviour(|b| b.considered_as_walk())
     }
 
+    /// [`Behaviour::size_read_from_data`].
+    pub fn size_read_from_data(self) -> Option<&'static str> {
+        self.behaviour(|b| b.size_read_from_data())
+    }
+
     /// [`Behaviour::beyond_physics`].
     pub fn beyond_physics(self, fitted: &dyn Fn(SharedPar) -> Option<(f64, f64)>) -> Option<String> {
         self.behaviour(|b| b.beyond_physics(fitted))
@@ -347,7 +364,7 @@ mod tests {
     fn every_effect_owns_and_names_its_parameters() {
         let all = Effect::catalogue();
         let earth = [Effect::EarthRotation, Effect::EarthRotationAtLatitude, Effect::EarthRotationHorizontal];
-        assert_eq!(all.len(), 17 + earth.len() + RATE_POWERS.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
+        assert_eq!(all.len(), 18 + earth.len() + RATE_POWERS.len() + DRIFT_KNOT_SPACINGS_S.len() + MAX_HARMONIC_ORDER);
         let mut keys: Vec<String> = all.iter().map(|e| e.key()).collect();
         keys.sort();
         keys.dedup();
