@@ -71,7 +71,7 @@
 //! calibrated (simulating is cheap beside calibrating: 4 s for `180,90,-180@300` with `all`).
 
 mod measured;
-use measured::replay::{self, full_plan, HOST, REALISTIC_EFFECTS};
+use measured::replay::{self, full_design, HOST, REALISTIC_EFFECTS};
 use measured::trust::{self, CellStats, SeedOutcome, BAR_RMS, BAR_Z};
 
 use host::sim::Effects;
@@ -215,40 +215,13 @@ fn case_dir(design: &str, case: &Case, seed: u64) -> PathBuf {
     measured::bench_dir("trust-matrix").join(design.replace('/', "+")).join(&case.label).join(format!("s{seed}"))
 }
 
-/// A design's suffix for its runs captured one per file, each simulated on its own, as the
-/// independent validation captures hold them: `180,90@120/files`.
-const FILES: &str = "/files";
-
-/// A design written out in full ([`full_plan`]), its [`FILES`] suffix kept.
-fn full_design(design: &str) -> String {
-    match design.strip_suffix(FILES) {
-        Some(plan) => full_plan(plan) + FILES,
-        None => full_plan(design),
-    }
-}
-
-/// The captures of `design` for `seed` with the effect `options`, simulated if not cached: one
-/// capture of every run; or, with [`FILES`], one per pose and rate, each simulated on its own
-/// with `capture_level` (a noise draw and a zero-rate level of its own: level 0 unless the case
-/// sets one), in `p<pose>_<rate>/` below `dir`.
+/// The captures of `design` for `seed` with the effect `options` ([`replay::capture_plans`]),
+/// simulated if not cached.
 fn captures(dir: &Path, design: &str, seed: u64, options: &[String]) -> Result<Vec<PathBuf>, String> {
-    let Some(plan) = design.strip_suffix(FILES) else {
-        return replay::simulated_with(dir, design, seed, options).map(|cap| vec![cap]);
-    };
-    let (rates, duration_s) = replay::rates_and_duration(plan);
-    let mut own = options.to_vec();
-    if !own.iter().any(|o| o.starts_with("--effect=capture_level")) {
-        own.push(effect_option("capture_level=0"));
-    }
-    let mut caps = Vec::new();
-    for pose in [1, 2] {
-        for rate in rates.split(',') {
-            let options: Vec<String> = own.iter().cloned().chain([format!("--poses={pose}")]).collect();
-            let sub = dir.join(format!("p{pose}_{rate}"));
-            caps.push(replay::simulated_with(&sub, &format!("{rate}@{duration_s}"), seed, &options)?);
-        }
-    }
-    Ok(caps)
+    replay::capture_plans(design, options)
+        .into_iter()
+        .map(|(sub, plan, options)| replay::simulated_with(&dir.join(sub), &plan, seed, &options))
+        .collect()
 }
 
 /// One seed of one cell, and what went wrong when it did.

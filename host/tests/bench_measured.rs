@@ -19,6 +19,23 @@ mod replay {
         assert_eq!(full_plan("-180@20"), "-180@20");
     }
 
+    /// A `/files` design keeps its suffix through `full_design` and is simulated one capture per
+    /// pose and rate, each with a noise draw of its own (`capture_level`, at level 0 unless the
+    /// case gives one); any other design is one capture.
+    #[test]
+    fn a_files_design_is_a_capture_per_pose_and_rate() {
+        assert_eq!(full_design("180,90/files"), format!("180,90@{DURATION_S}/files"));
+        assert_eq!(full_design("-180@20"), "-180@20");
+        let g = vec!["--effect=g_sensitivity".to_string()];
+        assert_eq!(capture_plans("180@20", &g), vec![(String::new(), "180@20".into(), g.clone())]);
+        let plans = capture_plans("180,-90@20/files", &g);
+        let names: Vec<(&str, &str)> = plans.iter().map(|(d, p, _)| (d.as_str(), p.as_str())).collect();
+        assert_eq!(names, [("p1_180", "180@20"), ("p1_-90", "-90@20"), ("p2_180", "180@20"), ("p2_-90", "-90@20")]);
+        assert_eq!(plans[3].2, ["--effect=g_sensitivity", "--effect=capture_level=0", "--poses=2"]);
+        let level = vec!["--effect=capture_level=0.01".to_string()];
+        assert_eq!(capture_plans("180@20/files", &level)[1].2, ["--effect=capture_level=0.01", "--poses=2"]);
+    }
+
     #[test]
     fn a_nan_is_the_largest_of_all() {
         assert_eq!(max_abs(&[1.0, -3.0, 2.0]), 3.0);

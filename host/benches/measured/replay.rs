@@ -38,6 +38,42 @@ pub fn full_plan(plan: &str) -> String {
     format!("{rates}@{duration_s}")
 }
 
+/// A design's suffix for its runs captured one per file, each simulated on its own, as the
+/// independent validation captures hold them: `180,90@120/files`.
+pub const FILES: &str = "/files";
+
+/// A design written out in full ([`full_plan`]), its [`FILES`] suffix kept.
+pub fn full_design(design: &str) -> String {
+    match design.strip_suffix(FILES) {
+        Some(plan) => full_plan(plan) + FILES,
+        None => full_plan(design),
+    }
+}
+
+/// The captures one seed of `design` is simulated into, with the effect `options`: (the
+/// subdirectory, the plan, the `host simulate` options) of each. One capture of every run; or,
+/// with [`FILES`], one per pose and rate in `p<pose>_<rate>/`, each with `capture_level` (a noise
+/// draw of its own, and a zero-rate level of its own when the options give it a size; level 0
+/// otherwise).
+pub fn capture_plans(design: &str, options: &[String]) -> Vec<(String, String, Vec<String>)> {
+    let Some(plan) = design.strip_suffix(FILES) else {
+        return vec![(String::new(), design.to_string(), options.to_vec())];
+    };
+    let (rates, duration_s) = rates_and_duration(plan);
+    let mut own = options.to_vec();
+    if !own.iter().any(|o| o.starts_with("--effect=capture_level")) {
+        own.push("--effect=capture_level=0".into());
+    }
+    let poses = [1, 2].into_iter();
+    poses
+        .flat_map(|pose| rates.split(',').map(move |rate| (pose, rate)))
+        .map(|(pose, rate)| {
+            let options = own.iter().cloned().chain([format!("--poses={pose}")]).collect();
+            (format!("p{pose}_{rate}"), format!("{rate}@{duration_s}"), options)
+        })
+        .collect()
+}
+
 /// The plans in `var` (`;`-separated, see [`rates_and_duration`]), or in `default`.
 pub fn plans_from_env(var: &str, default: &str) -> Vec<String> {
     std::env::var(var)
