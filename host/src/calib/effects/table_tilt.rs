@@ -25,7 +25,7 @@ impl Behaviour for TableTilt {
     }
 
     fn identified_by(&self) -> &'static str {
-        "runs at two speeds or directions: its part of θ2' scales with θ1', an offset does not"
+        "runs at two speeds or directions recorded in one capture per pose: its part of θ2' scales with θ1', an offset does not (a capture per run has a level of its own, which takes that part, and leaves the tilt a scale of M)"
     }
 
     fn kind(&self) -> Kind {
