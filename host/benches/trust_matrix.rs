@@ -254,10 +254,9 @@ fn run_seed(design: &str, case: &Case, seed: u64, keep_capture: bool) -> SeedRun
         }
     }
     if !keep_capture {
-        let subs = std::fs::read_dir(&dir).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.is_dir());
-        for d in std::iter::once(dir.clone()).chain(subs) {
-            let _ = std::fs::remove_file(d.join("simulate.args"));
-            let _ = std::fs::remove_file(d.join("x.cap"));
+        for (sub, _, _) in replay::capture_plans(design, &case.options) {
+            let _ = std::fs::remove_file(dir.join(&sub).join("simulate.args"));
+            let _ = std::fs::remove_file(dir.join(&sub).join("x.cap"));
         }
     }
     r
@@ -265,8 +264,14 @@ fn run_seed(design: &str, case: &Case, seed: u64, keep_capture: bool) -> SeedRun
 
 fn judge(dir: &Path, design: &str, case: &Case, seed: u64) -> SeedRun {
     let mut r = SeedRun { outcome: SeedOutcome::default(), wall_s: None, problem: None };
-    let caps = captures(dir, design, seed, &case.options);
-    let usage = match caps.as_ref().map_err(String::clone).and_then(|caps| replay::calibrate_files(dir, caps)) {
+    let caps = match captures(dir, design, seed, &case.options) {
+        Ok(caps) => caps,
+        Err(e) => {
+            r.problem = Some(e);
+            return r;
+        }
+    };
+    let usage = match replay::calibrate_files(dir, &caps) {
         Ok(u) => u,
         Err(e) => {
             r.problem = Some(e);
@@ -283,8 +288,7 @@ fn judge(dir: &Path, design: &str, case: &Case, seed: u64) -> SeedRun {
     }
     let z = replay::read_json(&dir.join("out/calibration.json")).and_then(|cal| {
         // Every capture's truth holds the seed's sensor.
-        let first = caps.as_ref().map_err(String::clone)?[0].with_file_name("x.truth.json");
-        trust::z_values(&cal, &replay::read_json(&first)?)
+        trust::z_values(&cal, &replay::read_json(&caps[0].with_file_name("x.truth.json"))?)
     });
     match z {
         Ok(z) => {

@@ -723,15 +723,14 @@ impl Session {
     pub fn truth(&self) -> Truth {
         let fs = self.gyro.full_scale;
         let m = self.sensor.m_counts_per_dps(fs);
+        let (k, offset) = (self.sensor.k_counts_per_dps(fs), self.sensor.offset_counts(fs));
         let truth = Truth {
             seed: self.seed,
             m_counts_per_dps: [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)])),
-            k_counts_per_dps: self.sensor.k_counts_per_dps(fs),
+            k_counts_per_dps: k,
             s: self.sensor.s.map(|v| [v[0], v[1], v[2]]),
             tilt_deg: self.sensor.tilt_deg,
-            offset_counts: std::array::from_fn(|i| {
-                self.sensor.offset_counts(fs)[i] + self.sensor.k_counts_per_dps(fs)[i] * self.level_dps[i]
-            }),
+            offset_counts: std::array::from_fn(|i| offset[i] + k[i] * self.level_dps[i]),
             noise_dps_per_sqrt_hz: self.noise_density,
             noise_counts_per_sample: self.noise_counts,
             gyro: self.gyro,

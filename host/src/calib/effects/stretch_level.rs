@@ -13,7 +13,7 @@ use super::{Behaviour, Effect, Layout};
 /// 0.003 °/s/√s (IEEE Std 952's MEMS range, [`super::drift_knots`]): 0.015 and 0.023 °/s;
 /// 0.015 taken (engineering judgement). Larger steps the loop's run-to-run test sees, and the
 /// free drift then gives each stretch its level.
-pub const LEVEL_STEP_DPS: f64 = 0.015;
+const LEVEL_STEP_DPS: f64 = 0.015;
 
 /// The offset of each stretch of capture other than the first its own level, in the model's
 /// stead of one offset throughout. Never fitted as such (the free drift's knots give every
