@@ -61,6 +61,22 @@ impl Binning {
         self.divided(theta_rad.rem_euclid(TAU))
     }
 
+    /// `(self.angle_index(θ), other.angle_index(θ))`, the turn's fraction taken once for both
+    /// (the diagnostics' walk bins every sample's θ2 twice).
+    #[inline]
+    pub fn angle_indices(&self, other: &Binning, theta_rad: f64) -> (usize, usize) {
+        debug_assert!(self.range == TAU && other.range == TAU);
+        let turns = theta_rad * (1.0 / TAU);
+        if turns.abs() < MAX_FAST_TURNS {
+            let frac = turns - (turns as i64) as f64;
+            let frac = if frac < 0.0 { frac + 1.0 } else { frac };
+            if let (Some(i), Some(j)) = (self.clear_of_edges(frac * self.n), other.clear_of_edges(frac * other.n)) {
+                return (i, j);
+            }
+        }
+        (self.angle_index(theta_rad), other.angle_index(theta_rad))
+    }
+
     /// ⌊q⌋ clamped to the last bin, when q is more than [`EDGE_BINS`] from an edge.
     #[inline]
     fn clear_of_edges(&self, q: f64) -> Option<usize> {
@@ -125,6 +141,20 @@ mod tests {
         for i in 0..100_000 {
             let x = i as f64 * 0.144_001_7;
             assert_eq!(b.index(x), ((x / 10.0) as usize).min(1439), "{x}");
+        }
+    }
+
+    /// Two binnings' indices taken together are each one's own.
+    #[test]
+    fn a_pair_of_angle_binnings_agrees_with_each_alone() {
+        let (a, b) = (Binning::new(TAU, 360), Binning::new(TAU, 8192));
+        for turns in [-70_000i64, -1, 0, 3, 65_535, 70_000] {
+            for k in 0..20_000 {
+                let th = (turns as f64 + k as f64 / 20_000.0) * TAU;
+                for th in [th.next_down(), th, th.next_up()] {
+                    assert_eq!(a.angle_indices(&b, th), (a.angle_index(th), b.angle_index(th)), "{th}");
+                }
+            }
         }
     }
 

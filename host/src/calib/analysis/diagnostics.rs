@@ -282,35 +282,50 @@ impl Diagnostics {
     }
 }
 
-/// Binned means.
-#[derive(Debug, Clone)]
-struct Bins {
-    sum: Vec<f64>,
-    sumsq: Vec<f64>,
-    count: Vec<f64>,
-    extra: Vec<f64>,
+/// One bin's sums: Σe, Σe², the count, and Σ of an extra value (the model's output).
+#[derive(Debug, Clone, Copy, Default)]
+struct Bin {
+    sum: f64,
+    sumsq: f64,
+    count: f64,
+    extra: f64,
 }
+
+/// Binned means, a bin's sums side by side (one bounds check a sample, where four vectors took
+/// four).
+#[derive(Debug, Clone)]
+struct Bins(Vec<Bin>);
 
 impl Bins {
     fn new(n: usize) -> Self {
-        Self { sum: vec![0.0; n], sumsq: vec![0.0; n], count: vec![0.0; n], extra: vec![0.0; n] }
+        Self(vec![Bin::default(); n])
     }
 
+    #[inline]
     fn add(&mut self, k: usize, e: f64, extra: f64) {
-        self.sum[k] += e;
-        self.sumsq[k] += e * e;
-        self.count[k] += 1.0;
-        self.extra[k] += extra;
+        let b = &mut self.0[k];
+        b.sum += e;
+        b.sumsq += e * e;
+        b.count += 1.0;
+        b.extra += extra;
+    }
+
+    /// Only Σe and the count, where nothing reads the others ([`Bins::spread`]).
+    #[inline]
+    fn add_to_mean(&mut self, k: usize, e: f64) {
+        let b = &mut self.0[k];
+        b.sum += e;
+        b.count += 1.0;
     }
 
     /// χ² of the bin means about their weighted mean for variance `var`, dof, and the largest
     /// |bin mean − mean|, and the range of the means.
     fn spread(&self, var: f64) -> (f64, usize, f64, f64) {
-        let total: f64 = self.count.iter().sum();
-        let mean = self.sum.iter().sum::<f64>() / total.max(1.0);
+        let total: f64 = self.0.iter().map(|b| b.count).sum();
+        let mean = self.0.iter().map(|b| b.sum).sum::<f64>() / total.max(1.0);
         let (mut chi2, mut used, mut max_dev) = (0.0, 0usize, 0.0f64);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (s, &c) in self.sum.iter().zip(&self.count) {
+        for &Bin { sum: s, count: c, .. } in &self.0 {
             if c < 2.0 {
                 continue;
             }
@@ -350,9 +365,9 @@ impl RateBinSums {
     /// The bins of the residual less its orders 0 and 1 (`coefs` of the first pass).
     fn without_orders_0_and_1(&self, coefs: &[(f64, f64); MAX_ORDER + 1]) -> Bins {
         let mut b = Bins::new(RATE_BINS);
-        for k in 0..RATE_BINS {
-            b.sum[k] = self.e[k] - (coefs[0].1 * self.count[k] + coefs[1].0 * self.sin[k] + coefs[1].1 * self.cos[k]);
-            b.count[k] = self.count[k];
+        for (k, bin) in b.0.iter_mut().enumerate() {
+            bin.sum = self.e[k] - (coefs[0].1 * self.count[k] + coefs[1].0 * self.sin[k] + coefs[1].1 * self.cos[k]);
+            bin.count = self.count[k];
         }
         b
     }
@@ -379,10 +394,10 @@ pub(crate) fn ripple_beyond_echo(slope: f64, full_echo: f64) -> f64 {
     }
 }
 
-/// The speed deviation θ1'/steady − 1 in %.
+/// The speed deviation θ1'/steady − 1, a fraction (× 100 where reported in %).
 #[inline]
-fn speed_deviation_percent(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
-    (theta1_rate_dps / steady_rate_dps - 1.0) * 100.0
+fn speed_deviation(theta1_rate_dps: f64, steady_rate_dps: f64) -> f64 {
+    theta1_rate_dps / steady_rate_dps - 1.0
 }
 
 /// White-noise variance from the remainder of a centred moving average of half-width `w`;
@@ -630,13 +645,12 @@ impl<'a> Walker<'a> {
         let (theta2_binning, angle_binning, centres) = (&self.theta2_binning, &self.angle_binning, &self.centres);
         for_each_interpolated(ev, data, r, values, |_, s, v| {
             let (preds, theta2_rad, temp_c) = (&v[..3], v[3], v[7]);
-            let bin = theta2_binning.angle_index(theta2_rad);
+            let (bin, hb) = theta2_binning.angle_indices(angle_binning, theta2_rad);
             let tb = time_binning.index(s.t_s() - t_first);
-            let dev = s.theta1_rate_dps() / rk.steady_rate_dps - 1.0;
+            let dev = speed_deviation(s.theta1_rate_dps(), rk.steady_rate_dps);
             sums.dev_sq += dev * dev;
-            let dev_pct = speed_deviation_percent(s.theta1_rate_dps(), rk.steady_rate_dps);
+            let dev_pct = dev * 100.0;
             let mut row = [f64::NAN; 3];
-            let hb = angle_binning.angle_index(theta2_rad);
             sums.angle.add_sample(hb, dev_pct);
             for a in 0..3 {
                 let rbin = rate_binning.index(v[4 + a].abs());
@@ -655,7 +669,7 @@ impl<'a> Walker<'a> {
                 sums.e[a].push(ea as f32);
                 sums.angle.add_residual(a, hb, dev_pct, ea);
                 sums.theta_bins[a].add(bin, ea, pred);
-                sums.time_bins[a].add(tb, ea, 0.0);
+                sums.time_bins[a].add_to_mean(tb, ea);
                 sums.temp[a].add(temp_c, ea);
                 sums.rate_sums[a].add(rbin, ea, centres[hb]);
             }
@@ -807,21 +821,21 @@ fn order_terms(orders: &[OrderSums; MAX_ORDER + 1], noise_var: f64, nf: f64, ka:
 
 /// The plotted residual against θ2 of one run and axis, °/s.
 fn theta2_curve(tb: &Bins, ka: f64) -> Theta2Curve {
-    let per_bin = |f: &dyn Fn(usize) -> f64| (0..THETA2_BINS).map(f).collect::<Vec<f64>>();
+    let per_bin = |f: &dyn Fn(&Bin) -> f64| tb.0.iter().map(f).collect::<Vec<f64>>();
     Theta2Curve {
-        theta2_deg: per_bin(&|b| (b as f64 + 0.5) * 360.0 / THETA2_BINS as f64),
-        residual_dps: per_bin(&|b| if tb.count[b] > 0.0 { tb.sum[b] / tb.count[b] / ka } else { f64::NAN }),
+        theta2_deg: (0..THETA2_BINS).map(|b| (b as f64 + 0.5) * 360.0 / THETA2_BINS as f64).collect(),
+        residual_dps: per_bin(&|b| if b.count > 0.0 { b.sum / b.count / ka } else { f64::NAN }),
         residual_se_dps: per_bin(&|b| {
-            let c = tb.count[b];
+            let c = b.count;
             if c > 1.0 {
-                let mean = tb.sum[b] / c;
-                ((tb.sumsq[b] / c - mean * mean).max(0.0) / (c - 1.0)).sqrt() / ka
+                let mean = b.sum / c;
+                ((b.sumsq / c - mean * mean).max(0.0) / (c - 1.0)).sqrt() / ka
             } else {
                 f64::NAN
             }
         }),
-        fit_dps: per_bin(&|b| if tb.count[b] > 0.0 { tb.extra[b] / tb.count[b] / ka } else { f64::NAN }),
-        counts: tb.count.iter().map(|&c| c as u64).collect(),
+        fit_dps: per_bin(&|b| if b.count > 0.0 { b.extra / b.count / ka } else { f64::NAN }),
+        counts: tb.0.iter().map(|b| b.count as u64).collect(),
     }
 }
 
