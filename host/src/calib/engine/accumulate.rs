@@ -7,10 +7,11 @@ use crate::calib::result::axes::is_clipped;
 
 use super::cells::Cells;
 use super::chain::Cursor;
+use super::knot_split::KnotSplit;
 use super::loop_data::LoopData;
 use super::model::Model;
 use super::pass::Pass;
-use super::sums::{Gram, KnotSplit, Reach, RowBlock, SharedRows, Touched, CHUNK};
+use super::sums::{Gram, Reach, RowBlock, SharedRows, Touched, CHUNK};
 use crate::calib::effects::terms::Col;
 
 /// One pass: per-run sums of `cols` against the residual of `model` (clipped samples left out of

@@ -19,7 +19,7 @@
 //!
 //! Files: [`loop_data`] (the cached data), [`model`], [`chain`] (eq. 1-2 and every effect's
 //! inputs), `pass` (what a pass fixes before it visits the samples), [`sums`] (the sums a pass
-//! adds its rows to), [`accumulate`] (one pass → per-run sums), [`cells`] (a pass's samples
+//! adds its rows to), `knot_split` (the free drift's knots in them), [`accumulate`] (one pass → per-run sums), [`cells`] (a pass's samples
 //! summed a few at a time, the chain taken at three nodes of each: `nodes`), [`solve`] (normal
 //! equations, Gauss-Newton, covariance), [`cross`] (a model's columns against candidates', read by
 //! the score and the consider covariance alike); [`sincos`] (the recurrences the chain's
@@ -29,6 +29,7 @@ pub mod accumulate;
 pub mod cells;
 pub mod chain;
 pub mod cross;
+mod knot_split;
 pub mod loop_data;
 pub mod model;
 mod nodes;

@@ -21,9 +21,10 @@ use std::ops::Range;
 
 use super::cells::CellForm;
 use super::chain::Evaluator;
+use super::knot_split::KnotSplit;
 use super::loop_data::LoopData;
 use super::pass::Pass;
-use super::sums::{Gram, KnotSplit, RowBlock, SharedRows, Touched, CHUNK};
+use super::sums::{Gram, RowBlock, SharedRows, Touched, CHUNK};
 use crate::calib::data::kinematics::KinSample;
 use crate::calib::effects::terms::Point;
 use crate::calib::result::axes::is_clipped;
@@ -255,17 +256,22 @@ impl<'p, 'a> CellPass<'p, 'a> {
                 });
             }
         }
+        let mut straight = [None; 3];
         if self.split.is_some() && !knots_per_sample {
             for (a, ax) in axes.iter().enumerate().filter(|(_, ax)| ax.n > 0) {
                 let (n, each) = (f64::from(ax.n), &mut self.knots_axis[a]);
-                ev.knots_at(plan, stretch, t0 + t_sum_s[a] / n, None, |j, w| each.push((j, n * w)));
+                let t_mean_s = t0 + t_sum_s[a] / n;
+                ev.knots_at(plan, stretch, t_mean_s, None, |j, w| each.push((j, n * w)));
+                straight[a] = Some((n.sqrt(), t_mean_s));
             }
         }
-        self.emit(&axes, all_used);
+        self.emit(&axes, all_used, straight);
     }
 
-    /// The cell's rows: per axis its samples' sums over the root of their count.
-    fn emit(&mut self, axes: &[AxisCell; 3], all_used: bool) {
+    /// The cell's rows: per axis its samples' sums over the root of their count. `straight`, per
+    /// axis, where its knots are straight lines over the cell: the root of its count and its
+    /// samples' mean time, s.
+    fn emit(&mut self, axes: &[AxisCell; 3], all_used: bool, straight: [Option<(f64, f64)>; 3]) {
         let pass = self.pass;
         let scale = axes.map(|ax| if ax.n > 0 { f64::from(ax.n).sqrt().recip() } else { 0.0 });
         let e = std::array::from_fn(|a| axes[a].e * scale[a]);
@@ -291,7 +297,7 @@ impl<'p, 'a> CellPass<'p, 'a> {
                     self.knots_all.iter().for_each(|&kw| merge(knots, kw));
                     knots.iter_mut().for_each(|kw| kw.1 *= scale[a]);
                     let rows = (knots.as_slice(), self.row.as_slice());
-                    split.add_row(a, rows, e[a], &mut self.local, pass.reach, &mut self.touched);
+                    split.add_row(a, rows, e[a], straight[a], &mut self.local, pass.reach, &mut self.touched);
                 }
                 None => {
                     self.blocks[a].push(e[a]).copy_from_slice(&self.row);
@@ -407,10 +413,17 @@ pub fn for_each_interpolated<const K: usize>(
             let t0 = nodes[0].1;
             let times: [f64; MAX_NODES] = std::array::from_fn(|j| nodes[j].1 - t0);
             let lagrange = Lagrange::new(&times[..k]);
+            // A short cell's three nodes (all but a stretch's last cells) spelled out: the sum
+            // over a run-time count of nodes kept the compiler from unrolling it.
+            let three = (k == 3).then(|| (nodes[0].2, nodes[1].2, nodes[2].2));
             for i in cell.clone() {
                 let s = samples.get(i);
                 let w = lagrange.weights(s.t_s() - t0);
-                visit(i, s, std::array::from_fn(|q| (0..k).map(|j| w[j] * nodes[j].2[q]).sum()));
+                let v = match three {
+                    Some((a, b, c)) => std::array::from_fn(|q| w[0] * a[q] + w[1] * b[q] + w[2] * c[q]),
+                    None => std::array::from_fn(|q| (0..k).map(|j| w[j] * nodes[j].2[q]).sum()),
+                };
+                visit(i, s, v);
             }
         }
     }

@@ -1,10 +1,7 @@
 //! The sums a pass adds its rows to: per run and axis, the Gram matrix of the columns against the
 //! residual ([`Gram`]), the pairs a pass reaches ([`Reach`]), and the blocks that hold rows (a
 //! sample's or a cell's) until they are summed, four columns side by side ([`RowBlock`],
-//! [`SharedRows`], and [`KnotSplit`] for the free drift's sparse knots).
-
-use super::chain::{ColPlan, Evaluator};
-use crate::calib::effects::terms::Point;
+//! [`SharedRows`]; the free drift's sparse knots are [`super::knot_split`]'s).
 
 /// Samples summed into a local accumulator before it is added to the run total: rounding error
 /// then grows as O(√n) ulp in a long run instead of O(n).
@@ -202,8 +199,8 @@ fn add_tile<'r>(xtx: &mut [f64], l: usize, ii: usize, jj: usize, rows: impl Iter
 /// third of a plain fit's pass. eᵀe and the counts are the pass's, sample by sample.
 pub(super) struct RowBlock {
     l: usize,
-    x: Vec<f64>,
-    e: Vec<f64>,
+    pub(super) x: Vec<f64>,
+    pub(super) e: Vec<f64>,
     reach: Vec<usize>,
 }
 
@@ -385,7 +382,7 @@ impl Reach {
 
     /// Whether the pair (i, j) is summed.
     #[inline(always)]
-    fn pairs(&self, i: usize, j: usize) -> bool {
+    pub(super) fn pairs(&self, i: usize, j: usize) -> bool {
         i.max(j) < self.0[i.min(j)]
     }
 }
@@ -402,7 +399,7 @@ impl Touched {
     }
 
     #[inline]
-    fn mark(&mut self, ii: usize) {
+    pub(super) fn mark(&mut self, ii: usize) {
         if !self.flags[ii] {
             self.flags[ii] = true;
             self.rows.push(ii);
@@ -412,181 +409,5 @@ impl Touched {
     pub(super) fn clear(&mut self) {
         let Self { flags, rows } = self;
         rows.drain(..).for_each(|ii| flags[ii] = false);
-    }
-}
-
-/// Per position in a pass's list (empty but for knots): the other columns a knot is summed with,
-/// as (index into [`KnotSplit::map`], index of the pair's sum in the upper triangle).
-type KnotPairs = [Vec<(usize, usize)>];
-
-impl Gram {
-    /// One row (a sample, or a cell) of axis `a` with residual `e`: the sums of its non-zero
-    /// knots `knots` (position, value) with themselves and with the other columns (values
-    /// `row`, paired through `pairs`, [`KnotSplit::pairs`]), for the pairs `reach` names; the
-    /// other columns' own sums are [`KnotSplit`]'s.
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    fn add_knots(
-        &mut self,
-        a: usize,
-        knots: &[(usize, f64)],
-        (pairs, row): (&KnotPairs, &[f64]),
-        e: f64,
-        reach: &Reach,
-        touched: &mut Touched,
-    ) {
-        let l = self.l;
-        let g = &mut self.xtx[a];
-        for (k, &(jk, wk)) in knots.iter().enumerate() {
-            touched.mark(jk);
-            self.xte[a][jk] += wk * e;
-            for &(p, at) in &pairs[jk] {
-                g[at] += row[p] * wk;
-            }
-            for &(jj, wj) in &knots[k..] {
-                if reach.pairs(jk, jj) {
-                    g[jk.min(jj) * l + jk.max(jj)] += wk * wj;
-                }
-            }
-        }
-    }
-}
-
-/// The sums of a plan with free-drift knots. Its other columns ([`ColPlan::dense`]) are non-zero
-/// at nearly every sample: they are summed a block of rows at a time, as the plan without knots
-/// is ([`RowBlock`]), into a Gram of their own that a chunk's end adds to the pass's. The knots,
-/// 2 of dozens per sample, are held beside the rows and summed against the rest, row by row,
-/// when the block is drained. Every sum still takes the rows in order. Summed together pair by
-/// pair through memory, sample by sample, the two were half of `host calibrate`'s time once the
-/// drift had knots.
-pub(super) struct KnotSplit {
-    /// Position of each of the plan's other columns in the pass's list (increasing).
-    map: Vec<usize>,
-    /// Per position in the pass's list (empty but for knots): the other columns the knot is
-    /// summed with, as (index into `map`, index of the pair's sum in the upper triangle).
-    pairs: Vec<Vec<(usize, usize)>>,
-    blocks: [RowBlock; 3],
-    /// Per axis, the non-zero knots of the block's rows, by row: (position, value), and the
-    /// row of each.
-    knots: [Vec<(usize, f64)>; 3],
-    knot_rows: [Vec<usize>; 3],
-    /// Their sums since the chunk began.
-    sums: Gram,
-    any: bool,
-}
-
-impl KnotSplit {
-    pub(super) fn new(plan: &ColPlan, reach: &Reach) -> Self {
-        let map: Vec<usize> = plan.dense.iter().map(|d| d.0).collect();
-        let own = Reach(map.iter().map(|&c| map.partition_point(|&q| q < reach.0[c])).collect());
-        let l = reach.0.len();
-        let mut pairs = vec![Vec::new(); l];
-        for &j in plan.knots.iter().flat_map(|g| g.at.iter().flatten()) {
-            pairs[j] = map
-                .iter()
-                .enumerate()
-                .filter(|&(_, &i)| reach.pairs(i, j))
-                .map(|(p, &i)| (p, i.min(j) * l + i.max(j)))
-                .collect();
-        }
-        Self {
-            blocks: std::array::from_fn(|_| RowBlock::new(&own)),
-            knots: std::array::from_fn(|_| Vec::new()),
-            knot_rows: std::array::from_fn(|_| Vec::new()),
-            sums: Gram::new(map.len()),
-            map,
-            pairs,
-            any: false,
-        }
-    }
-
-    /// Sample `p` on axis `a` with residual `e` (`common` as for [`Evaluator::fill_dense`]).
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    pub(super) fn add(
-        &mut self,
-        ev: &Evaluator,
-        (p, plan, common): (&Point, &ColPlan, &[f64]),
-        a: usize,
-        e: f64,
-        local: &mut Gram,
-        reach: &Reach,
-        touched: &mut Touched,
-    ) {
-        let knots = &mut self.knots[a];
-        ev.for_each_knot(plan, p, |j, w| knots.push((j, w)));
-        self.knot_rows[a].resize(knots.len(), self.blocks[a].e.len());
-        ev.fill_dense(p, plan, a, common, self.blocks[a].push(e));
-        if self.blocks[a].is_full() {
-            self.drain(a, local, reach, touched);
-        }
-        self.any = true;
-    }
-
-    /// A row on axis `a` with residual `e`: its knots `knots` (position, value, each once), and
-    /// its other columns `row`.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn add_row(
-        &mut self,
-        a: usize,
-        (knots, row): (&[(usize, f64)], &[f64]),
-        e: f64,
-        local: &mut Gram,
-        reach: &Reach,
-        touched: &mut Touched,
-    ) {
-        self.knots[a].extend_from_slice(knots);
-        self.knot_rows[a].resize(self.knots[a].len(), self.blocks[a].e.len());
-        self.blocks[a].push(e).copy_from_slice(row);
-        if self.blocks[a].is_full() {
-            self.drain(a, local, reach, touched);
-        }
-        self.any = true;
-    }
-
-    /// Axis `a`'s block into the sums: its other columns' into [`KnotSplit::sums`], its knots'
-    /// into `local`, row by row.
-    fn drain(&mut self, a: usize, local: &mut Gram, reach: &Reach, touched: &mut Touched) {
-        let Self { map, pairs, blocks, knots, knot_rows, sums, .. } = self;
-        let block = &mut blocks[a];
-        if block.e.is_empty() {
-            return;
-        }
-        let m = map.len();
-        let (kn, kr) = (&knots[a], &knot_rows[a]);
-        let mut lo = 0;
-        for (c, &ec) in block.e.iter().enumerate() {
-            let mut hi = lo;
-            while hi < kr.len() && kr[hi] == c {
-                hi += 1;
-            }
-            local.add_knots(a, &kn[lo..hi], (pairs, &block.x[c * m..(c + 1) * m]), ec, reach, touched);
-            lo = hi;
-        }
-        block.add_to(sums, a);
-        knots[a].clear();
-        knot_rows[a].clear();
-    }
-
-    /// At a chunk's end: the other columns' sums into `local`, their rows marked `touched`.
-    pub(super) fn flush(&mut self, local: &mut Gram, reach: &Reach, touched: &mut Touched) {
-        for a in 0..3 {
-            self.drain(a, local, reach, touched);
-        }
-        if !std::mem::take(&mut self.any) {
-            return;
-        }
-        let (m, l) = (self.map.len(), local.l);
-        for a in 0..3 {
-            for (p, &i) in self.map.iter().enumerate() {
-                local.xte[a][i] += std::mem::take(&mut self.sums.xte[a][p]);
-                for (q, &j) in self.map.iter().enumerate().skip(p) {
-                    local.xtx[a][i * l + j] += std::mem::take(&mut self.sums.xtx[a][p * m + q]);
-                }
-            }
-        }
-        for &i in &self.map {
-            touched.mark(i);
-        }
     }
 }
