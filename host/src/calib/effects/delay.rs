@@ -1,7 +1,8 @@
 //! The gyro's output lags the encoder.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+    along_gradient, shift_vector, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point,
+    Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -52,8 +53,13 @@ impl Behaviour for Delay {
     }
 
     /// Delaying by τ moves θ2 by −θ2'·τ (and the angles after it with it).
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        -p.rate2_dps.to_radians() * t.d_shift
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        let per_s = -p.rate2_dps.to_radians();
+        Some(shift_vector(p).map(|v| per_s * v))
     }
 
     /// 5 ms: the L3G4200D's LPF2 cut-off is 30-110 Hz at 800 Hz ODR (datasheet, Table 5); a

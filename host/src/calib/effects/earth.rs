@@ -1,8 +1,8 @@
 //! Earth's rotation, fixed in the lab, seen through θ1 and θ2.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar,
-    Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported,
+    SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -102,9 +102,13 @@ impl Behaviour for Earth {
         s.earth_dps[usize::from(k)] = value;
     }
 
-    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        let Own::Shared(k) = own else { return 0.0 };
-        dot(&t.u, &p.d_earth[usize::from(k)])
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, own: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        let Own::Shared(k) = own else { return None };
+        Some(p.d_earth[usize::from(k)])
     }
 
     /// While no form of Earth's rotation is in the model, the fitted form's three components

@@ -2,8 +2,8 @@
 //! turn.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar, Shifts,
-    Situation,
+    along_gradient, shift_vector, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point,
+    Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -110,21 +110,25 @@ impl Behaviour for EncoderError {
     /// takes it ([`Point::encoder_read`]): at the corrected angle the two terms, which nearly
     /// cancel (450 and 360 counts/rad for a sum of 93 on the trust bench's rig), would be 1e-5
     /// rad, 3.5e-4 of their sum, off.
-    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        let Own::Shared(k) = own else { return 0.0 };
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, own: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        let Own::Shared(k) = own else { return None };
         if p.theta1_rate_dps == 0.0 {
-            return 0.0;
+            return Some([0.0; 3]);
         }
         let ratio = p.rate2_dps / p.theta1_rate_dps;
         let read = &p.encoder_read;
-        let along_rate = t.per_theta1_rate(p) * read.rate_dps;
+        // The output follows θ1' as u·ω_s/θ1' (AxisTerms::per_theta1_rate).
+        let along_rate = read.rate_dps / p.theta1_rate_dps;
         let n = f64::from(self.0);
         let (s, c) = read.sin_cos[usize::from(self.0) - 1];
-        if k == 0 {
-            -t.d_shift * ratio * s - along_rate * n * c
-        } else {
-            -t.d_shift * ratio * (1.0 - c) - along_rate * n * s
-        }
+        let (on_shift, on_rate) =
+            if k == 0 { (-ratio * s, -along_rate * n * c) } else { (-ratio * (1.0 - c), -along_rate * n * s) };
+        let shift = shift_vector(p);
+        Some(std::array::from_fn(|i| on_shift * shift[i] + on_rate * p.omega[i]))
     }
 
     fn needs(&self, _: Own) -> Needs {

@@ -1,8 +1,8 @@
 //! The gyro's low-pass filter's gain at the table frequency.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
-    Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -52,8 +52,12 @@ impl Behaviour for FilterGain {
         s.filter_s2 = value;
     }
 
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        dot(&t.u, &p.d_filter)
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        Some(p.d_filter)
     }
 
     /// |κ| ≤ τ²/2 for a low-pass of real poles with group delay τ (each pole ω_i adds 1/ω_i to

@@ -1,7 +1,8 @@
 //! The sensor table trailing the base by an angle that grows with speed.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -50,9 +51,16 @@ impl Behaviour for GearLag {
 
     /// Moving the gear angle moves the rippled angle by (ripple − 1) and the rippled speed by
     /// θ2'·∂ripple/∂θ; it also moves the error the index pulse saw.
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
-        p.theta1_rate_rad_s * (t.e2 * (p.dtheta_eff - 1.0) + t.ez * p.drate_eff_dps)
-            - t.e2 * cx.index_edge[p.run].dshift_dlag
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, cx: &Ctx) -> Option<[f64; 3]> {
+        let (along_theta2, along_rate2) = (
+            p.theta1_rate_rad_s * (p.dtheta_eff - 1.0) - cx.index_edge[p.run].dshift_dlag,
+            p.theta1_rate_rad_s * p.drate_eff_dps,
+        );
+        Some(std::array::from_fn(|i| along_theta2 * p.d_theta2[i] + along_rate2 * p.d_rate2[i]))
     }
 
     /// None: it moves only the transmission error's phase, never M or the offsets.

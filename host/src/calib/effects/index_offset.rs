@@ -1,7 +1,8 @@
 //! The index plate is off the θ2 the poses are defined for.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -48,8 +49,12 @@ impl Behaviour for IndexOffset {
 
     /// It moves θ2 but not the gear mesh's angle (the ripple is tied to the gear, not to where
     /// θ2 = 0 is).
-    fn value(&self, _: Own, _: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        t.e2
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        Some(p.d_theta2)
     }
 
     /// 1°: the index plate is 2° wide, and an edge taken for its centre is 1° off (engineering

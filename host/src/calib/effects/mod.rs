@@ -113,6 +113,14 @@ pub trait Behaviour {
     /// (unused, NaN, for a linear column).
     fn value(&self, own: Own, p: &Point, a: usize, t: &AxisTerms, cx: &Ctx) -> f64;
 
+    /// Where shared parameter `own`'s Jacobian on every axis is that axis's gradient
+    /// `t.u` = ∂(output)/∂ω_s against one vector of the package frame, ∂ω_s/∂θ_k: that vector at
+    /// `p`, so that a pass takes it once for the three axes (`value` is then `t.u` · it,
+    /// [`terms::along_gradient`]). None (the default): `value` is taken axis by axis.
+    fn gradient_factor(&self, _own: Own, _p: &Point, _cx: &Ctx) -> Option<[f64; 3]> {
+        None
+    }
+
     /// Whether the loop tries it now.
     fn candidate(&self, s: &Situation) -> bool;
 

@@ -1,7 +1,8 @@
 //! A delay and an index offset that the runs cannot tell apart.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts, Situation,
+    along_gradient, shift_vector, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point,
+    Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -46,8 +47,12 @@ impl Behaviour for Phase {
         s.theta2_offset_rad += value;
     }
 
-    fn value(&self, _: Own, _: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        t.d_shift
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        Some(shift_vector(p))
     }
 
     /// None: held by the delay's and the index offset's own terms.

@@ -1,8 +1,8 @@
 //! The pose-2 fixture turned about the table axis against pose 1's.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported, SharedPar,
-    Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported,
+    SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -53,9 +53,13 @@ impl Behaviour for PoseFixture {
         s.fixture_rad[usize::from(k)] = value;
     }
 
-    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        let Own::Shared(k) = own else { return 0.0 };
-        dot(&t.u, &p.d_fixture[usize::from(k)])
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, own: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        let Own::Shared(k) = own else { return None };
+        Some(p.d_fixture[usize::from(k)])
     }
 
     /// The mount tolerance of a machined angle block ([`crate::calib::result::derived::MOUNT_TOLERANCE_DEG`]).

@@ -1,8 +1,8 @@
 //! The rig's time base off its nominal frequency.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
-    Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -57,8 +57,12 @@ impl Behaviour for RigClock {
     }
 
     /// ∂(output)/∂ε: the model's own rate signal on the axis, per ppm.
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        1e-6 * dot(&t.u, &p.omega)
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        Some(p.omega.map(|w| 1e-6 * w))
     }
 
     /// 20 ppm: the firmware runs on an 8 MHz HSE crystal (`firmware/src/main.rs`); parts of that

@@ -1,8 +1,8 @@
 //! A periodic angle error of the sensor table.
 
 use super::terms::{
-    AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, RunScope, SharedPar, Shifts,
-    Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, RunScope,
+    SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout, MAX_HARMONIC_ORDER};
 use crate::geometry::Pose;
@@ -124,19 +124,21 @@ impl Behaviour for TableHarmonic {
 
     /// The angle's part less what the index pulse saw of it ([`super::terms::IndexEdge`]).
     fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
-        let Own::Shared(k) = own else { return 0.0 };
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, own: Own, p: &Point, cx: &Ctx) -> Option<[f64; 3]> {
+        let Own::Shared(k) = own else { return None };
         let (scope, quadrature) = self.of(k);
         if !scope.applies(p.run, p.pose) {
-            return 0.0;
+            return Some([0.0; 3]);
         }
         let n = f64::from(self.0);
         let (sn, cn) = p.mesh_sin_cos[self.0 as usize];
         let (edge_s, edge_c) = cx.index_edge[p.run].harmonic[self.0 as usize];
-        if quadrature {
-            -t.e2 * (cn - edge_c) / n + t.ez * p.rate2_dps * sn
-        } else {
-            t.e2 * (sn - edge_s) / n + t.ez * p.rate2_dps * cn
-        }
+        let (along_theta2, along_rate2) =
+            if quadrature { (-(cn - edge_c) / n, p.rate2_dps * sn) } else { ((sn - edge_s) / n, p.rate2_dps * cn) };
+        Some(std::array::from_fn(|i| along_theta2 * p.d_theta2[i] + along_rate2 * p.d_rate2[i]))
     }
 
     /// None: over whole turns a harmonic of θ2 above the first is orthogonal to M's columns.

@@ -1,8 +1,8 @@
 //! The sensor-table axis not perpendicular to the base axis.
 
 use super::terms::{
-    dot, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar, Shifts,
-    Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -48,8 +48,13 @@ impl Behaviour for TableTilt {
         s.tilt_sin_cos = value.sin_cos();
     }
 
-    fn value(&self, _: Own, p: &Point, _: usize, t: &AxisTerms, _: &Ctx) -> f64 {
-        t.ez * p.theta1_rate_dps * p.cos_tilt + dot(&t.u, &p.d_tilt)
+    fn value(&self, own: Own, p: &Point, _: usize, t: &AxisTerms, cx: &Ctx) -> f64 {
+        along_gradient(t, self.gradient_factor(own, p, cx))
+    }
+
+    fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
+        let along_rate2 = p.theta1_rate_dps * p.cos_tilt;
+        Some(std::array::from_fn(|i| along_rate2 * p.d_rate2[i] + p.d_tilt[i]))
     }
 
     /// 0.3°: a table shaft in a bearing seat machined to 0.1 mm over a 20-mm span (engineering

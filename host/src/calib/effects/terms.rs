@@ -581,6 +581,20 @@ pub fn decay(t_s: f64, tau_s: f64) -> f64 {
     }
 }
 
+/// ∂ω_s/∂θ2 (before ripple) through the rippled angle and speed: the vector whose product with
+/// an axis's gradient is [`AxisTerms::d_shift`].
+#[inline]
+pub fn shift_vector(p: &Point) -> [f64; 3] {
+    std::array::from_fn(|i| p.dtheta_eff * p.d_theta2[i] + p.drate_eff_dps * p.d_rate2[i])
+}
+
+/// A shared column from its gradient factor ([`super::Behaviour::gradient_factor`]): `t.u` ·
+/// `factor`, 0 where it has none.
+#[inline]
+pub fn along_gradient(t: &AxisTerms, factor: Option<[f64; 3]>) -> f64 {
+    factor.map_or(0.0, |f| dot(&t.u, &f))
+}
+
 /// x · y.
 #[inline]
 pub fn dot(x: &[f64; 3], y: &[f64; 3]) -> f64 {

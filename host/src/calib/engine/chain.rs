@@ -778,7 +778,10 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The values at `p` of `plan`'s axis-independent columns, by position in `plan.dense`
-    /// (0 for the others).
+    /// (0 for the others), then, for each of its per-axis columns in order, the vector whose
+    /// product with an axis's gradient is the column on that axis
+    /// ([`crate::calib::effects::Behaviour::gradient_factor`]; NaN where it has none): what
+    /// [`Evaluator::fill_dense`] reads.
     #[inline]
     pub(super) fn common_values(&self, p: &Point, plan: &ColPlan, out: &mut Vec<f64>) {
         out.clear();
@@ -788,6 +791,13 @@ impl<'a> Evaluator<'a> {
             Kernel::Common(lc) => self.lin_value(lc, p, 0),
             Kernel::PerAxis(_) => 0.0,
         }));
+        for &(_, c) in &plan.per_axis {
+            let factor = match c {
+                Col::Shared(sp) => self.gradient_factor(sp.effect, Own::Shared(sp.k), p),
+                Col::Lin(_) => None,
+            };
+            out.extend(factor.unwrap_or([f64::NAN; 3]));
+        }
     }
 
     /// The knots of `plan` under point `p`, with their hat functions' values (the
@@ -883,6 +893,13 @@ impl<'a> Evaluator<'a> {
         e.behaviour(|b| b.value(own, p, a, t, &self.cx()))
     }
 
+    /// An effect's column at `p` as a vector against the axes' gradients
+    /// (`Behaviour::gradient_factor`), out of line as [`Evaluator::effect_value`].
+    #[inline(never)]
+    fn gradient_factor(&self, e: Effect, own: Own, p: &Point) -> Option<[f64; 3]> {
+        e.behaviour(|b| b.gradient_factor(own, p, &self.cx()))
+    }
+
     /// Fills `out[a * cols.len() + j]` with column j on axis a.
     pub fn fill(&self, p: &Point, cols: &[Col], out: &mut [f64]) {
         let l = cols.len();
@@ -895,15 +912,20 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Every column of a knot-free `plan` on axis `a` at `p`, by position: what
-    /// [`Evaluator::fill`] gives. `common` holds `plan`'s axis-independent values at `p`
-    /// (`common_values`).
+    /// [`Evaluator::fill`] gives. `common` holds `plan`'s axis-independent values at `p` and its
+    /// per-axis columns' gradient factors (`common_values`).
     pub(super) fn fill_dense(&self, p: &Point, plan: &ColPlan, a: usize, common: &[f64], out: &mut [f64]) {
         let t = if plan.has_shared { self.axis_terms(p, a) } else { AxisTerms::UNUSED };
         // The axis-independent values copied whole, then the per-axis ones over them: a match
         // per column and axis was a fifth of a candidates' pass, most of its columns common.
-        out.copy_from_slice(&common[..out.len()]);
-        for &(i, c) in &plan.per_axis {
-            out[i] = self.column_value(c, p, a, &t);
+        let (values, factors) = common.split_at(out.len());
+        out.copy_from_slice(values);
+        for (&(i, c), factor) in plan.per_axis.iter().zip(factors.chunks_exact(3)) {
+            out[i] = if factor[0].is_nan() {
+                self.column_value(c, p, a, &t)
+            } else {
+                dot(&t.u, &[factor[0], factor[1], factor[2]])
+            };
         }
     }
 }
