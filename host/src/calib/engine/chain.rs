@@ -426,6 +426,27 @@ impl<'a> Evaluator<'a> {
         }
     }
 
+    /// A table-frame vector of run `r` in the package frame. The pose-2 fixture turned by e:
+    /// R2 → exp([e]×)·R2, so a table-frame vector v reaches the package as R2ᵀ·exp(−[e]×)·v,
+    /// exactly ([`rodrigues`]): to first order only, a 1° turn left e²/2 = 150 ppm to a spurious
+    /// table tilt (97 ppm, 3.8σ off on the trust bench). Without a turn (pose 1, or no fixture in
+    /// the model) exp(0)·v is v: its two cross products per vector, a dozen vectors a point, were
+    /// 2 % of a calibration.
+    #[inline]
+    fn to_package(&self, r: usize) -> impl Fn(&[f64; 3]) -> [f64; 3] + '_ {
+        let rt = &self.rot_t[r];
+        let (e, [a, b]) = if self.data.kin.runs[r].pose == Pose::Two {
+            (self.shifts.fixture_rad, self.fixture_turn)
+        } else {
+            ([0.0; 3], [0.0; 2])
+        };
+        let turned = e != [0.0; 3];
+        move |v: &[f64; 3]| -> [f64; 3] {
+            let f = if turned { turn(&e, v, -1.0, (a, b)) } else { *v };
+            std::array::from_fn(|i| rt[i][0] * f[0] + rt[i][1] * f[1] + rt[i][2] * f[2])
+        }
+    }
+
     /// [`Evaluator::point`] of a model that moves angles or rates, or of a pass that wants the
     /// shared parameters' Jacobians.
     #[inline(never)]
@@ -446,14 +467,7 @@ impl<'a> Evaluator<'a> {
         let rate2 = rk.gear_ratio * rate1;
         let rate2_eff = rate2 * ripple;
         let rt = &self.rot_t[r];
-        // The pose-2 fixture turned by e: R2 → exp([e]×)·R2, so a table-frame vector v reaches
-        // the package as R2ᵀ·exp(−[e]×)·v, exactly ([`rodrigues`]): to first order only, a 1° turn
-        // left e²/2 = 150 ppm to a spurious table tilt (97 ppm, 3.8σ off on the trust bench).
-        let (e, [a, b]) = if rk.pose == Pose::Two { (sh.fixture_rad, self.fixture_turn) } else { ([0.0; 3], [0.0; 2]) };
-        let to_package = |v: &[f64; 3]| -> [f64; 3] {
-            let f = turn(&e, v, -1.0, (a, b));
-            std::array::from_fn(|i| rt[i][0] * f[0] + rt[i][1] * f[1] + rt[i][2] * f[2])
-        };
+        let to_package = self.to_package(r);
         // ω2 (EXCITER.md eq. 1) and its derivative in θ2, taken to the package frame.
         // The `libm` crate's sincos, as the plain point's: a quarter cheaper than glibc's here.
         let (se, ce) = libm::sincos(th_eff);
