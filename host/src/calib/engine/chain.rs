@@ -792,9 +792,9 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The values at `p` of `plan`'s axis-independent columns, by position in `plan.dense`
-    /// (0 for the others), then, for each of its per-axis columns in order, the vector whose
-    /// product with an axis's gradient is the column on that axis
-    /// ([`crate::calib::effects::Behaviour::gradient_factor`]; NaN where it has none): what
+    /// (0 for the others), then, for each of its per-axis shared columns in order (a linear
+    /// column has none), the vector whose product with an axis's gradient is the column on that
+    /// axis ([`crate::calib::effects::Behaviour::gradient_factor`]; NaN where it has none): what
     /// [`Evaluator::fill_dense`] reads.
     #[inline]
     pub(super) fn common_values(&self, p: &Point, plan: &ColPlan, out: &mut Vec<f64>) {
@@ -806,11 +806,9 @@ impl<'a> Evaluator<'a> {
             Kernel::PerAxis(_) => 0.0,
         }));
         for &(_, c) in &plan.per_axis {
-            let factor = match c {
-                Col::Shared(sp) => self.gradient_factor(sp.effect, Own::Shared(sp.k), p),
-                Col::Lin(_) => None,
-            };
-            out.extend(factor.unwrap_or([f64::NAN; 3]));
+            if let Col::Shared(sp) = c {
+                out.extend(self.gradient_factor(sp.effect, Own::Shared(sp.k), p).unwrap_or([f64::NAN; 3]));
+            }
         }
     }
 
@@ -934,11 +932,16 @@ impl<'a> Evaluator<'a> {
         // per column and axis was a fifth of a candidates' pass, most of its columns common.
         let (values, factors) = common.split_at(out.len());
         out.copy_from_slice(values);
-        for (&(i, c), factor) in plan.per_axis.iter().zip(factors.chunks_exact(3)) {
-            out[i] = if factor[0].is_nan() {
-                self.column_value(c, p, a, &t)
-            } else {
-                dot(&t.u, &[factor[0], factor[1], factor[2]])
+        let mut factors = factors.chunks_exact(3);
+        for &(i, c) in &plan.per_axis {
+            // A shared column has its slot among the factors; NaN: no factor, taken per axis.
+            let factor = match c {
+                Col::Shared(_) => factors.next().filter(|f| !f[0].is_nan()),
+                Col::Lin(_) => None,
+            };
+            out[i] = match factor {
+                Some(f) => dot(&t.u, &[f[0], f[1], f[2]]),
+                None => self.column_value(c, p, a, &t),
             };
         }
     }
