@@ -1532,6 +1532,34 @@ fn an_offset_step_between_captures_is_carried_in_sigma() {
     assert!(t.max_z() <= 3.0, "seed 9 at ±180, a capture per run: max |z| {:.2}\n{}", t.max_z(), r.summary());
 }
 
+/// A table tilt of 0.9° (three times its plausible 0.3°) on a capture per run, with a warm-up
+/// for which the free drift gives each capture its level: the tilt's constant rate θ1'·sin ε is
+/// then the levels', and what is left, cos ε on every in-plane rate, scales M where no run sees
+/// it (ε²/2 = 123 ppm). The tilt's column, ∂/∂ε at ε = 0, carries none of that: every
+/// sensitivity ended 127 ppm off, 5.1σ, at exit 0. The consider covariance now carries the
+/// second-order scale of the tilt's posterior (here its prior: √3·ε²/2 = 24 ppm at 0.3°).
+#[test]
+fn a_tilt_only_levels_per_capture_could_show_is_carried_to_second_order() {
+    let (mut runs, mut truth) = (Vec::new(), None);
+    for spec in plan(&[180.0, -180.0], 120.0) {
+        let mut cfg = SimConfig::with_runs(12, vec![spec]);
+        for e in ["table_tilt=0.9", "offset_drift"] {
+            cfg.effects.enable(e).expect("known effect");
+        }
+        let out = simulate(&cfg).unwrap();
+        runs.extend(decode(&out.bytes).runs);
+        truth.get_or_insert(out.truth);
+    }
+    let truth = truth.expect("four captures");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    assert!(r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
+    assert!(!r.effects().contains(&Effect::TableTilt), "{}", r.summary());
+    let tilt = r.final_report().consider.iter().find(|t| t.effect == "table_tilt").expect("the tilt is considered");
+    assert!(tilt.k_sigma_ppm.iter().all(|&p| p >= 23.7), "{:?}\n{}", tilt.k_sigma_ppm, r.summary());
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(t.max_z() <= 4.0, "seed 12, a 0.9° tilt, a capture per run: max |z| {:.2}\n{}", t.max_z(), r.summary());
+}
+
 /// The drawn rig of seed 2 with every range tripled, at 180, 90 °/s for 30 s: once the
 /// g-sensitivity was in, the loop fitted the filter gain at κ ≈ −970 ms², 500 times what a
 /// low-pass with the fitted 1.9-ms delay allows, the pair standing in for a speed ripple no

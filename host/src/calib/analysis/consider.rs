@@ -144,6 +144,9 @@ struct Candidate {
     walk: Vec<Option<usize>>,
     /// How the notes say that its size is the data's bound ([`Effect::size_read_from_data`]).
     from_data: Option<&'static str>,
+    /// Its shared parameters that also scale M by −f·p² ([`Effect::scale_per_square`]): each
+    /// one's place among [`prior_params`]' and f.
+    squares: Vec<(usize, f64)>,
 }
 
 fn candidates(
@@ -167,6 +170,7 @@ fn candidates(
             tried,
             walk: Vec::new(),
             from_data: effect.size_read_from_data(),
+            squares: Vec::new(),
         };
         let mut walk = Vec::new();
         // Adds a column with its bound; whether it was (it has a size and a reported unit).
@@ -216,11 +220,80 @@ fn candidates(
         }
         debug_assert!(walk.is_empty() || walk.len() == c.cols.len(), "a walk is all levels");
         c.walk = walk;
+        c.squares = squares_of(effect, &c.cols);
         if !c.cols.is_empty() {
             out.push(c);
         }
     }
     out
+}
+
+/// `effect`'s shared parameters among `cols` that scale M by −f·p² beyond their columns: each
+/// one's place among its parameters as [`prior_params`] lists them (a linear column is three,
+/// one per axis; a shared one is one), with f.
+fn squares_of(effect: Effect, cols: &[Col]) -> Vec<(usize, f64)> {
+    let mut at = 0;
+    let mut out = Vec::new();
+    for col in cols {
+        match col {
+            Col::Lin(_) => at += 3,
+            Col::Shared(p) => {
+                if let Some(f) = effect.scale_per_square(Own::Shared(p.k)) {
+                    out.push((at, f));
+                }
+                at += 1;
+            }
+        }
+    }
+    out
+}
+
+/// The estimate's sensitivity `s12` (12 × the effect's parameters), then a row for each
+/// parameter whose square scales M (`squares`): its own posterior comes out of the same factor.
+fn with_squares(s12: &DMatrix<f64>, squares: &[(usize, f64)]) -> DMatrix<f64> {
+    let mut rows = s12.clone().resize_vertically(12 + squares.len(), 0.0);
+    for (r, &(j, _)) in squares.iter().enumerate() {
+        rows[(12 + r, j)] = 1.0;
+    }
+    rows
+}
+
+/// The second moment of the estimate's bias from [`posterior`]'s factor `along` of the rows
+/// [`with_squares`] gave: F·Fᵀ of the 12 base rows, plus each squared parameter's scale
+/// ([`second_order_scale`]) from its own row's mean (the last column) and variance (the rest).
+fn second_moment(
+    along: &DMatrix<f64>,
+    squares: &[(usize, f64)],
+    s12: &DMatrix<f64>,
+    params: &[f64; 12],
+) -> DMatrix<f64> {
+    let base_rows = along.rows(0, 12);
+    let mut added = base_rows * base_rows.transpose();
+    // A common scale moves M's elements by −M per unit and leaves the offsets.
+    let scale_move = DVector::from_fn(12, |i, _| if i % 4 == 3 { 0.0 } else { -params[i] });
+    for (r, &(j, f)) in squares.iter().enumerate() {
+        let own = along.row(12 + r);
+        let last = own.len() - 1;
+        let var = (0..last).map(|q| own[q] * own[q]).sum::<f64>();
+        added += second_order_scale(f, own[last], var, &s12.column(j).into_owned(), &scale_move);
+    }
+    added
+}
+
+/// What a parameter p that scales M by −f·p² (`f`) adds to the second moment of the estimate's
+/// bias beyond its first-order part: its posterior is N(`mean`, `var`) (p in its fitted unit),
+/// `s` the estimate's sensitivity to p (the first-order move per unit), `d` the estimate's move
+/// per unit of scale (−M's elements, 0 for the offsets). With b = s·p − f·p²·m (m = −d), the
+/// second moment E[b·bᵀ] is s·sᵀ·E[p²] (the first-order part, carried already) plus
+/// f²·E[p⁴]·d·dᵀ and f·E[p³]·(s·dᵀ + d·sᵀ), Gaussian moments E[p³] = μ³ + 3μv and
+/// E[p⁴] = μ⁴ + 6μ²v + 3v². The bias is one-sided (cos ε ≤ 1), carried here as its root mean
+/// square: an unseen 0.3° tilt, √3·ε²/2 = 24 ppm in every sensitivity.
+fn second_order_scale(f: f64, mean: f64, var: f64, s: &DVector<f64>, d: &DVector<f64>) -> DMatrix<f64> {
+    let (m2, v) = (mean * mean, var.max(0.0));
+    let p3 = mean * (m2 + 3.0 * v);
+    let p4 = m2 * m2 + 6.0 * m2 * v + 3.0 * v * v;
+    let sd = s * d.transpose();
+    d * d.transpose() * (f * f * p4) + (&sd + sd.transpose()) * (f * p3)
 }
 
 /// Positions of parameters in the joint solve of a selection of `nl` linear and some shared
@@ -329,7 +402,7 @@ pub fn consider(
         let mut tried: Option<&dyn Fn(usize) -> f64> = if c.tried { Some(&threshold) } else { None };
         let (mut considered, mut source) = (c.params.clone(), c.source.to_string());
         let s12 = DMatrix::from_fn(12, idx.len(), |i, j| s_mat[(base[i], j)]);
-        let Some(mut whitened) = whiten(&info, &grad, &sd, &s12) else { continue };
+        let Some(mut whitened) = whiten(&info, &grad, &sd, &with_squares(&s12, &c.squares)) else { continue };
         if let Some(how) = c.from_data {
             // Its size is read from the data (its scale's upper bound), every direction
             // counted at it: no test of hundreds of steps, or of a level per stretch, speaks for
@@ -344,7 +417,7 @@ pub fn consider(
         if lambdas.is_empty() {
             continue;
         }
-        let added = &along * along.transpose();
+        let added = second_moment(&along, &c.squares, &s12, params);
         let (k_sigma_ppm, direction_sigma_deg) = added_sigmas(params, &added, nominal);
         let term = ConsiderTerm {
             effect: c.effect.key(),
@@ -959,5 +1032,29 @@ mod tests {
         for (a, b) in l1.iter().zip(&l2) {
             assert!((a - b).abs() <= 1e-12 * b.abs(), "{l1:?} against {l2:?}");
         }
+    }
+
+    /// The second-order scale's moments: a parameter known exactly (variance 0) at μ moves the
+    /// estimate by b = s·μ + f·μ²·d, so the first-order part s·sᵀ·μ² plus this term is b·bᵀ to
+    /// rounding; one unseen (mean 0, variance σ²) adds 3·f²·σ⁴·d·dᵀ and no cross term, an RMS
+    /// scale of √3·f·σ² (24 ppm for a 0.3° tilt at f = ½).
+    #[test]
+    fn a_squared_parameter_adds_the_second_moment_of_its_scale() {
+        let s = DVector::from_vec(vec![0.3, -1.2, 0.0, 2.0]);
+        let d = DVector::from_vec(vec![-57.0, 0.5, -0.2, 0.0]);
+        let (f, mu) = (0.5, 0.02);
+        let b = &s * mu + &d * (f * mu * mu);
+        let got = &s * s.transpose() * (mu * mu) + second_order_scale(f, mu, 0.0, &s, &d);
+        let want = &b * b.transpose();
+        for (g, w) in got.iter().zip(want.iter()) {
+            assert!((g - w).abs() <= 1e-15 * want.amax(), "{got} against {want}");
+        }
+        let sigma = 0.3f64.to_radians();
+        let unseen = second_order_scale(f, 0.0, sigma * sigma, &s, &d);
+        let rms_ppm = unseen[(0, 0)].sqrt() / 57.0 * 1e6;
+        let want_ppm = 3f64.sqrt() * f * sigma * sigma * 1e6;
+        assert!((rms_ppm - want_ppm).abs() <= 1e-9 * want_ppm, "{rms_ppm} ppm against {want_ppm}");
+        assert!((want_ppm - 23.7).abs() < 0.1, "{want_ppm} ppm");
+        assert!(unseen[(0, 3)] == 0.0 && unseen[(3, 3)] == 0.0, "the offsets do not scale: {unseen}");
     }
 }

@@ -154,6 +154,16 @@ pub trait Behaviour {
         None
     }
 
+    /// Where parameter `own`, at value p (its fitted unit), also scales every sensitivity by
+    /// −f·p² beyond what its column (the first derivative at the model's values) carries: the
+    /// factor f. The consider covariance then carries that second-order scale from the
+    /// parameter's posterior where the runs do not separate it (a table tilt's 1 − cos ε).
+    /// None (the default): the effect is linear enough in its parameters at their plausible size.
+    fn scale_per_square(&self, own: Own) -> Option<f64> {
+        let _ = own;
+        None
+    }
+
     /// What of a point parameter `own` needs beyond eq. 1-2.
     fn needs(&self, own: Own) -> Needs {
         let _ = own;
@@ -333,6 +343,11 @@ impl Effect {
     /// Its plausible size while the model lacks it ([`Behaviour::consider`]).
     pub fn consider(self, own: Own, cx: &ConsiderCtx) -> Option<ConsiderBound> {
         self.behaviour(|b| b.consider(own, cx))
+    }
+
+    /// [`Behaviour::scale_per_square`].
+    pub fn scale_per_square(self, own: Own) -> Option<f64> {
+        self.behaviour(|b| b.scale_per_square(own))
     }
 
     /// [`Behaviour::considered_as_walk`].
