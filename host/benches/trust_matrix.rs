@@ -47,7 +47,9 @@
 //! - `TRUST_SEEDS=N`: seeds 1..=N (default 10); `TRUST_SEEDS=A-B`: seeds A..=B;
 //! - `TRUST_DESIGNS="180@120;180,90@20"`: designs, the syntax of `all_effects`' `BENCH_PLANS`
 //!   (no `@`: 120 s);
-//! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order;
+//! - `TRUST_EFFECTS="g_sensitivity,earth_rotation,none,all"`: effects, in that order; effects
+//!   joined by `+` (`offset_drift+speed_ripple`) are one case with each of them on, each at the
+//!   case's size (those whose value is no size, `filter_delay` and `earth_rotation`, as they are);
 //! - `TRUST_SIZES="1,3"`: sizes, multiples of the default (`none` and `all` run once; `drawn` at
 //!   size S is `--drawn-rig=S`, every range of the draw S times wide);
 //! - `TRUST_LIVE="180,90,-180@120"`: the live design of the third bar;
@@ -169,32 +171,47 @@ fn cases(effects: &[String], sizes: &[f64]) -> (Vec<Case>, Vec<String>) {
             }
             continue;
         }
-        assert!(
-            known.contains(&name),
-            "TRUST_EFFECTS: unknown effect {name:?}; known: none, all, drawn, {}",
-            known.join(", ")
-        );
-        let catalogued = !NOT_CATALOGUED.contains(&name);
-        let default = headline(name, &enabled(name));
+        let parts: Vec<&str> = name.split('+').collect();
+        for part in &parts {
+            assert!(
+                known.contains(part),
+                "TRUST_EFFECTS: unknown effect {part:?}; known: none, all, drawn, {}",
+                known.join(", ")
+            );
+        }
+        let catalogued = parts.iter().all(|p| !NOT_CATALOGUED.contains(p));
         for &size in sizes {
             if size == 1.0 {
-                out.push(Case { label: name.into(), options: vec![effect_option(name)], catalogued });
+                let options = parts.iter().map(|p| effect_option(p)).collect();
+                out.push(Case { label: name.into(), options, catalogued });
                 continue;
             }
-            let Some(d) = default else {
+            let specs: Vec<Option<String>> = parts.iter().map(|p| sized(p, size)).collect();
+            // An effect alone whose value is no size has no such case; in a combination it
+            // stays as it is beside the others.
+            if parts.len() == 1 && specs[0].is_none() {
                 skipped.push(format!("{name} ×{size} (its value is no size)"));
                 continue;
-            };
-            // Rounded to 9 decimals, so that 3 × 0.3 reads 0.9 in the arguments.
-            let value = (size * d * 1e9).round() / 1e9;
-            let spec = format!("{name}={value}");
-            // The value must land where `headline` reads it, or the case is not the size it says.
-            let got = headline(name, &enabled(&spec)).expect("switched on");
-            assert!((got - size * d).abs() <= 1e-9 * (size * d).abs(), "{spec} sets {got}, not {size} × {d}");
-            out.push(Case { label: format!("{name}_x{size}"), options: vec![effect_option(&spec)], catalogued });
+            }
+            let options =
+                parts.iter().zip(&specs).map(|(p, spec)| effect_option(spec.as_deref().unwrap_or(p))).collect();
+            out.push(Case { label: format!("{name}_x{size}"), options, catalogued });
         }
     }
     (out, skipped)
+}
+
+/// `NAME=VALUE` for effect `name` at `size` times its default headline value; None when its
+/// value is no size ([`headline`]).
+fn sized(name: &str, size: f64) -> Option<String> {
+    let d = headline(name, &enabled(name))?;
+    // Rounded to 9 decimals, so that 3 × 0.3 reads 0.9 in the arguments.
+    let value = (size * d * 1e9).round() / 1e9;
+    let spec = format!("{name}={value}");
+    // The value must land where `headline` reads it, or the case is not the size it says.
+    let got = headline(name, &enabled(&spec)).expect("switched on");
+    assert!((got - size * d).abs() <= 1e-9 * (size * d).abs(), "{spec} sets {got}, not {size} × {d}");
+    Some(spec)
 }
 
 /// `host simulate --effect=SPEC`.

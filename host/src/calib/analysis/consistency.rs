@@ -18,8 +18,17 @@
 //! score statistic on those three columns, at the family-wise level it shares with the omnibus
 //! test (Bonferroni). A turn too small for either test still biases M, and a turn that is the
 //! same at every speed is M itself (`docs/trust.md`, "M changing with speed").
+//!
+//! Where the model holds one offset through stretches of capture (a file per run, a remount)
+//! whose levels may differ, those levels stand in for a change with speed: a turn about the
+//! table's in-plane axes moves θ2'·M·Rᵀe_z2 into every axis's level, and so does the offset's
+//! wander between captures. The consider covariance carries the levels in σ
+//! (`effects::stretch_level`); here each stretch after the first gets a level of its own as a
+//! nuisance of the test (its efficient score, Rao 1948), so that levels which differ are not read
+//! as M changing with speed. A change shows in the table-rate sinusoids whatever the levels do.
 
 use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
+use crate::calib::data::layout::Stretch;
 use crate::calib::engine::{full_selection, normal_equations, Fitted, Gram, LinCol, LoopData};
 use crate::calib::result::axes::AXES;
 use crate::geometry::Pose;
@@ -135,14 +144,20 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
     let sel = full_selection(&f.model);
     let total = Gram::sum(&f.per_run)?;
     let (n_mat, b_tot) = normal_equations(&total, &sel, weights);
-    let np = n_mat.nrows();
-    let chol = n_mat.clone().cholesky()?;
+    let model_chol = n_mat.clone().cholesky()?;
     // The sums were taken before the fit's last (negligible) step: the gradient after it.
-    let delta = chol.solve(&b_tot);
+    let delta = model_chol.solve(&b_tot);
     let m_idx: Vec<usize> = (0..3)
         .flat_map(|a| (0..3).map(move |j| (a, j)))
         .map(|(a, j)| f.lin_index(a, LinCol::Omega(j)))
         .collect::<Option<_>>()?;
+    let levels = Levels::of(data, f, weights, &delta, &groups);
+    // The null model: the fit's, with the stretches' levels where they are free.
+    let (chol, nuisance) = match levels.as_ref().and_then(|l| l.null(&n_mat)) {
+        Some((chol, w)) => (chol, Some(w)),
+        None => (model_chol, None),
+    };
+    let np = chol.l().nrows();
     let extra = groups.len() - 1;
     let ne = 9 * extra;
     let mut cross = DMatrix::zeros(np, ne);
@@ -158,7 +173,10 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
             let Some(&first) = of_pose.first() else { continue };
             let Some(g) = Gram::sum(of_pose.iter().map(|&r| &f.per_run[r])) else { continue };
             let (ng, bg) = normal_equations(&g, &sel, weights);
-            let added = Added::of(&ng, &(bg - &ng * &delta), &m_idx);
+            let mut added = Added::of(&ng, &(bg - &ng * &delta), &m_idx);
+            if let (Some(l), Some(w)) = (&levels, &nuisance) {
+                added = added.beside_levels(&l.cross_with(data, f, weights, &of_pose, &m_idx), w);
+            }
             let at = 9 * gi..9 * gi + 9;
             score.rows_mut(at.start, 9).add_assign(&added.score);
             cross.columns_mut(at.start, 9).add_assign(&added.cross);
@@ -244,6 +262,115 @@ fn surviving_inverse(info: &DMatrix<f64>, own: &DMatrix<f64>) -> Option<(DMatrix
     (dof > 0).then(|| (&d * inv_n * &d, dof))
 }
 
+/// A level of its own (per axis) for every stretch after the first whose runs are all of one
+/// group, where the model holds one offset through the stretches: its columns' cross-products
+/// with the model's parameters and with each other, and the residual's gradient along them, from
+/// the fit's per-run sums (a level is the offset's column over its stretch's runs). Such a
+/// stretch's level cannot be told from its group's own change of level; one that runs of several
+/// groups share (the runs of a pose in one capture) is pinned by them, and a change with speed
+/// keeps showing in how its groups' levels differ.
+struct Levels {
+    /// Per level: its stretch and axis.
+    of: Vec<(usize, usize)>,
+    /// The offset's index among the model's parameters, per axis.
+    one: [usize; 3],
+    cross: DMatrix<f64>,
+    own: DMatrix<f64>,
+    score: DVector<f64>,
+}
+
+impl Levels {
+    /// None where no stretch after the first is of one group ([`groups`]), or the free drift
+    /// already gives each its level.
+    fn of(
+        data: &LoopData,
+        f: &Fitted,
+        weights: [f64; 3],
+        delta: &DVector<f64>,
+        groups: &[(f64, Vec<usize>)],
+    ) -> Option<Self> {
+        if f.model.effects.iter().any(|e| e.is_free_drift()) {
+            return None;
+        }
+        let mut group_of_run = vec![0; data.kin.runs.len()];
+        for (g, (_, runs)) in groups.iter().enumerate() {
+            runs.iter().for_each(|&r| group_of_run[r] = g);
+        }
+        let one_group = |s: &Stretch| s.runs.clone().all(|r| group_of_run[r] == group_of_run[s.runs.start]);
+        let of: Vec<(usize, usize)> = (data.layout.stretches.iter().enumerate().skip(1))
+            .filter(|(_, st)| one_group(st))
+            .flat_map(|(s, _)| (0..3).map(move |a| (s, a)))
+            .collect();
+        if of.is_empty() {
+            return None;
+        }
+        let one: [usize; 3] = [0, 1, 2].map(|a| f.lin_index(a, LinCol::One)).map(Option::unwrap_or_default);
+        let np = delta.len();
+        let (mut cross, mut own, mut score) =
+            (DMatrix::zeros(np, of.len()), DMatrix::zeros(of.len(), of.len()), DVector::zeros(of.len()));
+        for (l, &(s, a)) in of.iter().enumerate() {
+            let (ns, bs) = Self::normal(data, f, weights, s, &[])?;
+            let grad = bs - &ns * delta;
+            cross.set_column(l, &ns.column(one[a]));
+            own[(l, l)] = ns[(one[a], one[a])];
+            score[l] = grad[one[a]];
+        }
+        Some(Self { of, one, cross, own, score })
+    }
+
+    /// The normal equations of the fit's sums over stretch `s`'s runs (those among `only`, when
+    /// given); None when it has none.
+    fn normal(
+        data: &LoopData,
+        f: &Fitted,
+        weights: [f64; 3],
+        s: usize,
+        only: &[usize],
+    ) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        let runs = (0..f.per_run.len())
+            .filter(|&r| data.layout.run_stretch.get(r) == Some(&s) && (only.is_empty() || only.contains(&r)));
+        let g = Gram::sum(runs.map(|r| &f.per_run[r]))?;
+        Some(normal_equations(&g, &full_selection(&f.model), weights))
+    }
+
+    /// The null model's normal matrix with the levels beside the model's `n_mat`, factored, and
+    /// N⁻¹·(0, levels' gradient): what the efficient score of an added column subtracts. None
+    /// when the levels and the model are not separable (the test then keeps one offset).
+    fn null(&self, n_mat: &DMatrix<f64>) -> Option<(Cholesky<f64, Dyn>, DVector<f64>)> {
+        let (np, nl) = (n_mat.nrows(), self.of.len());
+        let mut ext = DMatrix::zeros(np + nl, np + nl);
+        ext.view_mut((0, 0), (np, np)).copy_from(n_mat);
+        ext.view_mut((0, np), (np, nl)).copy_from(&self.cross);
+        ext.view_mut((np, 0), (nl, np)).copy_from(&self.cross.transpose());
+        ext.view_mut((np, np), (nl, nl)).copy_from(&self.own);
+        let chol = ext.cholesky()?;
+        let mut grad = DVector::zeros(np + nl);
+        grad.rows_mut(np, nl).copy_from(&self.score);
+        let w = chol.solve(&grad);
+        Some((chol, w))
+    }
+
+    /// The levels' cross-products with the nine columns of ΔM over runs `runs` (levels × 9).
+    fn cross_with(
+        &self,
+        data: &LoopData,
+        f: &Fitted,
+        weights: [f64; 3],
+        runs: &[usize],
+        m_idx: &[usize],
+    ) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(self.of.len(), 9);
+        for (l, &(s, a)) in self.of.iter().enumerate() {
+            if let Some((ns, _)) = Self::normal(data, f, weights, s, runs) {
+                for c in 0..9 {
+                    out[(l, c)] = ns[(self.one[a], m_idx[c])];
+                }
+            }
+        }
+        out
+    }
+}
+
 /// Some runs' block of the nine columns of a change ΔM of M (axis-major): their cross-products
 /// with the model's parameters, with each other, and the residual's gradient along them.
 struct Added {
@@ -261,6 +388,19 @@ impl Added {
             own: DMatrix::from_fn(9, 9, |c, d| ng[(m_idx[c], m_idx[d])]),
             score: DVector::from_fn(9, |c, _| grad[m_idx[c]]),
         }
+    }
+
+    /// The same columns against a null model with the stretches' levels beside the model's
+    /// parameters: `levels` their cross-products with the columns (levels × 9), `w` the null
+    /// model's N⁻¹·(0, levels' gradient). The cross-products gain the levels' rows, and the
+    /// gradient becomes the efficient score, what is left once the levels take their share.
+    fn beside_levels(self, levels: &DMatrix<f64>, w: &DVector<f64>) -> Self {
+        let (np, nl) = (self.cross.nrows(), levels.nrows());
+        let mut cross = DMatrix::zeros(np + nl, 9);
+        cross.view_mut((0, 0), (np, 9)).copy_from(&self.cross);
+        cross.view_mut((np, 0), (nl, 9)).copy_from(levels);
+        let score = self.score - cross.transpose() * w;
+        Self { cross, own: self.own, score }
     }
 }
 
