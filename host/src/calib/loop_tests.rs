@@ -1507,6 +1507,24 @@ fn an_offset_random_walk_no_knots_follow_is_carried_in_sigma() {
     assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
 }
 
+/// The loop on one capture per run of `rates_dps` in both poses for `duration_s` each, as the
+/// independent captures are, each simulated alone with `effects`; with the sensor's truth.
+fn capture_per_run_loop(seed: u64, rates_dps: &[f64], duration_s: f64, effects: &[&str]) -> (LoopReport, Truth) {
+    let (mut runs, mut truth) = (Vec::new(), None);
+    for spec in plan(rates_dps, duration_s) {
+        let mut cfg = SimConfig::with_runs(seed, vec![spec]);
+        for e in effects {
+            cfg.effects.enable(e).expect("known effect");
+        }
+        let out = simulate(&cfg).unwrap();
+        runs.extend(decode(&out.bytes).runs);
+        truth.get_or_insert(out.truth);
+    }
+    let truth = truth.expect("a capture per run");
+    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    (r, truth)
+}
+
 /// Seed 9 at ±180 °/s for 120 s, each run captured on its own as the independent captures
 /// are, each capture with a zero-rate level of its own (`capture_level`, 0.005 °/s rms per
 /// axis): the model held one offset through the four captures, and their levels, too small for
@@ -1515,16 +1533,7 @@ fn an_offset_random_walk_no_knots_follow_is_carried_in_sigma() {
 /// (the trust bench's `180,-180@120/files` design): 2.11.
 #[test]
 fn an_offset_step_between_captures_is_carried_in_sigma() {
-    let (mut runs, mut truth) = (Vec::new(), None);
-    for spec in plan(&[180.0, -180.0], 120.0) {
-        let mut cfg = SimConfig::with_runs(9, vec![spec]);
-        cfg.effects.enable("capture_level").expect("known effect");
-        let out = simulate(&cfg).unwrap();
-        runs.extend(decode(&out.bytes).runs);
-        truth.get_or_insert(out.truth);
-    }
-    let truth = truth.expect("four captures");
-    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    let (r, _) = capture_per_run_loop(9, &[180.0, -180.0], 120.0, &["capture_level"]);
     assert!(!r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
     let level = r.final_report().consider.iter().find(|t| t.effect == "stretch_level");
     assert!(level.is_some_and(|t| t.unseparated > 0), "the levels' bound must be carried\n{}", r.summary());
@@ -1540,18 +1549,7 @@ fn an_offset_step_between_captures_is_carried_in_sigma() {
 /// second-order scale of the tilt's posterior (here its prior: √3·ε²/2 = 24 ppm at 0.3°).
 #[test]
 fn a_tilt_only_levels_per_capture_could_show_is_carried_to_second_order() {
-    let (mut runs, mut truth) = (Vec::new(), None);
-    for spec in plan(&[180.0, -180.0], 120.0) {
-        let mut cfg = SimConfig::with_runs(12, vec![spec]);
-        for e in ["table_tilt=0.9", "offset_drift"] {
-            cfg.effects.enable(e).expect("known effect");
-        }
-        let out = simulate(&cfg).unwrap();
-        runs.extend(decode(&out.bytes).runs);
-        truth.get_or_insert(out.truth);
-    }
-    let truth = truth.expect("four captures");
-    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    let (r, _) = capture_per_run_loop(12, &[180.0, -180.0], 120.0, &["table_tilt=0.9", "offset_drift"]);
     assert!(r.effects().iter().any(|e| e.is_free_drift()), "{}", r.summary());
     assert!(!r.effects().contains(&Effect::TableTilt), "{}", r.summary());
     let tilt = r.final_report().consider.iter().find(|t| t.effect == "table_tilt").expect("the tilt is considered");
@@ -1569,18 +1567,8 @@ fn a_tilt_only_levels_per_capture_could_show_is_carried_to_second_order() {
 /// nuisance of the test: no disagreement, exit 0.
 #[test]
 fn levels_that_differ_between_captures_are_not_read_as_m_changing_with_speed() {
-    let (mut runs, mut truth) = (Vec::new(), None);
-    for spec in plan(&[180.0, -180.0], 120.0) {
-        let mut cfg = SimConfig::with_runs(1, vec![spec]);
-        for e in ["offset_drift", "bias_random_walk", "capture_level=0"] {
-            cfg.effects.enable(e).expect("known effect");
-        }
-        let out = simulate(&cfg).unwrap();
-        runs.extend(decode(&out.bytes).runs);
-        truth.get_or_insert(out.truth);
-    }
-    let truth = truth.expect("four captures");
-    let r = close_loop(&runs, &LoopOptions::default(), Some(truth.sensor())).expect("calibrates");
+    let (r, _) =
+        capture_per_run_loop(1, &[180.0, -180.0], 120.0, &["offset_drift", "bias_random_walk", "capture_level=0"]);
     assert!(!r.effects().iter().any(|e| e.is_free_drift()), "the warm-up curve holds the levels\n{}", r.summary());
     let c = r.consistency.as_ref().expect("two signed speeds");
     assert!(!c.disagrees(), "{c:?}\n{}", r.summary());
