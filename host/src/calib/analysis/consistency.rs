@@ -23,9 +23,10 @@
 //! whose levels may differ, those levels stand in for a change with speed: a turn about the
 //! table's in-plane axes moves θ2'·M·Rᵀe_z2 into every axis's level, and so does the offset's
 //! wander between captures. The consider covariance carries the levels in σ
-//! (`effects::stretch_level`); here each stretch after the first gets a level of its own as a
-//! nuisance of the test (its efficient score, Rao 1948), so that levels which differ are not read
-//! as M changing with speed. A change shows in the table-rate sinusoids whatever the levels do.
+//! (`effects::stretch_level`); here each stretch after the first whose runs are all of one group
+//! gets a level of its own as a nuisance of the test (its efficient score, Rao 1948), so that
+//! levels which differ are not read as M changing with speed. A change shows in the table-rate
+//! sinusoids whatever the levels do.
 
 use crate::calib::analysis::stats::{chi2_to_sigma, chi2_upper_quantile};
 use crate::calib::data::layout::Stretch;
@@ -308,12 +309,15 @@ impl Levels {
         let np = delta.len();
         let (mut cross, mut own, mut score) =
             (DMatrix::zeros(np, of.len()), DMatrix::zeros(of.len(), of.len()), DVector::zeros(of.len()));
-        for (l, &(s, a)) in of.iter().enumerate() {
+        // A stretch's three levels (one per axis) are consecutive in `of`.
+        for (l0, &(s, _)) in of.iter().enumerate().step_by(3) {
             let (ns, bs) = Self::normal(data, f, weights, s, &[])?;
             let grad = bs - &ns * delta;
-            cross.set_column(l, &ns.column(one[a]));
-            own[(l, l)] = ns[(one[a], one[a])];
-            score[l] = grad[one[a]];
+            for (a, &o) in one.iter().enumerate() {
+                cross.set_column(l0 + a, &ns.column(o));
+                own[(l0 + a, l0 + a)] = ns[(o, o)];
+                score[l0 + a] = grad[o];
+            }
         }
         Some(Self { of, one, cross, own, score })
     }
