@@ -364,10 +364,13 @@ impl Levels {
         m_idx: &[usize],
     ) -> DMatrix<f64> {
         let mut out = DMatrix::zeros(self.of.len(), 9);
-        for (l, &(s, a)) in self.of.iter().enumerate() {
+        // A stretch's three levels are consecutive in `of`: one sum of its runs serves them.
+        for (l0, &(s, _)) in self.of.iter().enumerate().step_by(3) {
             if let Some((ns, _)) = Self::normal(data, f, weights, s, runs) {
-                for c in 0..9 {
-                    out[(l, c)] = ns[(self.one[a], m_idx[c])];
+                for (a, &o) in self.one.iter().enumerate() {
+                    for c in 0..9 {
+                        out[(l0 + a, c)] = ns[(o, m_idx[c])];
+                    }
                 }
             }
         }
