@@ -58,6 +58,10 @@ pub fn note(n: &Note) -> String {
             "Earth rotation: horizontal part fitted {:.2} °/h (at most 15.041 °/h); its vertical part turns in the sensor frame as gravity does, so the g-sensitivity holds it (at most Ω/g = {vertical_max_dps_per_g:.4} °/s/g along M's rows), which leaves the sensitivities and directions unbiased. --latitude-deg gives the vertical part and separates the two.",
             PlusMinus(*horizontal_dph)
         ),
+        Note::HeldByPrior { name, estimate, bound, prior_sigma, unit, identified_by } => format!(
+            "{name}: these runs do not bound it within the {bound:.3} {unit} it can at most be (another term of the model shares its shape), so its physical size holds it (0 ± {prior_sigma:.2} {unit}), not a free fit, whose σ would be the runs' blindness: {:.2} {unit}, carried in every σ and in cov. Runs that separate it: {identified_by}; where other terms share its shape, runs at three signed speeds (--rates-dps 180,90,-180) tell them apart.",
+            PlusMinus(*estimate)
+        ),
         Note::Unseparated(t) => unseparated(t),
         Note::ModelChoice(t) => model_choice(t),
     }

@@ -251,6 +251,20 @@ pub enum Note {
         /// The most the vertical part puts in the g-sensitivity, Ω/g, °/s per g.
         vertical_max_dps_per_g: f64,
     },
+    /// A parameter the runs did not bound within its physical size, held by its prior
+    /// ([`crate::calib::effects::Behaviour::prior`]).
+    HeldByPrior {
+        /// What it is.
+        name: String,
+        /// Its value and σ, in `unit`.
+        estimate: Estimate,
+        /// The largest it can be, and its prior's σ, in `unit`.
+        bound: f64,
+        prior_sigma: f64,
+        unit: String,
+        /// The runs that would separate it.
+        identified_by: String,
+    },
     /// A catalogued effect the runs do not separate: its plausible size is carried in σ.
     Unseparated(ConsiderTerm),
     /// A step's near tie the final model lacks: M's move to it, at its weight, is carried in σ.
@@ -397,7 +411,7 @@ fn base_estimate_with(f: &Fitted, nominal: f64, added: Option<&DMatrix<f64>>) ->
 /// covariance uses the noise level its residual shows.
 fn reweight(f: &mut Fitted, weights: [f64; 3]) {
     if let Some(total) = Gram::sum(&f.per_run) {
-        if let Some(sol) = solve_joint(&total, &full_selection(&f.model), weights) {
+        if let Some(sol) = solve_joint(&total, &full_selection(&f.model), weights, &f.model.priors()) {
             f.solution = sol;
         }
     }
@@ -1070,7 +1084,7 @@ impl Context<'_> {
             .last_sums
             .as_ref()
             .and_then(|s| s.read(&state.fitted.model, &[&cols], Cells::Span))
-            .and_then(|g| solve_joint(&g, &sel, weights))
+            .and_then(|g| solve_joint(&g, &sel, weights, &start.priors()))
         {
             let held = vec![false; start.shared.len()];
             apply_step(&mut start, nl, &sol.delta, &held);
@@ -1200,8 +1214,33 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
     if let Some(note) = earth_note(fitted, latitude_deg) {
         notes.push(note);
     }
+    notes.extend(held_by_prior(fitted));
     notes.extend(speed_change_note(data, effects));
     (asks, notes)
+}
+
+/// The parameters the fit held by their prior, as the report gives them.
+fn held_by_prior(f: &Fitted) -> Vec<Note> {
+    let nl = f.model.lin.len();
+    f.model
+        .shared
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| f.model.prior_held.contains(p))
+        .filter_map(|(k, &p)| {
+            let prior = p.prior()?;
+            let shown = p.reported();
+            let sigma = f.solution.cov.get((3 * nl + k, 3 * nl + k)).map_or(0.0, |v| v.max(0.0).sqrt());
+            Some(Note::HeldByPrior {
+                name: shown.name,
+                estimate: Estimate::new(f.model.theta[k], sigma).scaled(shown.scale),
+                bound: prior.bound * shown.scale,
+                prior_sigma: prior.sigma * shown.scale,
+                unit: shown.unit.into(),
+                identified_by: p.effect.identified_by().into(),
+            })
+        })
+        .collect()
 }
 
 /// What the runs leave unchecked of a change of M with speed (`mount_compliance` on the

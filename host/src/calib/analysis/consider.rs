@@ -374,7 +374,7 @@ pub fn consider(
     }) else {
         return Consideration::none();
     };
-    let (n_mat, b_vec) = normal_equations(&total, &sel, weights);
+    let (n_mat, b_vec) = normal_equations(&total, &sel, weights, &f.model.priors());
     let nl_ext = sel.lin.len();
     let model_idx: Vec<usize> = (0..3)
         .flat_map(|a| (0..nl).map(move |p| lin_param(nl_ext, a, p)))

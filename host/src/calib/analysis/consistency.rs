@@ -144,7 +144,7 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
     }
     let sel = full_selection(&f.model);
     let total = Gram::sum(&f.per_run)?;
-    let (n_mat, b_tot) = normal_equations(&total, &sel, weights);
+    let (n_mat, b_tot) = normal_equations(&total, &sel, weights, &f.model.priors());
     let model_chol = n_mat.clone().cholesky()?;
     // The sums were taken before the fit's last (negligible) step: the gradient after it.
     let delta = model_chol.solve(&b_tot);
@@ -173,7 +173,7 @@ pub fn consistency(data: &LoopData, f: &Fitted, weights: [f64; 3], k: [f64; 3], 
             let of_pose: Vec<usize> = runs.iter().copied().filter(|&r| data.kin.runs[r].pose == pose).collect();
             let Some(&first) = of_pose.first() else { continue };
             let Some(g) = Gram::sum(of_pose.iter().map(|&r| &f.per_run[r])) else { continue };
-            let (ng, bg) = normal_equations(&g, &sel, weights);
+            let (ng, bg) = normal_equations(&g, &sel, weights, &[]);
             let mut added = Added::of(&ng, &(bg - &ng * &delta), &m_idx);
             if let (Some(l), Some(w)) = (&levels, &nuisance) {
                 added = added.beside_levels(&l.cross_with(data, f, weights, &of_pose, &m_idx), w);
@@ -334,7 +334,7 @@ impl Levels {
         let runs = (0..f.per_run.len())
             .filter(|&r| data.layout.run_stretch.get(r) == Some(&s) && (only.is_empty() || only.contains(&r)));
         let g = Gram::sum(runs.map(|r| &f.per_run[r]))?;
-        Some(normal_equations(&g, &full_selection(&f.model), weights))
+        Some(normal_equations(&g, &full_selection(&f.model), weights, &[]))
     }
 
     /// The null model's normal matrix with the levels beside the model's `n_mat`, factored, and

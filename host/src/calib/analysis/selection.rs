@@ -370,7 +370,8 @@ fn score_all(
     let total = sums.total();
     let positions: Vec<_> = (0..cands.len()).map(|g| sums.block(g)).collect();
     let base_sel = Selection { lin: (0..nl).collect(), shared: (nl..nl + ns).collect() };
-    let Some(base) = solve_joint(total, &base_sel, weights) else {
+    let priors = state.model.priors();
+    let Some(base) = solve_joint(total, &base_sel, weights, &priors) else {
         return Ok(None);
     };
     let n_total: u64 = total.n.iter().sum();
@@ -399,7 +400,7 @@ fn score_all(
             }
             let dof = dof.saturating_sub(removed).max(1);
             let threshold = crate::calib::analysis::stats::chi2_upper_quantile(dof, alpha / m as f64);
-            let solution = solve_joint(total, &sel, weights);
+            let solution = solve_joint(total, &sel, weights, &priors);
             let m_at = m_positions(&state.model.lin, &sel);
             let delta_chi2 = solution.as_ref().map_or(0.0, |s| base.chi2 - s.chi2);
             let score = Score {
@@ -712,7 +713,7 @@ pub fn start_without(fitted: &Fitted, effect: Effect, weights: [f64; 3]) -> crat
         .collect();
     let value = |i: usize| if i < 3 * nl { model.beta[i / nl][i % nl] } else { model.theta[i - 3 * nl] };
     let gone: Vec<usize> = (0..3 * nl + ns).filter(|i| !keep.contains(i)).collect();
-    let (n_mat, b) = normal_equations(&total, &full_selection(model), weights);
+    let (n_mat, b) = normal_equations(&total, &full_selection(model), weights, &model.priors());
     let n_kk = DMatrix::from_fn(keep.len(), keep.len(), |i, j| n_mat[(keep[i], keep[j])]);
     let x_r = DVector::from_fn(gone.len(), |i, _| value(gone[i]) - last[gone[i]]);
     let n_kr = DMatrix::from_fn(keep.len(), gone.len(), |i, j| n_mat[(keep[i], gone[j])]);
@@ -847,7 +848,7 @@ pub fn held_out(fitted: &Fitted, weights: [f64; 3], run_numbers: &[usize], poses
         };
         let others_sel =
             Selection { lin: sel.lin.iter().copied().filter(|&c| !own(c)).collect(), shared: sel.shared.clone() };
-        let Some(sol) = solve_joint(&others, &others_sel, weights) else {
+        let Some(sol) = solve_joint(&others, &others_sel, weights, &fitted.model.priors()) else {
             continue;
         };
         // Without this run the others may not determine M: with g-sensitivity a pose left at

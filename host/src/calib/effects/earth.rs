@@ -1,8 +1,8 @@
 //! Earth's rotation, fixed in the lab, seen through θ1 and θ2.
 
 use super::terms::{
-    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, Point, Reported,
-    SharedPar, Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Needs, Own, PhysicalPrior, Point,
+    Reported, SharedPar, Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
@@ -96,6 +96,21 @@ impl Behaviour for Earth {
 
     fn bound(&self, _: u8) -> Option<Bound> {
         None
+    }
+
+    /// No component is larger than Ω (15.041 °/h, IERS). Each of a vector of that length in a
+    /// direction not known has σ Ω/√3; the horizontal ones, with the vertical known from the
+    /// latitude, at most Ω/√2 (a length Ω·cos φ ≤ Ω in an unknown heading). Runs that cannot
+    /// tell a component from the model's other terms (the vertical beside a gyro filter's droop
+    /// at two speeds in one direction: 1143 ± 634 °/h on a 20-Hz filter, every sensitivity's σ
+    /// 9000 ppm) leave it to this prior.
+    fn prior(&self, _: u8) -> Option<PhysicalPrior> {
+        let omega_dps = crate::geometry::EARTH_RATE_RAD_S.to_degrees();
+        let sigma = match self.0 {
+            Form::AtLatitude => omega_dps / 2f64.sqrt(),
+            Form::Fitted | Form::Horizontal => omega_dps / 3f64.sqrt(),
+        };
+        Some(PhysicalPrior { bound: omega_dps, sigma })
     }
 
     fn shift(&self, k: u8, value: f64, s: &mut Shifts) {

@@ -90,6 +90,16 @@ pub trait Behaviour {
     /// The range shared parameter `k` is held in, if any.
     fn bound(&self, k: u8) -> Option<Bound>;
 
+    /// What physics says of shared parameter `k`'s size (None, the default: only the data
+    /// bound it): the largest it can be and a zero-mean Gaussian prior. A fit whose runs cannot
+    /// bound it within that size (its σ from the data alone larger) holds it by the prior from
+    /// then on ([`crate::calib::engine::Model::prior_held`]): its value and σ then describe
+    /// the Earth, say, not the runs' blindness to it, which a free fit carries into M's σ.
+    fn prior(&self, k: u8) -> Option<terms::PhysicalPrior> {
+        let _ = k;
+        None
+    }
+
     /// The runs shared parameter `k` can move the output in, when not all (None, the default):
     /// a pass leaves its column out of the sums of every other run, where it is zero.
     fn scope(&self, k: u8) -> Option<terms::RunScope> {

@@ -86,6 +86,11 @@ impl SharedPar {
         self.effect.behaviour(|b| b.bound(self.k))
     }
 
+    /// What physics says of its size, when it does ([`super::Behaviour::prior`]).
+    pub fn prior(self) -> Option<PhysicalPrior> {
+        self.effect.behaviour(|b| b.prior(self.k))
+    }
+
     /// The runs it can move the output in, when not all ([`super::Behaviour::scope`]).
     pub fn scope(self) -> Option<RunScope> {
         self.effect.behaviour(|b| b.scope(self.k))
@@ -158,6 +163,15 @@ pub struct Bound {
     pub what: &'static str,
     /// Its unit.
     pub unit: &'static str,
+}
+
+/// What physics says of a parameter's size, in its fitted unit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhysicalPrior {
+    /// The largest it can be: runs that bound it no better (1σ) have not seen it.
+    pub bound: f64,
+    /// σ of the zero-mean Gaussian prior that then holds it.
+    pub sigma: f64,
 }
 
 /// How a parameter is reported: its name, the factor from its fitted unit to the reported one,

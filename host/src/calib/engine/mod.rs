@@ -48,7 +48,7 @@ pub use cells::Cells;
 pub use chain::{Cursor, Evaluator};
 pub use cross::CrossSums;
 pub use loop_data::{LoopData, RunTemperatures, TemperatureGrid, TEMPERATURE_GRID_S, TEMPERATURE_SMOOTHING_S};
-pub use model::Model;
+pub use model::{Model, Prior};
 pub use nodes::for_each_interpolated;
 pub use solve::{
     apply_step, fit, full_selection, normal_equations, residual_after, solve_joint, Fitted, JointSolution, Selection,

@@ -10,6 +10,15 @@ use nalgebra::{Matrix3, Vector3};
 use super::loop_data::LoopData;
 use crate::calib::effects::terms::{Col, LinCol, SharedPar};
 
+/// A zero-mean Gaussian prior on a shared parameter ([`Model::priors`]): its column in the
+/// sums, its precision 1/σ², and its value where the sums were taken.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    pub col: usize,
+    pub precision: f64,
+    pub value: f64,
+}
+
 /// A model: its effects, columns and current parameter values.
 #[derive(Debug, Clone)]
 pub struct Model {
@@ -28,6 +37,9 @@ pub struct Model {
     pub s_hat: [Vector3<f64>; 3],
     /// Earth's vertical rate when it is known (from a latitude) rather than fitted, °/s.
     pub earth_vertical_known_dps: f64,
+    /// Shared parameters a fit found the runs could not bound within their physical size: held
+    /// by their prior ([`SharedPar::prior`]) in every solve of this model.
+    pub prior_held: Vec<SharedPar>,
     /// What of the data the effects' columns depend on.
     pub layout: Layout,
 }
@@ -53,6 +65,7 @@ impl Model {
             theta: Vec::new(),
             s_hat: std::array::from_fn(|a| Vector3::ith(a, 1.0)),
             earth_vertical_known_dps: 0.0,
+            prior_held: Vec::new(),
             layout: Layout { poses: poses.to_vec(), ..Layout::default() },
         }
     }
@@ -60,6 +73,19 @@ impl Model {
     /// Columns of the model: linear then shared.
     pub fn cols(&self) -> Vec<Col> {
         self.lin.iter().map(|&c| Col::Lin(c)).chain(self.shared.iter().map(|&p| Col::Shared(p))).collect()
+    }
+
+    /// The priors of the shared parameters it holds by them ([`Model::prior_held`]) at their
+    /// values, each at its column of the sums of [`Model::cols`].
+    pub fn priors(&self) -> Vec<Prior> {
+        let nl = self.lin.len();
+        self.shared
+            .iter()
+            .zip(&self.theta)
+            .enumerate()
+            .filter(|(_, (p, _))| self.prior_held.contains(p))
+            .filter_map(|(k, (p, &value))| Some(Prior { col: nl + k, precision: p.prior()?.sigma.powi(-2), value }))
+            .collect()
     }
 
     /// Value of a shared parameter, if in the model.
@@ -108,6 +134,7 @@ impl Model {
         let keep_shared: Vec<bool> = self.shared.iter().map(|p| !shared.contains(p)).collect();
         m.theta = keep(&self.theta, &keep_shared);
         m.shared.retain(|p| !shared.contains(p));
+        m.prior_held.retain(|p| !shared.contains(p));
         m
     }
 

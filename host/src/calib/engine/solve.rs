@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use super::accumulate::accumulate_pairs;
 use super::cells::Cells;
 use super::loop_data::LoopData;
-use super::model::Model;
+use super::model::{Model, Prior};
 use super::sums::{Gram, Reach};
 use crate::calib::effects::terms::{Bound, LinCol, SharedPar};
 
@@ -75,10 +75,12 @@ pub struct JointSolution {
     pub n: [u64; 3],
 }
 
-/// Solves the weighted joint problem (`weights[a]` = 1/variance of axis a's noise).
-pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<JointSolution> {
+/// Solves the weighted joint problem (`weights[a]` = 1/variance of axis a's noise), with the
+/// `priors` of the selected parameters (those of the model the sums were taken of). χ² is the
+/// data's alone.
+pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3], priors: &[Prior]) -> Option<JointSolution> {
     let np = sel.len();
-    let (a_mat, b) = normal_equations(g, sel, weights);
+    let (a_mat, b) = normal_equations(g, sel, weights, priors);
     let (scaled, d, rcond) = scaled_rcond(&a_mat);
     if rcond < MIN_RCOND {
         return None;
@@ -92,8 +94,28 @@ pub fn solve_joint(g: &Gram, sel: &Selection, weights: [f64; 3]) -> Option<Joint
 }
 
 /// The weighted normal equations of a selection: XᵀWX and XᵀWe over the three axes, parameters
-/// in the selection's order (axis-major linear ones, then shared).
-pub fn normal_equations(g: &Gram, sel: &Selection, weights: [f64; 3]) -> (DMatrix<f64>, DVector<f64>) {
+/// in the selection's order (axis-major linear ones, then shared), with the `priors` of the
+/// selected parameters: each adds its precision to its diagonal and pulls its step towards
+/// zero from its value.
+pub fn normal_equations(
+    g: &Gram,
+    sel: &Selection,
+    weights: [f64; 3],
+    priors: &[Prior],
+) -> (DMatrix<f64>, DVector<f64>) {
+    let (mut a_mat, mut b) = data_normal_equations(g, sel, weights);
+    let first_shared = 3 * sel.lin.len();
+    for p in priors {
+        if let Some(q) = sel.shared.iter().position(|&c| c == p.col) {
+            a_mat[(first_shared + q, first_shared + q)] += p.precision;
+            b[first_shared + q] -= p.precision * p.value;
+        }
+    }
+    (a_mat, b)
+}
+
+/// [`normal_equations`] of the data alone.
+fn data_normal_equations(g: &Gram, sel: &Selection, weights: [f64; 3]) -> (DMatrix<f64>, DVector<f64>) {
     let np = sel.len();
     let l = g.l;
     let mut a_mat = DMatrix::<f64>::zeros(np, np);
@@ -277,7 +299,7 @@ pub(crate) fn fit_at_most(
             lin: (0..nl).collect(),
             shared: (0..model.shared.len()).filter(|&k| !frozen[k]).map(|k| nl + k).collect(),
         };
-        let solution = solve_joint(&total, &sel, weights).ok_or_else(|| singular(&model, &total, data))?;
+        let solution = solve_pass(&total, &sel, weights, &mut model).ok_or_else(|| singular(&model, &total, data))?;
         let converged = !frozen.contains(&true)
             && (0..solution.delta.len()).all(|i| {
                 let sd = solution.cov[(i, i)].max(0.0).sqrt();
@@ -292,6 +314,30 @@ pub(crate) fn fit_at_most(
         }
     }
     unreachable!("the loop returns at its last pass")
+}
+
+/// A fit's pass solved with the priors `model` holds. A parameter with a physical size
+/// ([`SharedPar::prior`]) that the runs do not bound within it (its σ larger, or the system
+/// singular without its prior) is held by its prior from then on, and the pass solved again.
+fn solve_pass(total: &Gram, sel: &Selection, weights: [f64; 3], model: &mut Model) -> Option<JointSolution> {
+    let solution = solve_joint(total, sel, weights, &model.priors());
+    let (nl, first_shared) = (model.lin.len(), 3 * sel.lin.len());
+    let unbounded: Vec<SharedPar> = model
+        .shared
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| !model.prior_held.contains(p))
+        .filter_map(|(k, &p)| {
+            let bound = p.prior()?.bound;
+            let i = first_shared + sel.shared.iter().position(|&c| c == nl + k)?;
+            solution.as_ref().is_none_or(|s| s.cov[(i, i)].max(0.0).sqrt() > bound).then_some(p)
+        })
+        .collect();
+    if unbounded.is_empty() {
+        return solution;
+    }
+    model.prior_held.extend(unbounded);
+    solve_joint(total, sel, weights, &model.priors())
 }
 
 /// The error for a joint system that cannot be solved: an axis whose own base columns (ω_s and
