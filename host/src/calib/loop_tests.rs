@@ -1589,6 +1589,20 @@ fn levels_that_differ_between_captures_are_not_read_as_m_changing_with_speed() {
     assert!(t.max_z() <= 4.0, "max |z| {:.2}\n{}", t.max_z(), r.summary());
 }
 
+/// What `../shared/validation`'s README says its realistic captures hold: the gyro's low-pass,
+/// timestamp jitter, speed ripple, Earth at 45°, a warm-up with a random walk, the gears' error
+/// (each capture with the level it starts at, no level of its own).
+const INDEPENDENT_EFFECTS: [&str; 8] = [
+    "filter_delay",
+    "timestamp_jitter",
+    "speed_ripple",
+    "earth_rotation",
+    "offset_drift",
+    "bias_random_walk",
+    "gear_transmission",
+    "capture_level=0",
+];
+
 /// The independent captures' effect set with the gyro at 400 Hz and its 20-Hz low-pass (11 ms
 /// of delay), 180 and 90 °/s in one direction, a capture per run, seed 2. The loop takes the
 /// filter's droop κ (gain 1 − κω², 4.1σ), which at two speeds in one direction leaves Earth's
@@ -1599,22 +1613,12 @@ fn levels_that_differ_between_captures_are_not_read_as_m_changing_with_speed() {
 /// g-sensitivity these runs cannot separate (its 760-ppm consider term).
 #[test]
 fn an_earth_rate_the_runs_cannot_bound_is_held_by_physics() {
-    let effects = [
-        "filter_delay",
-        "timestamp_jitter",
-        "speed_ripple",
-        "earth_rotation",
-        "offset_drift",
-        "bias_random_walk",
-        "gear_transmission",
-        "capture_level=0",
-    ];
     let gyro = protocol::GyroConfig {
         odr: protocol::Odr::Hz400,
         bandwidth: protocol::Bandwidth::Bw0,
         ..protocol::GyroConfig::DEFAULT
     };
-    let (r, _) = capture_per_run_loop_at(2, &[180.0, 90.0], 120.0, &effects, gyro);
+    let (r, _) = capture_per_run_loop_at(2, &[180.0, 90.0], 120.0, &INDEPENDENT_EFFECTS, gyro);
     let omega_dph = 15.041;
     let vertical = r.steps.last().and_then(|s| s.effect_params.iter().find(|p| p.name == "Earth rate, vertical"));
     let v = vertical.unwrap_or_else(|| panic!("Earth's vertical is in the model\n{}", r.summary())).estimate;
@@ -1635,17 +1639,7 @@ fn an_earth_rate_the_runs_cannot_bound_is_held_by_physics() {
 /// it is what noise gives, and the calibration ends at exit 0.
 #[test]
 fn a_free_earth_rate_a_little_above_the_earths_is_not_flagged() {
-    let effects = [
-        "filter_delay",
-        "timestamp_jitter",
-        "speed_ripple",
-        "earth_rotation",
-        "offset_drift",
-        "bias_random_walk",
-        "gear_transmission",
-        "capture_level=0",
-    ];
-    let (r, _) = capture_per_run_loop(8, &[180.0, -180.0], 120.0, &effects);
+    let (r, _) = capture_per_run_loop(8, &[180.0, -180.0], 120.0, &INDEPENDENT_EFFECTS);
     let earth = r.steps.last().and_then(|s| s.effect_params.iter().find(|p| p.name.contains("Earth rate")));
     assert!(earth.is_some(), "Earth is fitted freely\n{}", r.summary());
     assert!(r.earth_excess.is_none(), "{:?}\n{}", r.earth_excess, r.summary());
