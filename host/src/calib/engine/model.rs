@@ -14,8 +14,11 @@ use crate::calib::effects::terms::{Col, LinCol, SharedPar};
 /// sums, its precision 1/σ², and its value where the sums were taken.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Prior {
+    /// Its column in the sums ([`Model::cols`]' order).
     pub col: usize,
+    /// 1/σ², in the parameter's fitted unit.
     pub precision: f64,
+    /// Its value where the sums were taken (the prior pulls the step towards −value).
     pub value: f64,
 }
 
