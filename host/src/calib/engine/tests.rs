@@ -99,3 +99,47 @@ fn valid_ranges_match_the_per_sample_rule() {
     }
     assert!(ValidSamples::of(t.len(), |i| t[i], 1.5, 30).is_empty());
 }
+
+/// A prior adds its precision to its parameter's diagonal and pulls the step towards −value,
+/// only for a parameter the selection holds; the data's part of the system is untouched, and a
+/// model holds only the priors of the parameters a fit found unbounded.
+#[test]
+fn a_prior_adds_its_precision_and_pulls_the_step_towards_zero() {
+    use super::model::Prior;
+    use super::solve::{normal_equations, Selection};
+    use super::sums::Gram;
+    // Two columns: one per-axis linear, one shared; each axis sees x = (1, 2), e = 3.
+    let g = Gram {
+        l: 2,
+        xtx: std::array::from_fn(|_| vec![1.0, 2.0, 2.0, 4.5]),
+        xte: std::array::from_fn(|_| vec![3.0, 6.5]),
+        ete: [9.0; 3],
+        n: [1; 3],
+    };
+    let sel = Selection { lin: vec![0], shared: vec![1] };
+    let w = [1.0, 2.0, 0.5];
+    let (a0, b0) = normal_equations(&g, &sel, w, &[]);
+    // The shared parameter sits after the three axes' linear ones: Σ_a w_a·4.5 and Σ_a w_a·6.5.
+    assert_eq!((a0[(3, 3)], b0[3]), (3.5 * 4.5, 3.5 * 6.5));
+    let prior = Prior { col: 1, precision: 4.0, value: 0.25 };
+    let (a1, b1) = normal_equations(&g, &sel, w, &[prior]);
+    let mut expected = a0.clone();
+    expected[(3, 3)] += 4.0;
+    assert_eq!(a1, expected);
+    assert_eq!(b1[3], b0[3] - 1.0);
+    assert_eq!(b1.rows(0, 3), b0.rows(0, 3));
+    // A prior on a column the selection leaves out changes nothing.
+    let (a2, b2) = normal_equations(&g, &Selection { lin: vec![0], shared: vec![] }, w, &[prior]);
+    assert_eq!((a2, b2), normal_equations(&g, &Selection { lin: vec![0], shared: vec![] }, w, &[]));
+    // Earth's components have a physical size; a model holds a prior only once a fit held it.
+    let earth = Model::base().with(Effect::EarthRotation, Default::default(), vec![1e-3, 0.0, 0.0]);
+    assert!(earth.priors().is_empty());
+    let vertical = SharedPar { effect: Effect::EarthRotation, k: 0 };
+    let size = vertical.prior().expect("Earth's rate has a physical size");
+    assert!((size.bound - 15.041 / 3600.0).abs() < 1e-6 && (size.sigma * 3f64.sqrt() - size.bound).abs() < 1e-12);
+    let mut held = earth.clone();
+    held.prior_held.push(vertical);
+    let nl = held.lin.len();
+    assert_eq!(held.priors(), vec![Prior { col: nl, precision: size.sigma.powi(-2), value: 1e-3 }]);
+    assert!(held.without(Effect::EarthRotation).prior_held.is_empty());
+}
