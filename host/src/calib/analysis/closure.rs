@@ -1221,19 +1221,14 @@ fn closing_advice(data: &LoopData, fitted: &Fitted, latitude_deg: Option<f64>) -
 
 /// The parameters the fit held by their prior, as the report gives them.
 fn held_by_prior(f: &Fitted) -> Vec<Note> {
-    let nl = f.model.lin.len();
     f.model
-        .shared
+        .prior_held
         .iter()
-        .enumerate()
-        .filter(|(_, p)| f.model.prior_held.contains(p))
-        .filter_map(|(k, &p)| {
-            let prior = p.prior()?;
-            let shown = p.reported();
-            let sigma = f.solution.cov.get((3 * nl + k, 3 * nl + k)).map_or(0.0, |v| v.max(0.0).sqrt());
+        .filter_map(|&p| {
+            let (prior, estimate, shown) = (p.prior()?, shared_estimate(f, p)?, p.reported());
             Some(Note::HeldByPrior {
                 name: shown.name,
-                estimate: Estimate::new(f.model.theta[k], sigma).scaled(shown.scale),
+                estimate: estimate.scaled(shown.scale),
                 bound: prior.bound * shown.scale,
                 prior_sigma: prior.sigma * shown.scale,
                 unit: shown.unit.into(),
