@@ -106,7 +106,8 @@ fn enabled(spec: &str) -> Effects {
 }
 
 /// The headline parameter of effect `name` in `e`: what `--effect NAME=VALUE` sets. None for the
-/// switches whose value is not a size: `filter_delay` (no value) and `earth_rotation` (latitude).
+/// switches whose value is not a size: `filter_delay` (no value), `filter_order` and
+/// `filter_cutoff_hz` (the filter's shape) and `earth_rotation` (latitude).
 fn headline(name: &str, e: &Effects) -> Option<f64> {
     match name {
         "delay_ms" => e.filter_delay.map(|f| f.pure_delay_ms),

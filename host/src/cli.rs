@@ -265,7 +265,8 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 500, value_parser = parse_full_scale)]
     full_scale: u16,
     /// Switch on an effect the ideal model lacks, NAME or NAME=VALUE (repeatable):
-    /// filter_delay, delay_ms, index_offset_deg, offset_drift, speed_ripple, nonlinearity,
+    /// filter_delay, filter_order, filter_cutoff_hz, delay_ms, index_offset_deg, offset_drift,
+    /// speed_ripple, nonlinearity,
     /// nonlinearity_cubic, nonlinearity_square, gear_ratio_error, mystery_harmonic,
     /// mount_compliance, earth_rotation, gear_transmission, g_sensitivity, table_tilt,
     /// pose_fixture, bias_random_walk, axis_delay, rig_clock, encoder_eccentricity,

@@ -220,24 +220,36 @@ impl GearTransmission {
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FilterDelay {
-    /// Apply a 2nd-order Butterworth low-pass at the Table-21 cut-off of the configured
-    /// ODR/bandwidth (default: on). Its actual group delay at each run's drive frequency is
-    /// reported in the truth.
+    /// Apply a Butterworth low-pass at the Table-21 cut-off of the configured ODR/bandwidth
+    /// (default: on). Its actual group delay at each run's drive frequency is reported in the
+    /// truth.
     pub lowpass: bool,
     /// Additional pure delay of the output, ms (default 0): an exactly known delay for tests.
     pub pure_delay_ms: f64,
+    /// The low-pass's order, 2 (default: the usual biquad) or 3 (`crate::sim::filter`).
+    #[serde(default = "FilterDelay::default_order")]
+    pub order: u8,
+    /// A cut-off, Hz, in place of the configured bandwidth's (default none): a part whose filter
+    /// is not the one its `Hello` declares, as the calibration meets it from the data alone.
+    #[serde(default)]
+    pub cutoff_hz: Option<f64>,
 }
 
 impl Default for FilterDelay {
     fn default() -> Self {
-        Self { lowpass: true, pure_delay_ms: 0.0 }
+        Self { lowpass: true, pure_delay_ms: 0.0, order: Self::default_order(), cutoff_hz: None }
     }
 }
 
 impl FilterDelay {
     /// A pure delay of `delay_ms` without the low-pass.
     pub fn pure_ms(delay_ms: f64) -> Self {
-        Self { lowpass: false, pure_delay_ms: delay_ms }
+        Self { lowpass: false, pure_delay_ms: delay_ms, ..Self::default() }
+    }
+
+    /// The order of the datasheet's usual filter.
+    fn default_order() -> u8 {
+        2
     }
 }
 
@@ -584,8 +596,10 @@ impl Effects {
     ];
 
     /// Names accepted by [`Effects::enable`], with the meaning of the optional `=value`.
-    pub const NAMES: [(&'static str, &'static str); 23] = [
+    pub const NAMES: [(&'static str, &'static str); 25] = [
         ("filter_delay", "gyro low-pass at the Table-21 cut-off (no value)"),
+        ("filter_order", "gyro low-pass of this Butterworth order, 2 or 3 (default 3)"),
+        ("filter_cutoff_hz", "gyro low-pass at this cut-off, not the configured one, Hz (default 35)"),
         ("delay_ms", "pure output delay, ms (default 5)"),
         ("index_offset_deg", "θ2 at the index centre, degrees (default 3)"),
         ("offset_drift", "warm-up temperature rise, °C (default 10)"),
@@ -635,6 +649,25 @@ impl Effects {
                     return Err(EffectSpecError("filter_delay takes no value (use delay_ms=…)".into()));
                 }
                 self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0)).lowpass = true;
+            }
+            "filter_order" => {
+                let order = value.unwrap_or(3.0);
+                if !super::filter::ORDERS.iter().any(|&o| f64::from(o) == order) {
+                    return Err(EffectSpecError(format!(
+                        "effect {spec:?}: the low-pass's order is one of {:?}",
+                        super::filter::ORDERS
+                    )));
+                }
+                let f = self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0));
+                (f.lowpass, f.order) = (true, order as u8);
+            }
+            "filter_cutoff_hz" => {
+                let hz = value.unwrap_or(35.0);
+                if hz <= 0.0 {
+                    return Err(EffectSpecError(format!("effect {spec:?}: a cut-off is above 0 Hz")));
+                }
+                let f = self.filter_delay.get_or_insert_with(|| FilterDelay::pure_ms(0.0));
+                (f.lowpass, f.cutoff_hz) = (true, Some(hz));
             }
             "delay_ms" => {
                 let ms = value.unwrap_or(5.0);
@@ -804,9 +837,11 @@ impl Effects {
         1.0 + self.rig_clock.map_or(0.0, |c| c.error_ppm * 1e-6)
     }
 
-    /// Whether the low-pass filter is on.
-    pub fn lowpass(&self) -> bool {
-        self.filter_delay.is_some_and(|f| f.lowpass)
+    /// The low-pass filter, when on: its order and cut-off (`configured_hz` unless the effect
+    /// sets its own).
+    pub fn lowpass(&self, configured_hz: f64) -> Option<(u8, f64)> {
+        let f = self.filter_delay.filter(|f| f.lowpass)?;
+        Some((f.order, f.cutoff_hz.unwrap_or(configured_hz)))
     }
 }
 
@@ -821,7 +856,11 @@ mod tests {
         e.enable("delay_ms=5").unwrap();
         assert_eq!(e.filter_delay, Some(FilterDelay::pure_ms(5.0)));
         e.enable("filter_delay").unwrap();
-        assert_eq!(e.filter_delay, Some(FilterDelay { lowpass: true, pure_delay_ms: 5.0 }));
+        assert_eq!(e.filter_delay, Some(FilterDelay { lowpass: true, pure_delay_ms: 5.0, ..FilterDelay::default() }));
+        e.enable("filter_order").unwrap();
+        e.enable("filter_cutoff_hz=40").unwrap();
+        assert_eq!(e.lowpass(50.0), Some((3, 40.0)));
+        assert_eq!(Effects::default().lowpass(50.0), None);
         e.enable("gear_ratio_error=-50").unwrap();
         assert_eq!(e.true_gear_ratio(1.0), 1.0 - 50e-6);
         e.enable("index_offset_deg").unwrap();
@@ -833,6 +872,11 @@ mod tests {
         assert!(e.enable("delay_ms=abc").is_err());
         assert!(e.enable("delay_ms=-1").is_err());
         assert!(e.enable("filter_delay=3").is_err());
+        assert_eq!(
+            e.enable("filter_order=4").unwrap_err().to_string(),
+            "effect \"filter_order=4\": the low-pass's order is one of [2, 3]"
+        );
+        assert!(e.enable("filter_cutoff_hz=0").is_err());
     }
 
     #[test]

@@ -1,8 +1,12 @@
-//! The gyro's internal digital low-pass, modelled as a 2nd-order Butterworth biquad.
+//! The gyro's internal digital low-pass: a Butterworth of order 2 (one biquad, the default) or 3
+//! (a first-order section and a biquad of Q = 1), each section designed by the bilinear transform
+//! pre-warped at the cut-off.
 //!
 //! The datasheet gives only the cut-off (Table 21), not the filter structure or the internal
-//! rate; a Butterworth section designed by the bilinear transform (pre-warped at the cut-off) is
-//! the usual choice and gives the expected low-frequency delay of ≈ √2/(2π·fc).
+//! rate; a 2nd-order Butterworth is the usual choice and gives the expected low-frequency delay of
+//! ≈ √2/(2π·fc). Other parts filter otherwise: the independent model of the exciter the
+//! validation captures come from has a 3rd-order filter at 35 Hz in one of its sets (issue 24),
+//! whose delay, 2/(2π·fc), and droop the calibration must find from the data like any other.
 
 use nalgebra::Complex;
 use std::f64::consts::PI;
@@ -13,32 +17,67 @@ use std::f64::consts::PI;
 /// digital filter's actual delay.
 pub const OVERSAMPLING: u32 = 1;
 
-/// Coefficients of one biquad, `a0` normalised to 1.
+/// The Butterworth orders the simulator builds.
+pub const ORDERS: [u8; 2] = [2, 3];
+
+/// Coefficients of one biquad section, `a0` normalised to 1 (a first-order section has
+/// `b[2] = a[1] = 0`).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Butterworth2 {
+struct Section {
     b: [f64; 3],
     a: [f64; 2],
 }
 
-impl Butterworth2 {
-    /// Low-pass with cut-off `fc_hz` (−3 dB) at sample rate `fs_hz`.
-    pub fn lowpass(fc_hz: f64, fs_hz: f64) -> Self {
-        let k = (PI * fc_hz / fs_hz).tan();
-        let norm = 1.0 / (1.0 + std::f64::consts::SQRT_2 * k + k * k);
+impl Section {
+    /// The section that passes its input unchanged.
+    const IDENTITY: Self = Self { b: [1.0, 0.0, 0.0], a: [0.0, 0.0] };
+
+    /// Low-pass biquad of quality `q` with cut-off `fc_hz` at sample rate `fs_hz`, k = tan(π·fc/fs).
+    fn second_order(k: f64, q: f64) -> Self {
+        let norm = 1.0 / (1.0 + k / q + k * k);
         let b0 = k * k * norm;
-        Self {
-            b: [b0, 2.0 * b0, b0],
-            a: [2.0 * (k * k - 1.0) * norm, (1.0 - std::f64::consts::SQRT_2 * k + k * k) * norm],
-        }
+        Self { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
+    }
+
+    /// First-order low-pass, k = tan(π·fc/fs).
+    fn first_order(k: f64) -> Self {
+        let b0 = k / (1.0 + k);
+        Self { b: [b0, b0, 0.0], a: [(k - 1.0) / (1.0 + k), 0.0] }
+    }
+
+    /// Complex response at `z1` = e^(−jωT).
+    fn response(&self, z1: Complex<f64>) -> Complex<f64> {
+        let z2 = z1 * z1;
+        let num = self.b[0] + z1 * self.b[1] + z2 * self.b[2];
+        let den = Complex::new(1.0, 0.0) + z1 * self.a[0] + z2 * self.a[1];
+        num / den
+    }
+}
+
+/// A Butterworth low-pass of order 2 or 3: its sections in cascade.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Butterworth {
+    sections: [Section; 2],
+}
+
+impl Butterworth {
+    /// Low-pass of `order` ([`ORDERS`]) with cut-off `fc_hz` (−3 dB) at sample rate `fs_hz`: for
+    /// order 2 one biquad of Q = 1/√2; for order 3 the real pole and a biquad of Q = 1 (the
+    /// Butterworth poles at 180° and ±60° from the negative real axis).
+    pub fn lowpass(order: u8, fc_hz: f64, fs_hz: f64) -> Self {
+        debug_assert!(ORDERS.contains(&order), "order {order}");
+        let k = (PI * fc_hz / fs_hz).tan();
+        let sections = match order {
+            3 => [Section::first_order(k), Section::second_order(k, 1.0)],
+            _ => [Section::second_order(k, std::f64::consts::FRAC_1_SQRT_2), Section::IDENTITY],
+        };
+        Self { sections }
     }
 
     /// Complex response at `f_hz` for sample rate `fs_hz`.
     fn response(&self, f_hz: f64, fs_hz: f64) -> Complex<f64> {
         let z1 = Complex::from_polar(1.0, -2.0 * PI * f_hz / fs_hz);
-        let z2 = z1 * z1;
-        let num = self.b[0] + z1 * self.b[1] + z2 * self.b[2];
-        let den = Complex::new(1.0, 0.0) + z1 * self.a[0] + z2 * self.a[1];
-        num / den
+        self.sections.iter().map(|s| s.response(z1)).product()
     }
 
     /// Group delay −dφ/dω at `f_hz`, s, by a central difference of the phase.
@@ -50,40 +89,47 @@ impl Butterworth2 {
     }
 }
 
-/// Three channels of one biquad, transposed direct form II.
+/// Three channels of a [`Butterworth`], each section in transposed direct form II.
 #[derive(Debug, Clone, Copy)]
 pub struct Filter3 {
-    coef: Butterworth2,
-    s: [[f64; 2]; 3],
+    coef: Butterworth,
+    /// Per section, per channel, the two state values.
+    s: [[[f64; 2]; 3]; 2],
 }
 
 impl Filter3 {
     /// A filter with zero state.
-    pub fn new(coef: Butterworth2) -> Self {
-        Self { coef, s: [[0.0; 2]; 3] }
+    pub fn new(coef: Butterworth) -> Self {
+        Self { coef, s: [[[0.0; 2]; 3]; 2] }
     }
 
-    /// Sets the state to the steady state for a constant input `x` (unit DC gain).
+    /// Sets the state to the steady state for a constant input `x` (unit DC gain in every
+    /// section, so each passes `x` on).
     pub fn settle(&mut self, x: [f64; 3]) {
-        let [b0, b1, b2] = self.coef.b;
-        let [a1, a2] = self.coef.a;
-        for (s, x) in self.s.iter_mut().zip(x) {
-            // Steady state of y = x: s1 = b1·x − a1·y + s2, s2 = b2·x − a2·y.
-            s[1] = (b2 - a2) * x;
-            s[0] = (b1 - a1) * x + s[1];
-            debug_assert!(((b0 * x + s[0]) - x).abs() <= 1e-9 * x.abs().max(1.0));
+        for (sec, states) in self.coef.sections.iter().zip(self.s.iter_mut()) {
+            let [b0, b1, b2] = sec.b;
+            let [a1, a2] = sec.a;
+            for (s, x) in states.iter_mut().zip(x) {
+                // Steady state of y = x: s1 = b1·x − a1·y + s2, s2 = b2·x − a2·y.
+                s[1] = (b2 - a2) * x;
+                s[0] = (b1 - a1) * x + s[1];
+                debug_assert!(((b0 * x + s[0]) - x).abs() <= 1e-9 * x.abs().max(1.0));
+            }
         }
     }
 
     /// Filters one input vector.
     pub fn step(&mut self, x: [f64; 3]) -> [f64; 3] {
-        let [b0, b1, b2] = self.coef.b;
-        let [a1, a2] = self.coef.a;
-        let mut y = [0.0; 3];
-        for ((s, x), y) in self.s.iter_mut().zip(x).zip(y.iter_mut()) {
-            *y = b0 * x + s[0];
-            s[0] = b1 * x - a1 * *y + s[1];
-            s[1] = b2 * x - a2 * *y;
+        let mut y = x;
+        for (sec, states) in self.coef.sections.iter().zip(self.s.iter_mut()) {
+            let [b0, b1, b2] = sec.b;
+            let [a1, a2] = sec.a;
+            for (s, v) in states.iter_mut().zip(y.iter_mut()) {
+                let x = *v;
+                *v = b0 * x + s[0];
+                s[0] = b1 * x - a1 * *v + s[1];
+                s[1] = b2 * x - a2 * *v;
+            }
         }
         y
     }
@@ -96,7 +142,7 @@ mod tests {
     #[test]
     fn cutoff_gain_and_low_frequency_delay_match_the_analogue_prototype() {
         let (fc, fs) = (110.0, 3200.0);
-        let f = Butterworth2::lowpass(fc, fs);
+        let f = Butterworth::lowpass(2, fc, fs);
         assert!((f.response(fc, fs).norm() - 0.5f64.sqrt()).abs() < 1e-9);
         assert!((f.response(0.0, fs).norm() - 1.0).abs() < 1e-12);
         // Analogue 2nd-order Butterworth: τ(0) = √2/(2π·fc) = 2.046 ms; the bilinear map changes
@@ -107,9 +153,31 @@ mod tests {
     }
 
     #[test]
+    fn a_third_order_has_its_cutoff_gain_and_twice_the_first_sections_delay() {
+        let (fc, fs) = (35.0, 800.0);
+        let f = Butterworth::lowpass(3, fc, fs);
+        assert!((f.response(fc, fs).norm() - 0.5f64.sqrt()).abs() < 1e-9);
+        assert!((f.response(0.0, fs).norm() - 1.0).abs() < 1e-12);
+        // Butterworth of order 3: |H|² = 1/(1 + (f/fc)⁶) in the analogue prototype; the
+        // bilinear map, pre-warped at fc, keeps that at tan(πf/fs)/tan(πfc/fs) in place of f/fc.
+        let f_hz = 70.0;
+        let x = (PI * f_hz / fs).tan() / (PI * fc / fs).tan();
+        assert!((f.response(f_hz, fs).norm() - (1.0 + x.powi(6)).powf(-0.5)).abs() < 1e-9);
+        // Analogue: τ(0) = 1/ωc (the real pole) + 1/(Q·ωc) (the Q = 1 pair) = 2/(2π·fc) = 9.09 ms;
+        // the bilinear map at 800 Hz changes it by (πfc/fs)²-order terms, a few %.
+        let tau = f.group_delay_s(0.5, fs);
+        let analogue = 2.0 / (2.0 * PI * fc);
+        assert!((tau / analogue - 1.0).abs() < 0.03, "{tau} vs {analogue}");
+    }
+
+    #[test]
     fn filter_settles_to_a_constant_and_delays_a_ramp_by_the_group_delay() {
-        let fs = 3200.0;
-        let coef = Butterworth2::lowpass(30.0, fs);
+        for order in ORDERS {
+            settles_and_delays_a_ramp(Butterworth::lowpass(order, 30.0, 3200.0), 3200.0);
+        }
+    }
+
+    fn settles_and_delays_a_ramp(coef: Butterworth, fs: f64) {
         let mut f = Filter3::new(coef);
         f.settle([1.0, -2.0, 0.0]);
         let y = f.step([1.0, -2.0, 0.0]);

@@ -8,7 +8,7 @@
 //! after it).
 
 use super::effects::Effects;
-use super::filter::{Butterworth2, Filter3, OVERSAMPLING};
+use super::filter::{Butterworth, Filter3, OVERSAMPLING};
 use super::motion::{BaseState, EdgeCrossing, Encoder, IndexPlate, Motor};
 use super::sensor::{quantise, SenseChain, SensorTruth, Thermal};
 use super::stream::FrameWriter;
@@ -82,6 +82,11 @@ fn salted_rng(seed: u64, stream: Stream, salt: u32) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
     r.set_stream(stream as u64 + STREAMS_PER_SALT * u64::from(salt));
     r
+}
+
+/// The low-pass cut-off `gyro` configures, Hz (datasheet Table 21).
+fn configured_cutoff_hz(gyro: GyroConfig) -> f64 {
+    f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0
 }
 
 /// The salt of a capture taken on its own ([`crate::sim::effects::CaptureLevel`]): FNV-1a over
@@ -171,7 +176,7 @@ pub struct Session {
     clock_phase_s: f64,
     period_s: f64,
     noise_counts: [f64; 3],
-    lowpass_coef: Option<Butterworth2>,
+    lowpass_coef: Option<Butterworth>,
     noise_rng: ChaCha8Rng,
     /// The offset's random walk, °/s per axis, and when it was last advanced, s.
     walk_dps: [f64; 3],
@@ -265,10 +270,10 @@ impl Session {
         // White noise of density ρ sampled at the ODR: σ = ρ·√(ODR/2) (Nyquist bandwidth).
         let sigma_dps = self.noise_density * (f64::from(gyro.odr.hz()) / 2.0).sqrt();
         self.noise_counts = k.map(|k| k * sigma_dps);
-        self.lowpass_coef = self.effects.lowpass().then(|| {
-            let fc_hz = f64::from(gyro.bandwidth.cutoff_dhz(gyro.odr)) / 10.0;
-            Butterworth2::lowpass(fc_hz, odr_hz * f64::from(OVERSAMPLING))
-        });
+        self.lowpass_coef = self
+            .effects
+            .lowpass(configured_cutoff_hz(gyro))
+            .map(|(order, fc_hz)| Butterworth::lowpass(order, fc_hz, odr_hz * f64::from(OVERSAMPLING)));
     }
 
     /// The `Hello` message: the firmware's own, for the gyro settings in force.
@@ -746,10 +751,7 @@ impl Session {
             start_encoder: self.encoder.start_counts,
             ambient_c: self.thermal.ambient_c,
             out_temp_at_0c: self.thermal.out_temp_at_0c,
-            lowpass_cutoff_hz: self
-                .effects
-                .lowpass()
-                .then(|| f64::from(self.gyro.bandwidth.cutoff_dhz(self.gyro.odr)) / 10.0),
+            lowpass_cutoff_hz: self.effects.lowpass(configured_cutoff_hz(self.gyro)).map(|(_, fc_hz)| fc_hz),
             effects: self.effects,
             runs: self.runs.clone(),
             thermal: None,

@@ -389,6 +389,26 @@ fn lowpass_delays_by_its_reported_group_delay() {
     }
 }
 
+/// A 3rd-order filter at a cut-off of its own (not the configured bandwidth's): the truth
+/// reports that cut-off and the filter's delay, ≈ 2/(2π·fc), and the samples are delayed by it.
+#[test]
+fn a_third_order_lowpass_at_its_own_cutoff_delays_by_its_reported_group_delay() {
+    let mut cfg = SimConfig::standard(34, 10.0);
+    cfg.effects.enable("filter_order=3").unwrap();
+    cfg.effects.enable("filter_cutoff_hz=35").unwrap();
+    let out = simulate(&cfg).unwrap();
+    let cap = decode_clean(&out.bytes);
+    assert_eq!(out.truth.lowpass_cutoff_hz, Some(35.0));
+    for (run, rt) in cap.runs.iter().zip(&out.truth.runs) {
+        // Analogue 9.09 ms; the bilinear map at 800 Hz changes it by a few %.
+        let analogue_ms = 1e3 * 2.0 / (TAU * 35.0);
+        assert!((rt.filter_group_delay_ms / analogue_ms - 1.0).abs() < 0.05, "{rt:?}");
+        let (tau, sigma) = fit_delay_s(run, &cfg, &out.truth, 0.0);
+        let tol = 5.0 * sigma + encoder_quantum_s(180.0);
+        assert!((tau - rt.total_delay_ms * 1e-3).abs() < tol, "τ = {tau} ± {sigma} vs {rt:?}");
+    }
+}
+
 #[test]
 fn index_offset_moves_only_the_index() {
     let (_, _, cb, eff, ce) = with_and_without(33, "index_offset_deg=3", 6.0);
