@@ -492,7 +492,9 @@ fn an_unknown_effect_is_refused_with_the_list() {
     let o = host(&["simulate", "--out", dir.join("x.cap").to_str().unwrap(), "--effect", "wobble"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).starts_with("error: unknown effect \"wobble\"; known: filter_delay, delay_ms, "),
+        stderr(&o).starts_with(
+            "error: unknown effect \"wobble\"; known: filter_delay, filter_order, filter_cutoff_hz, delay_ms, "
+        ),
         "{}",
         stderr(&o)
     );
