@@ -759,7 +759,7 @@ fn sums_gathered_for_candidates_are_read_for_any_part_of_them() {
 }
 
 /// The analytic Jacobian of every shared parameter matches a central difference of the model's
-/// prediction (the delay's to 15 %: [`assert_jacobians_match`]).
+/// prediction (the delay's to 2 %: [`assert_jacobians_match`]).
 #[test]
 fn shared_parameter_jacobians_match_finite_differences() {
     let (runs, _) = capture_with(8, &[180.0, -90.0], 6.0, &["speed_ripple"], FullScale::Dps500);
@@ -777,6 +777,7 @@ fn shared_parameter_jacobians_match_finite_differences() {
     let (h2, h12) = (pairs(2, [0.003, -0.002, 0.001, 0.002]), pairs(12, [0.004, 0.001, -0.002, 0.003]));
     let model = model
         .with(Effect::IndexOffset, Default::default(), vec![0.05])
+        .with(Effect::Phase, Default::default(), vec![-0.02])
         .with(Effect::Delay, Default::default(), vec![0.004])
         .with(Effect::DriftWarmUp, [vec![30.0], vec![-20.0], vec![10.0]], vec![40.0])
         .with(Effect::RateScale, [vec![0.01, 2e-5], vec![-0.01, 1e-5], vec![0.0, -2e-5]], vec![])
@@ -796,7 +797,6 @@ fn shared_parameter_jacobians_match_finite_differences() {
     model.theta.extend([0.002, -0.001]);
     let at = [(0usize, 2000usize), (1, 1500), (0, 3333), (2, 1800), (3, 2600)];
     assert_jacobians_match(&data, &model, &at, |p, _| match p.effect {
-        Effect::Delay => 1e-5,
         Effect::DriftWarmUp => 1e-3,
         _ => 1e-6,
     });
@@ -804,9 +804,7 @@ fn shared_parameter_jacobians_match_finite_differences() {
 
 /// Asserts that at samples `at` (run, index) every shared parameter's analytic Jacobian matches a
 /// central difference of the model's prediction with step `h(parameter, value)`: to 1e-4, the
-/// delay's to 15 % (its Jacobian leaves out θ1''·τ: the fit evaluates the delayed kinematics
-/// exactly, only its convergence rate depends on the Jacobian; speed ripple and the encoder's
-/// quantisation in θ1' put θ1'' into the difference).
+/// delay's to [`DELAY_JACOBIAN_TOL`] with a step of its own ([`delay_step_s`]).
 fn assert_jacobians_match(data: &LoopData, model: &Model, at: &[(usize, usize)], h: impl Fn(SharedPar, f64) -> f64) {
     let cols: Vec<Col> = model.shared.iter().map(|&p| Col::Shared(p)).collect();
     let ev = Evaluator::new(data, model);
@@ -815,7 +813,7 @@ fn assert_jacobians_match(data: &LoopData, model: &Model, at: &[(usize, usize)],
         let p = ev.point(r, i);
         ev.fill(&p, &cols, &mut jac);
         for (k, &par) in model.shared.iter().enumerate() {
-            let h = h(par, model.theta[k]);
+            let h = if par.effect == Effect::Delay { delay_step_s(data) } else { h(par, model.theta[k]) };
             let shifted = |d: f64| {
                 let mut m = model.clone();
                 m.theta[k] += d;
@@ -827,7 +825,7 @@ fn assert_jacobians_match(data: &LoopData, model: &Model, at: &[(usize, usize)],
             for a in 0..3 {
                 let numeric = (up[a] - down[a]) / (2.0 * h);
                 let analytic = jac[a * cols.len() + k];
-                let tol = if par.effect == Effect::Delay { 0.15 } else { 1e-4 };
+                let tol = if par.effect == Effect::Delay { DELAY_JACOBIAN_TOL } else { 1e-4 };
                 assert!(
                     (numeric - analytic).abs() <= tol * numeric.abs().max(1e-3),
                     "{par:?} axis {a} sample {r}/{i}: {analytic} vs {numeric}"
@@ -835,6 +833,21 @@ fn assert_jacobians_match(data: &LoopData, model: &Model, at: &[(usize, usize)],
             }
         }
     }
+}
+
+/// The delay's Jacobian against its central difference: within this fraction. The delay moves
+/// θ1' by −θ1''·τ, and its column takes θ1'' smoothed over the rates' own window (the speed
+/// ripple; `rate_slope_dps2`), while the model reads θ1' between samples, whose slope from one to
+/// the next carries the encoder's quantisation (7.5 °/s² rms at 800 Hz). A difference over the
+/// window ([`delay_step_s`]) sees the smoothed slope; what is left is the straight-line
+/// interpolation's and the window's curvature on the ripple and the angle (≲ 1 %).
+const DELAY_JACOBIAN_TOL: f64 = 0.02;
+
+/// The delay's step for its central difference, s: half the rates' window, so that the
+/// difference spans the window the column's θ1'' is taken over.
+fn delay_step_s(data: &LoopData) -> f64 {
+    let rk = &data.kin.runs[0];
+    (rk.rate_window_samples / 2) as f64 / rk.sample_rate_hz
 }
 
 /// Every registered effect on its own (the catalogue, so a new effect is checked without
@@ -1630,6 +1643,50 @@ fn an_earth_rate_the_runs_cannot_bound_is_held_by_physics() {
     assert!(sigma_ppm.iter().all(|s| s.abs() < 1000.0), "σ k {sigma_ppm:?} ppm\n{}", r.summary());
     assert!(t.sensitivity_error_ppm.iter().all(|e| e.abs() < 300.0), "{:?}\n{}", t.sensitivity_error_ppm, r.summary());
     assert!(t.max_z() <= 3.0, "max |z| {:.2}\n{}", t.max_z(), r.summary());
+}
+
+/// One speed, a capture per run, the gyro's low-pass at 35 Hz (6.4 ms) and the motor's default
+/// speed ripple (0.5 % at 1×, 0.25 % at 2×, 0.1 % at 12×), seed 1. At one speed the combined
+/// phase takes θ2's part of the delay, and the ripple reaches the gyro 6.4 ms after the encoder
+/// reads it: lines at 11× and 13× (9σ) were left that no effect explained, flagged on every seed
+/// of the trust bench, while the delay's column lacked the rate's part (−θ1''·τ) and the delay
+/// was not tried on top of the phase. With both, the ripple's timing gives the delay (and the
+/// phase, with no index offset here, is then dropped as redundant).
+#[test]
+fn at_one_speed_the_ripples_timing_tells_the_delay() {
+    let (r, truth) = capture_per_run_loop(1, &[180.0], 120.0, &["filter_cutoff_hz=35", "speed_ripple"]);
+    assert_eq!(r.steps[1].effects, [Effect::Phase], "{}", r.summary());
+    assert!(r.effects().contains(&Effect::Delay), "{}", r.summary());
+    let last = r.steps.last().expect("steps");
+    let tau = last.effect_params.iter().find(|p| p.name == "delay τ").expect("the delay is reported").estimate;
+    let true_ms = truth.runs[0].total_delay_ms;
+    assert!((tau.value - true_ms).abs() <= 4.0 * tau.sigma + 0.05, "τ {tau:?} ms against {true_ms} ms");
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    let t = truth_of(last);
+    assert!(t.max_z() <= 4.0, "max |z| {:.2}\n{}", t.max_z(), r.summary());
+}
+
+/// The independent captures' effect set with the gyro at 100 Hz and its 25-Hz low-pass (7.1 ms),
+/// 180 and 90 °/s, a capture per run, seed 4. Before the delay's column carried the rate's part
+/// (−θ1''·τ), the fit settled where that incomplete Jacobian stopped, and the structure it left
+/// took a g-sensitivity, a delay between the axes and a turn of the pose-2 fixture that are not
+/// there: every sensitivity 555 ppm and the directions 0.1° off (|z| 7.1), flagged by the
+/// g-sensitivity's note, as on four of six seeds. Now it is calibrated within the noise.
+#[test]
+fn a_slow_gyros_delay_fitted_with_the_ripples_part_leaves_no_false_effects() {
+    let gyro = protocol::GyroConfig {
+        odr: protocol::Odr::Hz100,
+        bandwidth: protocol::Bandwidth::Bw1,
+        ..protocol::GyroConfig::DEFAULT
+    };
+    let (r, _) = capture_per_run_loop_at(4, &[180.0, 90.0], 120.0, &INDEPENDENT_EFFECTS, gyro);
+    let effects = r.effects();
+    let false_ones = [Effect::GSensitivity, Effect::AxisDelay, Effect::PoseFixture];
+    assert!(!false_ones.iter().any(|e| effects.contains(e)), "{effects:?}\n{}", r.summary());
+    assert_eq!(r.verdict(), Verdict::AtNoiseFloor, "{}", r.summary());
+    let t = truth_of(r.steps.last().expect("steps"));
+    assert!(t.sensitivity_error_ppm.iter().all(|e| e.abs() < 100.0), "{:?}\n{}", t.sensitivity_error_ppm, r.summary());
+    assert!(t.max_z() <= 4.0, "max |z| {:.2}\n{}", t.max_z(), r.summary());
 }
 
 /// The independent captures' effect set (filter, timestamp jitter, speed ripple, Earth at 45°, a

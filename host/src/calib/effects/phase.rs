@@ -1,13 +1,14 @@
 //! A delay and an index offset that the runs cannot tell apart.
 
 use super::terms::{
-    along_gradient, shift_vector, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point,
-    Reported, SharedPar, Shifts, Situation,
+    along_gradient, AxisTerms, Bound, ConsiderBound, ConsiderCtx, Ctx, Kind, LinCol, Own, Point, Reported, SharedPar,
+    Shifts, Situation,
 };
 use super::{Behaviour, Effect, Layout};
 
 /// A delay and an index offset together when the runs share one θ2' and cannot tell them
-/// apart: one phase δ − θ2'·τ (rad), the same maths as the index offset, moving the mesh angle too.
+/// apart: one phase δ − θ2'·τ (rad), the same maths as the index offset: it moves θ2, not the
+/// gear mesh's angle.
 pub struct Phase;
 
 impl Behaviour for Phase {
@@ -51,8 +52,14 @@ impl Behaviour for Phase {
         along_gradient(t, self.gradient_factor(own, p, cx))
     }
 
+    /// It moves θ2 as the index offset does (`Shifts::theta2_offset_rad`), not the gear mesh's
+    /// angle, so its Jacobian is the index offset's. It was the delay's (the mesh turned too),
+    /// which the fit's model did not do: with the gears' error in the model the two parted by the
+    /// error's own derivative, as much as the ripple's timing that tells a delay from this phase
+    /// at one speed, and that delay's fit ran out of passes (trust bench, `180@120/files`, the
+    /// independent captures' effects at 2× with a 35-Hz filter).
     fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
-        Some(shift_vector(p))
+        Some(p.d_theta2)
     }
 
     /// None: held by the delay's and the index offset's own terms.
