@@ -53,11 +53,10 @@ impl Behaviour for Phase {
     }
 
     /// It moves θ2 as the index offset does (`Shifts::theta2_offset_rad`), not the gear mesh's
-    /// angle, so its Jacobian is the index offset's. It was the delay's (the mesh turned too),
-    /// which the fit's model did not do: with the gears' error in the model the two parted by the
-    /// error's own derivative, as much as the ripple's timing that tells a delay from this phase
-    /// at one speed, and that delay's fit ran out of passes (trust bench, `180@120/files`, the
-    /// independent captures' effects at 2× with a 35-Hz filter).
+    /// angle, so its Jacobian is the index offset's: the delay's turns the mesh too, which with
+    /// the gears' error in the model differs by that error's own derivative (5 % on the
+    /// Jacobian test), as much as the ripple's timing that tells a delay from this phase at one
+    /// speed ([`super::delay`]).
     fn gradient_factor(&self, _: Own, p: &Point, _: &Ctx) -> Option<[f64; 3]> {
         Some(p.d_theta2)
     }
