@@ -32,14 +32,14 @@ impl Section {
     /// The section that passes its input unchanged.
     const IDENTITY: Self = Self { b: [1.0, 0.0, 0.0], a: [0.0, 0.0] };
 
-    /// Low-pass biquad of quality `q` with cut-off `fc_hz` at sample rate `fs_hz`, k = tan(π·fc/fs).
+    /// Low-pass biquad of quality `q` whose cut-off fc at sample rate fs gives k = tan(π·fc/fs).
     fn second_order(k: f64, q: f64) -> Self {
         let norm = 1.0 / (1.0 + k / q + k * k);
         let b0 = k * k * norm;
         Self { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] }
     }
 
-    /// First-order low-pass, k = tan(π·fc/fs).
+    /// First-order low-pass, k as for [`Section::second_order`].
     fn first_order(k: f64) -> Self {
         let b0 = k / (1.0 + k);
         Self { b: [b0, b0, 0.0], a: [(k - 1.0) / (1.0 + k), 0.0] }
@@ -141,33 +141,32 @@ mod tests {
 
     #[test]
     fn cutoff_gain_and_low_frequency_delay_match_the_analogue_prototype() {
-        let (fc, fs) = (110.0, 3200.0);
-        let f = Butterworth::lowpass(2, fc, fs);
-        assert!((f.response(fc, fs).norm() - 0.5f64.sqrt()).abs() < 1e-9);
-        assert!((f.response(0.0, fs).norm() - 1.0).abs() < 1e-12);
         // Analogue 2nd-order Butterworth: τ(0) = √2/(2π·fc) = 2.046 ms; the bilinear map changes
         // it by (πfc/fs)²-order terms, ~1 % here.
-        let tau = f.group_delay_s(0.5, fs);
-        let analogue = std::f64::consts::SQRT_2 / (2.0 * PI * fc);
-        assert!((tau / analogue - 1.0).abs() < 0.03, "{tau} vs {analogue}");
+        let (fc, fs) = (110.0, 3200.0);
+        assert_gains_and_delay(&Butterworth::lowpass(2, fc, fs), fc, fs, std::f64::consts::SQRT_2 / (2.0 * PI * fc));
+    }
+
+    /// −3 dB at `fc_hz`, unit gain at DC, and a delay at 0.5 Hz within 3 % of `analogue_s`.
+    fn assert_gains_and_delay(f: &Butterworth, fc_hz: f64, fs_hz: f64, analogue_s: f64) {
+        assert!((f.response(fc_hz, fs_hz).norm() - 0.5f64.sqrt()).abs() < 1e-9);
+        assert!((f.response(0.0, fs_hz).norm() - 1.0).abs() < 1e-12);
+        let tau = f.group_delay_s(0.5, fs_hz);
+        assert!((tau / analogue_s - 1.0).abs() < 0.03, "{tau} vs {analogue_s}");
     }
 
     #[test]
     fn a_third_order_has_its_cutoff_gain_and_twice_the_first_sections_delay() {
         let (fc, fs) = (35.0, 800.0);
         let f = Butterworth::lowpass(3, fc, fs);
-        assert!((f.response(fc, fs).norm() - 0.5f64.sqrt()).abs() < 1e-9);
-        assert!((f.response(0.0, fs).norm() - 1.0).abs() < 1e-12);
+        // Analogue: τ(0) = 1/ωc (the real pole) + 1/(Q·ωc) (the Q = 1 pair) = 2/(2π·fc) = 9.09 ms;
+        // the bilinear map at 800 Hz changes it by (πfc/fs)²-order terms, a few %.
+        assert_gains_and_delay(&f, fc, fs, 2.0 / (2.0 * PI * fc));
         // Butterworth of order 3: |H|² = 1/(1 + (f/fc)⁶) in the analogue prototype; the
         // bilinear map, pre-warped at fc, keeps that at tan(πf/fs)/tan(πfc/fs) in place of f/fc.
         let f_hz = 70.0;
         let x = (PI * f_hz / fs).tan() / (PI * fc / fs).tan();
         assert!((f.response(f_hz, fs).norm() - (1.0 + x.powi(6)).powf(-0.5)).abs() < 1e-9);
-        // Analogue: τ(0) = 1/ωc (the real pole) + 1/(Q·ωc) (the Q = 1 pair) = 2/(2π·fc) = 9.09 ms;
-        // the bilinear map at 800 Hz changes it by (πfc/fs)²-order terms, a few %.
-        let tau = f.group_delay_s(0.5, fs);
-        let analogue = 2.0 / (2.0 * PI * fc);
-        assert!((tau / analogue - 1.0).abs() < 0.03, "{tau} vs {analogue}");
     }
 
     #[test]
